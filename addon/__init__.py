@@ -1,0 +1,42 @@
+# SPDX-License-Identifier: GPL-2.0-or-later
+"""Subdivision PIA: make a control cage whose Catmull-Clark limit surface
+(as Blender's Subdivision Surface modifier evaluates it with
+"Use Limit Surface") passes through the vertices of a mesh.
+
+Script use (background or foreground)::
+
+    import subdiv_pia
+    new_obj, report = subdiv_pia.interpolate(obj, levels=2, quality=3)
+
+The numeric core (``native``) imports no ``bpy``; everything else is loaded
+only inside Blender so that ``subdiv_pia.native`` stays importable outside it.
+"""
+
+bl_info = {
+    "name": "Subdivision PIA (interpolating cage)",
+    "author": "subdiv_pia contributors",
+    "version": (0, 1, 0),
+    "blender": (3, 4, 0),
+    "location": "Properties > Modifiers > Subdivision PIA; View3D > Object menu",
+    "description": "New cage whose subdivision limit surface passes through the mesh vertices",
+    "category": "Mesh",
+}
+
+try:
+    import bpy  # noqa: F401
+except ImportError:  # outside Blender: only `native` is usable
+    bpy = None
+
+if bpy is not None:
+    from . import properties, operators, ui
+    from .api import interpolate, settings_from_modifier, DEFAULT_SETTINGS  # noqa: F401
+
+    _modules = (properties, operators, ui)
+
+    def register():
+        for module in _modules:
+            module.register()
+
+    def unregister():
+        for module in reversed(_modules):
+            module.unregister()

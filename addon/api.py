@@ -1,0 +1,317 @@
+# SPDX-License-Identifier: GPL-2.0-or-later
+"""Script API and the one implementation shared by the operator and cli.py.
+
+Data makes one trip: Blender mesh -> flat numpy arrays (foreach_get) ->
+native.interpolate -> cage positions -> foreach_set on a copy of the mesh ->
+new object with a Subdivision Surface modifier (use_limit_surface=True).
+"""
+
+import numpy as np
+import bpy
+
+from . import native
+
+# Names follow the Subdivision Surface modifier where one exists.
+DEFAULT_SETTINGS = {
+    "scheme": 'CATMULL_CLARK',
+    "levels": 2,
+    "render_levels": 2,
+    "quality": 3,
+    "boundary_smooth": 'ALL',
+    "use_creases": True,
+    "method": 'AUTO',
+    "tolerance": 1e-6,
+    "max_iterations": 1000,
+}
+
+SCHEMES = ('CATMULL_CLARK',)
+BOUNDARY_SMOOTH = ('ALL', 'PRESERVE_CORNERS')
+METHODS = ('AUTO', 'PIA', 'GS_PIA')
+
+# Settings that a source Subdivision Surface modifier provides.
+MODIFIER_SETTINGS = ("levels", "render_levels", "quality", "boundary_smooth", "use_creases")
+
+
+def find_subsurf(obj):
+    """The last Subdivision Surface modifier of obj, or None."""
+    if obj is None:
+        return None
+    found = None
+    for mod in obj.modifiers:
+        if mod.type == 'SUBSURF':
+            found = mod
+    return found
+
+
+def settings_from_modifier(obj):
+    """Settings taken from obj's Subdivision Surface modifier (empty dict if none).
+
+    The modifier's use_limit_surface is deliberately ignored: the result is
+    always a cage for the limit surface.
+    """
+    mod = find_subsurf(obj)
+    if mod is None:
+        return {}
+    settings = {name: getattr(mod, name) for name in MODIFIER_SETTINGS}
+    if mod.subdivision_type == 'CATMULL_CLARK':
+        settings["scheme"] = 'CATMULL_CLARK'
+    return settings
+
+
+def check_settings(settings):
+    """Complete settings with defaults and check names and ranges (ValueError)."""
+    unknown = set(settings) - set(DEFAULT_SETTINGS)
+    if unknown:
+        raise ValueError("Unknown setting(s): %s" % ", ".join(sorted(unknown)))
+    s = dict(DEFAULT_SETTINGS)
+    s.update(settings)
+    if s["scheme"] not in SCHEMES:
+        raise ValueError("scheme must be one of %s, not %r" % (SCHEMES, s["scheme"]))
+    if s["boundary_smooth"] not in BOUNDARY_SMOOTH:
+        raise ValueError("boundary_smooth must be one of %s, not %r"
+                         % (BOUNDARY_SMOOTH, s["boundary_smooth"]))
+    if s["method"] not in METHODS:
+        raise ValueError("method must be one of %s, not %r" % (METHODS, s["method"]))
+    s["levels"] = int(s["levels"])
+    s["render_levels"] = int(s["render_levels"])
+    s["quality"] = int(s["quality"])
+    s["max_iterations"] = int(s["max_iterations"])
+    s["tolerance"] = float(s["tolerance"])
+    s["use_creases"] = bool(s["use_creases"])
+    if not 0 <= s["levels"] <= 11 or not 0 <= s["render_levels"] <= 11:
+        raise ValueError("levels and render_levels must be in 0..11")
+    if not 1 <= s["quality"] <= 10:
+        raise ValueError("quality must be in 1..10, not %d" % s["quality"])
+    if s["max_iterations"] < 1:
+        raise ValueError("max_iterations must be at least 1")
+    if not (s["tolerance"] > 0.0 and np.isfinite(s["tolerance"])):
+        raise ValueError("tolerance must be a positive number")
+    return s
+
+
+# ---------------------------------------------------------------------------
+# Blender mesh -> flat arrays
+
+def _float_attribute(mesh, name, domain):
+    attributes = getattr(mesh, "attributes", None)
+    if attributes is None:
+        return None
+    attr = attributes.get(name)
+    if attr is None or attr.data_type != 'FLOAT' or attr.domain != domain:
+        return None
+    values = np.empty(len(attr.data), np.float32)
+    attr.data.foreach_get("value", values)
+    return values
+
+
+def _crease_layer(mesh, name):
+    """Blender 3.x crease layers: a collection of layers (3.4) or one layer (3.5+)."""
+    layers = getattr(mesh, name, None)
+    if layers is None:
+        return None
+    try:
+        count = len(layers)  # a collection of layers (3.4)
+    except TypeError:
+        return layers        # a single layer (3.5, 3.6)
+    return layers[0] if count else None
+
+
+def read_creases(mesh):
+    """(edge_creases (E,) or None, vertex_creases (N,) or None), Blender 0..1."""
+    edge = _float_attribute(mesh, "crease_edge", 'EDGE')          # Blender 4.x
+    if edge is None:
+        layer = _crease_layer(mesh, "edge_creases")
+        if layer is not None and len(layer.data) == len(mesh.edges):
+            edge = np.empty(len(mesh.edges), np.float32)
+            layer.data.foreach_get("value", edge)
+        elif len(mesh.edges) and hasattr(mesh.edges[0], "crease"):  # Blender 3.4
+            edge = np.empty(len(mesh.edges), np.float32)
+            mesh.edges.foreach_get("crease", edge)
+    vertex = _float_attribute(mesh, "crease_vert", 'POINT')       # Blender 4.x
+    if vertex is None:
+        layer = _crease_layer(mesh, "vertex_creases")              # Blender 3.x
+        if layer is not None and len(layer.data) == len(mesh.vertices):
+            vertex = np.empty(len(mesh.vertices), np.float32)
+            layer.data.foreach_get("value", vertex)
+    if edge is not None and not edge.any():
+        edge = None
+    if vertex is not None and not vertex.any():
+        vertex = None
+    return edge, vertex
+
+
+def mesh_arrays(mesh):
+    """Flat arrays of a Blender mesh, in the form native.Mesh takes them."""
+    n = len(mesh.vertices)
+    positions = np.empty(n * 3, np.float32)
+    mesh.vertices.foreach_get("co", positions)
+    positions = positions.reshape(n, 3)
+
+    f = len(mesh.polygons)
+    loop_start = np.empty(f, np.int32)
+    face_sizes = np.empty(f, np.int32)
+    mesh.polygons.foreach_get("loop_start", loop_start)
+    mesh.polygons.foreach_get("loop_total", face_sizes)
+    loop_vertex = np.empty(len(mesh.loops), np.int32)
+    mesh.loops.foreach_get("vertex_index", loop_vertex)
+
+    offsets = np.zeros(f, np.int64)
+    if f > 1:
+        np.cumsum(face_sizes[:-1], out=offsets[1:])
+    if np.array_equal(offsets, loop_start) and int(face_sizes.sum()) == len(loop_vertex):
+        face_vertices = loop_vertex
+    else:  # loops not stored in face order: gather them face by face
+        total = int(face_sizes.sum())
+        corner = np.arange(total, dtype=np.int64) - np.repeat(offsets, face_sizes)
+        face_vertices = np.ascontiguousarray(
+            loop_vertex[np.repeat(loop_start.astype(np.int64), face_sizes) + corner])
+
+    e = len(mesh.edges)
+    edges = np.empty(e * 2, np.int32)
+    mesh.edges.foreach_get("vertices", edges)
+    edges = edges.reshape(e, 2)
+
+    edge_creases, vertex_creases = read_creases(mesh)
+    return {
+        "positions": positions,
+        "face_sizes": face_sizes,
+        "face_vertices": face_vertices,
+        "edges": edges,
+        "edge_creases": edge_creases,
+        "vertex_creases": vertex_creases,
+    }
+
+
+# ---------------------------------------------------------------------------
+# The shared implementation
+
+def check_source(obj):
+    """Raise ValueError with a user-facing message if obj cannot be used."""
+    if obj is None:
+        raise ValueError("No active object: select a mesh object")
+    if obj.type != 'MESH':
+        raise ValueError("'%s' is not a mesh object (type %s)" % (obj.name, obj.type))
+    mesh = obj.data
+    if len(mesh.vertices) == 0:
+        raise ValueError("Mesh '%s' has no vertices" % mesh.name)
+    if len(mesh.polygons) == 0:
+        raise ValueError("Mesh '%s' has no faces: subdivision needs faces" % mesh.name)
+
+
+def compute_cage(obj, settings, progress=None):
+    """Run the solver on obj's mesh data (not its modifiers). Returns (cage, report)."""
+    if not native.available():
+        raise RuntimeError("Subdivision PIA library not loaded: %s" % native.load_error())
+    arrays = mesh_arrays(obj.data)
+    mesh = native.Mesh(arrays["positions"], arrays["face_sizes"], arrays["face_vertices"],
+                       edges=arrays["edges"],
+                       edge_creases=arrays["edge_creases"],
+                       vertex_creases=arrays["vertex_creases"])
+    return native.interpolate(
+        mesh, scheme=settings["scheme"], boundary_smooth=settings["boundary_smooth"],
+        use_creases=settings["use_creases"], quality=settings["quality"],
+        method=settings["method"], tolerance=settings["tolerance"],
+        max_iterations=settings["max_iterations"], progress=progress)
+
+
+def _link_like(source, new_obj, context):
+    collections = list(source.users_collection) or [context.scene.collection]
+    for collection in collections:
+        collection.objects.link(new_obj)
+    new_obj.parent = source.parent
+    new_obj.parent_type = source.parent_type
+    if source.parent_type == 'BONE':
+        new_obj.parent_bone = source.parent_bone
+    new_obj.matrix_parent_inverse = source.matrix_parent_inverse.copy()
+    new_obj.rotation_mode = source.rotation_mode
+    new_obj.matrix_basis = source.matrix_basis.copy()
+    for i, slot in enumerate(source.material_slots):
+        if i < len(new_obj.material_slots):
+            new_obj.material_slots[i].link = slot.link
+            new_obj.material_slots[i].material = slot.material
+
+
+def build_object(source, cage, report, settings, context=None, name=None):
+    """New object: copy of source's mesh with cage positions and a limit-surface subsurf."""
+    context = context or bpy.context
+    name = name or source.name + "_pia"
+    mesh = source.data.copy()
+    mesh.name = name
+    flat = np.ascontiguousarray(cage, dtype=np.float32).reshape(-1)
+    mesh.vertices.foreach_set("co", flat)
+    keys = mesh.shape_keys
+    if keys is not None and keys.reference_key is not None:
+        keys.reference_key.data.foreach_set("co", flat)
+    mesh.update()
+
+    new_obj = bpy.data.objects.new(name, mesh)
+    _link_like(source, new_obj, context)
+
+    mod = new_obj.modifiers.new("Subdivision", 'SUBSURF')
+    mod.subdivision_type = 'CATMULL_CLARK'
+    mod.use_limit_surface = True
+    mod.levels = settings["levels"]
+    mod.render_levels = settings["render_levels"]
+    mod.quality = settings["quality"]
+    mod.boundary_smooth = settings["boundary_smooth"]
+    mod.use_creases = settings["use_creases"]
+    src_mod = find_subsurf(source)
+    if src_mod is not None:
+        mod.uv_smooth = src_mod.uv_smooth
+        mod.show_only_control_edges = src_mod.show_only_control_edges
+
+    new_obj["pia_iterations"] = int(report.iterations)
+    new_obj["pia_max_error"] = float(report.max_error_relative)
+    new_obj["pia_mean_error"] = float(report.mean_error_relative)
+    new_obj["pia_status"] = str(report.status)
+    new_obj["pia_method"] = str(report.method)
+    new_obj["pia_tolerance"] = float(settings["tolerance"])
+
+    view_layer = context.view_layer
+    if view_layer is not None:
+        for obj in (source, new_obj):
+            try:
+                obj.select_set(obj is new_obj, view_layer=view_layer)
+            except RuntimeError:  # not in this view layer (excluded collection)
+                pass
+        if view_layer.objects.get(new_obj.name) is not None:
+            view_layer.objects.active = new_obj
+    return new_obj
+
+
+def interpolate(obj, *, context=None, name=None, progress=None, **settings):
+    """Make an interpolating cage object for the mesh object obj.
+
+    Settings (keywords, defaults in DEFAULT_SETTINGS; names as the modifier's):
+    scheme, levels, render_levels, quality, boundary_smooth, use_creases,
+    method, tolerance (relative to the bounding-box diagonal), max_iterations.
+    Settings not given are taken from obj's Subdivision Surface modifier if it
+    has one, else the defaults.
+
+    progress(iteration, relative_error) -> bool: return True to cancel.
+
+    Returns (new_object, report); report.converged is False when the tolerance
+    was not reached (the object is made anyway). Raises ValueError or
+    native.PiaError on bad input, RuntimeError if the library is missing;
+    nothing is created then and obj is never changed.
+    """
+    check_source(obj)
+    merged = settings_from_modifier(obj)
+    merged.update(settings)
+    s = check_settings(merged)
+    cage, report = compute_cage(obj, s, progress=progress)
+    new_obj = build_object(obj, cage, report, s, context=context, name=name)
+    return new_obj, report
+
+
+def format_report(report):
+    """One line for the status bar and the command line."""
+    if report.converged:
+        head = "Converged"
+    elif report.status == 'STAGNATED':
+        head = "Stagnated (tolerance not reached)"
+    else:
+        head = "Stopped at max iterations (tolerance not reached)"
+    return ("%s: %d iterations (%s), max error %.3g, mean error %.3g of the bounding-box diagonal"
+            % (head, report.iterations, report.method,
+               report.max_error_relative, report.mean_error_relative))

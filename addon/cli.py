@@ -1,0 +1,149 @@
+# SPDX-License-Identifier: GPL-2.0-or-later
+"""Command line: make an interpolating cage and save it to a .blend file.
+
+    blender -b --python <add-on folder>/cli.py -- INPUT OUTPUT.blend [options]
+
+INPUT is .obj, .ply, .stl or .blend. Run with -- --help for the options.
+Exit status 0 on success (also when the tolerance was not reached: the
+report says so), 1 with the message on error.
+"""
+
+import argparse
+import importlib
+import os
+import sys
+
+import bpy
+
+
+def _import_package():
+    """Import the add-on package that contains this file, also when run as a file."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    parent, package = os.path.split(here)
+    if parent not in sys.path:
+        sys.path.insert(0, parent)
+    return importlib.import_module(package)
+
+
+def parse_args(argv):
+    parser = argparse.ArgumentParser(
+        prog="blender -b --python cli.py --",
+        description="Make a control cage whose Catmull-Clark limit surface (Blender's "
+                    "Subdivision Surface modifier with Use Limit Surface) passes through "
+                    "the vertices of INPUT; save it with a Subdivision Surface modifier.")
+    parser.add_argument("input", help="input mesh: .obj, .ply, .stl or .blend")
+    parser.add_argument("output", help="output .blend file")
+    parser.add_argument("--object", help="object name to use from a .blend input "
+                                         "(default: the active mesh object, else the first)")
+    parser.add_argument("--levels", type=int, help="viewport levels of the modifier (default 2)")
+    parser.add_argument("--render-levels", type=int, help="render levels (default: --levels)")
+    parser.add_argument("--quality", type=int, help="modifier quality 1..10 (default 3)")
+    parser.add_argument("--boundary-smooth", choices=("ALL", "PRESERVE_CORNERS"))
+    parser.add_argument("--no-creases", action="store_true", help="ignore edge and vertex creases")
+    parser.add_argument("--method", choices=("AUTO", "PIA", "GS_PIA"))
+    parser.add_argument("--tolerance", type=float,
+                        help="max error relative to the bounding-box diagonal (default 1e-6)")
+    parser.add_argument("--max-iterations", type=int, help="iteration limit (default 1000)")
+    return parser.parse_args(argv)
+
+
+def _call_first(names, **kwargs):
+    for module_name, op_name in names:
+        module = getattr(bpy.ops, module_name)
+        if hasattr(module, op_name):
+            return getattr(module, op_name)(**kwargs)
+    raise RuntimeError("No importer available (%s)" % ", ".join("%s.%s" % n for n in names))
+
+
+def load_input(path, object_name=None):
+    """Load INPUT into the current (empty) scene and return the mesh object to use."""
+    if not os.path.isfile(path):
+        raise ValueError("Input file not found: %s" % path)
+    ext = os.path.splitext(path)[1].lower()
+    if ext == ".blend":
+        bpy.ops.wm.open_mainfile(filepath=path)
+        if object_name:
+            obj = bpy.data.objects.get(object_name)
+            if obj is None:
+                raise ValueError("No object named %r in %s" % (object_name, path))
+            return obj
+        obj = bpy.context.view_layer.objects.active
+        if obj is not None and obj.type == 'MESH':
+            return obj
+        meshes = [o for o in bpy.context.scene.objects if o.type == 'MESH']
+        if not meshes:
+            raise ValueError("No mesh object in %s" % path)
+        return meshes[0]
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    before = set(bpy.data.objects)
+    if ext == ".obj":
+        if hasattr(bpy.ops.wm, "obj_import"):  # C++ importer (3.3+): keeps vertex order
+            known = bpy.ops.wm.obj_import.get_rna_type().properties.keys()
+            options = {k: False for k in ("use_split_objects", "use_split_groups") if k in known}
+            bpy.ops.wm.obj_import(filepath=path, **options)
+        else:
+            bpy.ops.import_scene.obj(filepath=path, split_mode='OFF')
+    elif ext == ".ply":
+        _call_first((("wm", "ply_import"), ("import_mesh", "ply")), filepath=path)
+    elif ext == ".stl":
+        _call_first((("wm", "stl_import"), ("import_mesh", "stl")), filepath=path)
+    else:
+        raise ValueError("Unsupported input type %r (use .obj, .ply, .stl or .blend)" % ext)
+    new = [o for o in bpy.data.objects if o not in before and o.type == 'MESH']
+    if object_name:
+        new = [o for o in new if o.name == object_name]
+    if not new:
+        raise ValueError("No mesh object was imported from %s" % path)
+    return sorted(new, key=lambda o: o.name)[0]
+
+
+def main(argv):
+    args = parse_args(argv)
+    package = _import_package()
+    obj = load_input(os.path.abspath(args.input), args.object)
+    settings = {}
+    if args.levels is not None:
+        settings["levels"] = args.levels
+        settings["render_levels"] = args.levels
+    if args.render_levels is not None:
+        settings["render_levels"] = args.render_levels
+    for name in ("quality", "boundary_smooth", "method", "tolerance", "max_iterations"):
+        value = getattr(args, name)
+        if value is not None:
+            settings[name] = value
+    if args.no_creases:
+        settings["use_creases"] = False
+
+    progress = None
+    if sys.stdout.isatty():
+        def progress(iteration, error):
+            sys.stdout.write("\riteration %d: max error %.3g" % (iteration, error))
+            sys.stdout.flush()
+            return False
+
+    new_obj, report = package.interpolate(obj, progress=progress, **settings)
+    if progress is not None:
+        sys.stdout.write("\n")
+    print("subdiv_pia: %s: %s" % (new_obj.name, package.api.format_report(report)))
+    print("subdiv_pia: stencils %.3f s, solve %.3f s" % (report.stencil_seconds, report.solve_seconds))
+    output = os.path.abspath(args.output)
+    os.makedirs(os.path.dirname(output) or ".", exist_ok=True)
+    bpy.ops.wm.save_as_mainfile(filepath=output, check_existing=False)
+    print("subdiv_pia: saved %s" % output)
+
+
+def _argv():
+    return sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
+
+
+if __name__ == "__main__":
+    try:
+        main(_argv())
+    except SystemExit:
+        raise
+    except Exception as error:  # message for the user, non-zero exit
+        print("subdiv_pia: error: %s" % error, file=sys.stderr)
+        sys.stdout.flush()
+        sys.stderr.flush()
+        sys.exit(1)

@@ -1,0 +1,102 @@
+# SPDX-License-Identifier: GPL-2.0-or-later
+"""The operator: reads the operator settings and reports; the work is in api."""
+
+import bpy
+
+from . import api, native
+from .properties import SETTING_NAMES, settings_annotations
+
+
+class _Progress:
+    """Blender's progress indicator, driven by the solver's progress callback."""
+
+    def __init__(self, context, total):
+        wm = getattr(context, "window_manager", None)
+        self.wm = wm if (wm is not None and not bpy.app.background) else None
+        if self.wm is not None:
+            self.wm.progress_begin(0, max(int(total), 1))
+
+    def __call__(self, iteration, relative_error):
+        if self.wm is not None:
+            self.wm.progress_update(iteration)
+        return False  # never cancel
+
+    def end(self):
+        if self.wm is not None:
+            self.wm.progress_end()
+            self.wm = None
+
+
+class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
+    """Make a new object whose subdivision limit surface passes through this mesh's vertices"""
+    bl_idname = "object.subdiv_pia_interpolate"
+    bl_label = "Interpolating Subdivision Cage"
+    bl_options = {'REGISTER', 'UNDO'}
+    __annotations__ = settings_annotations()
+
+    @classmethod
+    def poll(cls, context):
+        # Keep the operator callable so that bad input gets a clear message.
+        return True
+
+    def _defaults_from_modifier(self, context):
+        # The source's Subdivision Surface modifier gives the defaults for
+        # settings the caller did not set explicitly (its use_limit_surface
+        # is ignored: the cage is always made for the limit surface).
+        for name, value in api.settings_from_modifier(context.active_object).items():
+            if not self.properties.is_property_set(name):
+                setattr(self, name, value)
+
+    def invoke(self, context, event):
+        self._defaults_from_modifier(context)
+        return self.execute(context)
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        layout.prop(self, "scheme")
+        col = layout.column(align=True)
+        col.prop(self, "levels")
+        col.prop(self, "render_levels")
+        layout.prop(self, "quality")
+        layout.prop(self, "boundary_smooth")
+        layout.prop(self, "use_creases")
+        layout.separator()
+        layout.prop(self, "method")
+        layout.prop(self, "tolerance")
+        layout.prop(self, "max_iterations")
+
+    def execute(self, context):
+        # Also here: scripts call the operator without invoke (EXEC_DEFAULT).
+        self._defaults_from_modifier(context)
+        settings = {name: getattr(self, name) for name in SETTING_NAMES}
+        progress = _Progress(context, settings["max_iterations"])
+        try:
+            obj = context.active_object
+            api.check_source(obj)
+            new_obj, report = api.interpolate(obj, context=context, progress=progress, **settings)
+        except (ValueError, RuntimeError, native.PiaError) as error:
+            self.report({'ERROR'}, str(error))
+            return {'CANCELLED'}
+        finally:
+            progress.end()
+        self.report({'INFO'} if report.converged else {'WARNING'},
+                    "%s: %s" % (new_obj.name, api.format_report(report)))
+        return {'FINISHED'}
+
+
+def menu_func(self, context):
+    self.layout.operator(OBJECT_OT_subdiv_pia_interpolate.bl_idname, icon='MOD_SUBSURF')
+
+
+classes = (OBJECT_OT_subdiv_pia_interpolate,)
+_register, _unregister = bpy.utils.register_classes_factory(classes)
+
+
+def register():
+    _register()
+
+
+def unregister():
+    _unregister()

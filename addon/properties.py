@@ -1,0 +1,78 @@
+# SPDX-License-Identifier: GPL-2.0-or-later
+"""Settings shared by the operator and the panel (scene.subdiv_pia)."""
+
+import bpy
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty
+
+from .api import DEFAULT_SETTINGS
+
+SCHEME_ITEMS = (
+    ('CATMULL_CLARK', "Catmull-Clark",
+     "Catmull-Clark limit surface as the Subdivision Surface modifier evaluates it"),
+)
+BOUNDARY_SMOOTH_ITEMS = (
+    ('ALL', "All", "Smooth boundaries, including corners (as the modifier)"),
+    ('PRESERVE_CORNERS', "Keep Corners", "Smooth boundaries, but corners are kept sharp (as the modifier)"),
+)
+METHOD_ITEMS = (
+    ('AUTO', "Automatic", "Let the library choose the fastest solver"),
+    ('PIA', "PIA", "Plain progressive iterative approximation (Jacobi-like)"),
+    ('GS_PIA', "Gauss-Seidel PIA", "Progressive iterative approximation with Gauss-Seidel updates"),
+)
+
+
+def settings_annotations():
+    """Property definitions used by both the operator and the PropertyGroup."""
+    d = DEFAULT_SETTINGS
+    return {
+        "scheme": EnumProperty(name="Scheme", items=SCHEME_ITEMS, default=d["scheme"],
+                               description="Subdivision scheme whose limit surface must interpolate"),
+        "levels": IntProperty(name="Levels Viewport", default=d["levels"], min=0, max=11, soft_max=6,
+                              description="Viewport levels of the new Subdivision Surface modifier"),
+        "render_levels": IntProperty(name="Render", default=d["render_levels"], min=0, max=11, soft_max=6,
+                                     description="Render levels of the new Subdivision Surface modifier"),
+        "quality": IntProperty(name="Quality", default=d["quality"], min=1, max=10,
+                               description="Limit surface accuracy, as the modifier's Quality "
+                                           "(the cage is made for exactly this value)"),
+        "boundary_smooth": EnumProperty(name="Boundary Smooth", items=BOUNDARY_SMOOTH_ITEMS,
+                                        default=d["boundary_smooth"],
+                                        description="Boundary rule, as the modifier's"),
+        "use_creases": BoolProperty(name="Use Creases", default=d["use_creases"],
+                                    description="Use edge and vertex creases, as the modifier"),
+        "method": EnumProperty(name="Method", items=METHOD_ITEMS, default=d["method"],
+                               description="Iterative solver"),
+        "tolerance": FloatProperty(name="Tolerance", default=d["tolerance"], min=1e-12, max=1.0,
+                                   precision=8, step=0.0001,
+                                   description="Stop when every vertex is this close to the surface, "
+                                               "relative to the bounding-box diagonal"),
+        "max_iterations": IntProperty(name="Max Iterations", default=d["max_iterations"],
+                                      min=1, max=1000000,
+                                      description="Stop after this many iterations"),
+    }
+
+
+SETTING_NAMES = tuple(settings_annotations())
+
+
+class SubdivPiaSettings(bpy.types.PropertyGroup):
+    """Panel settings, stored on the scene."""
+    __annotations__ = dict(
+        settings_annotations(),
+        use_modifier_settings=BoolProperty(
+            name="From Modifier", default=True,
+            description="Take levels, quality, boundary and creases from the active object's "
+                        "Subdivision Surface modifier when it has one"),
+    )
+
+
+_register, _unregister = bpy.utils.register_classes_factory((SubdivPiaSettings,))
+
+
+def register():
+    _register()
+    bpy.types.Scene.subdiv_pia = bpy.props.PointerProperty(type=SubdivPiaSettings)
+
+
+def unregister():
+    del bpy.types.Scene.subdiv_pia
+    _unregister()

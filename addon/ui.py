@@ -1,0 +1,81 @@
+# SPDX-License-Identifier: GPL-2.0-or-later
+"""Modifiers-tab panel and Object-menu entry."""
+
+import bpy
+
+from . import api, native
+from .operators import OBJECT_OT_subdiv_pia_interpolate, menu_func
+from .properties import SETTING_NAMES
+
+RESULT_KEYS = ("pia_status", "pia_method", "pia_iterations", "pia_max_error", "pia_mean_error")
+
+
+class DATA_PT_subdiv_pia(bpy.types.Panel):
+    bl_label = "Interpolating Subdivision Cage"
+    bl_space_type = 'PROPERTIES'
+    bl_region_type = 'WINDOW'
+    bl_context = "modifier"
+    bl_options = {'DEFAULT_CLOSED'}
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.object
+        return obj is not None and obj.type == 'MESH'
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        obj = context.object
+        settings = context.scene.subdiv_pia
+
+        if not native.available():
+            box = layout.box()
+            box.label(text="Native library not loaded:", icon='ERROR')
+            for line in str(native.load_error() or "unknown reason").splitlines() or [""]:
+                box.label(text=line)
+            return
+
+        from_modifier = settings.use_modifier_settings and api.find_subsurf(obj) is not None
+        layout.prop(settings, "use_modifier_settings")
+        layout.prop(settings, "scheme")
+        col = layout.column()
+        col.enabled = not from_modifier
+        sub = col.column(align=True)
+        sub.prop(settings, "levels")
+        sub.prop(settings, "render_levels")
+        col.prop(settings, "quality")
+        col.prop(settings, "boundary_smooth")
+        col.prop(settings, "use_creases")
+        layout.prop(settings, "method")
+        layout.prop(settings, "tolerance")
+        layout.prop(settings, "max_iterations")
+
+        op = layout.operator(OBJECT_OT_subdiv_pia_interpolate.bl_idname, icon='MOD_SUBSURF')
+        modifier_names = set(api.MODIFIER_SETTINGS) if from_modifier else set()
+        for name in SETTING_NAMES:
+            if name not in modifier_names:
+                setattr(op, name, getattr(settings, name))
+
+        if "pia_status" in obj:
+            box = layout.box()
+            box.label(text="Last result", icon='INFO')
+            col = box.column(align=True)
+            col.label(text="Status: %s (%s)" % (obj.get("pia_status"), obj.get("pia_method", "?")))
+            col.label(text="Iterations: %d" % int(obj.get("pia_iterations", 0)))
+            col.label(text="Max error: %.3g of diagonal" % float(obj.get("pia_max_error", 0.0)))
+            col.label(text="Mean error: %.3g of diagonal" % float(obj.get("pia_mean_error", 0.0)))
+
+
+classes = (DATA_PT_subdiv_pia,)
+_register, _unregister = bpy.utils.register_classes_factory(classes)
+
+
+def register():
+    _register()
+    bpy.types.VIEW3D_MT_object.append(menu_func)
+
+
+def unregister():
+    bpy.types.VIEW3D_MT_object.remove(menu_func)
+    _unregister()
