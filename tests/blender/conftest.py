@@ -1,0 +1,116 @@
+# SPDX-License-Identifier: GPL-2.0-or-later
+"""Fixtures and helpers for the tests that run inside Blender (see run.py)."""
+
+import os
+
+import bpy
+import numpy as np
+import pytest
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(os.path.dirname(HERE))
+DATA = os.path.join(ROOT, "tests", "data")
+
+# Blender's evaluated control points must match the originals to this,
+# relative to the bounding-box diagonal.
+MATCH = 1e-5
+
+
+@pytest.fixture(autouse=True)
+def empty_scene():
+    """Every test starts from an empty factory scene."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    yield
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+
+
+def link_and_activate(obj):
+    bpy.context.scene.collection.objects.link(obj)
+    for other in bpy.context.view_layer.objects:
+        other.select_set(False)
+    obj.select_set(True)
+    bpy.context.view_layer.objects.active = obj
+    return obj
+
+
+def object_from_pydata(name, vertices, faces, edges=(), validate=True):
+    mesh = bpy.data.meshes.new(name)
+    mesh.from_pydata([tuple(map(float, v)) for v in vertices],
+                     [tuple(e) for e in edges], [tuple(f) for f in faces])
+    if validate:
+        mesh.validate()
+    mesh.update()
+    return link_and_activate(bpy.data.objects.new(name, mesh))
+
+
+def import_obj(path):
+    before = set(bpy.data.objects)
+    if hasattr(bpy.ops.wm, "obj_import"):
+        bpy.ops.wm.obj_import(filepath=path)
+    else:
+        bpy.ops.import_scene.obj(filepath=path, split_mode='OFF')
+    new = [o for o in bpy.data.objects if o not in before and o.type == 'MESH']
+    assert len(new) == 1, "expected one mesh object from %s" % path
+    return link_and_activate_existing(new[0])
+
+
+def link_and_activate_existing(obj):
+    for other in bpy.context.view_layer.objects:
+        other.select_set(False)
+    obj.select_set(True)
+    bpy.context.view_layer.objects.active = obj
+    return obj
+
+
+def positions(mesh):
+    co = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.vertices.foreach_get("co", co)
+    return co.reshape(-1, 3)
+
+
+def diagonal(points):
+    return float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
+
+
+def evaluated_control_points(obj, count):
+    """First `count` vertices of obj as Blender evaluates it (modifiers applied)."""
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    depsgraph.update()
+    evaluated = obj.evaluated_get(depsgraph)
+    mesh = evaluated.to_mesh()
+    try:
+        assert len(mesh.vertices) >= count
+        return positions(mesh)[:count].astype(np.float64)
+    finally:
+        evaluated.to_mesh_clear()
+
+
+def relative_miss(obj, targets):
+    """max |evaluated control point - target| / bbox diagonal of targets."""
+    points = evaluated_control_points(obj, len(targets))
+    return float(np.abs(points - targets).max()) / diagonal(targets)
+
+
+def snapshot(obj):
+    """What must not change on the source object."""
+    return {
+        "positions": positions(obj.data).copy(),
+        "mesh": obj.data.name,
+        "modifiers": [(m.name, m.type) + tuple(
+            getattr(m, a) for a in ("levels", "render_levels", "quality", "boundary_smooth",
+                                    "use_creases", "use_limit_surface"))
+                      if m.type == 'SUBSURF' else (m.name, m.type) for m in obj.modifiers],
+        "matrix": [list(row) for row in obj.matrix_world],
+    }
+
+
+def assert_unchanged(obj, before):
+    after = snapshot(obj)
+    np.testing.assert_array_equal(after["positions"], before["positions"])
+    assert after["mesh"] == before["mesh"]
+    assert after["modifiers"] == before["modifiers"]
+    assert after["matrix"] == before["matrix"]
+
+
+def run_operator(**settings):
+    return bpy.ops.object.subdiv_pia_interpolate(**settings)

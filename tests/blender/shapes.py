@@ -1,0 +1,145 @@
+# SPDX-License-Identifier: GPL-2.0-or-later
+"""Generated test shapes. Each function builds one mesh object, links it to the
+scene, makes it active and returns it. Vertices are jittered (fixed seed) so
+the cage differs from the mesh everywhere."""
+
+import bmesh
+import bpy
+import numpy as np
+
+from conftest import link_and_activate, object_from_pydata
+
+CREASE_VALUES = (0.3, 0.5, 0.9, 1.0)
+
+
+def jitter(obj, amount=0.05, seed=1):
+    mesh = obj.data
+    co = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.vertices.foreach_get("co", co)
+    rng = np.random.default_rng(seed)
+    co += rng.uniform(-amount, amount, co.shape).astype(np.float32)
+    mesh.vertices.foreach_set("co", co)
+    mesh.update()
+    return obj
+
+
+def set_edge_creases(mesh, values):
+    values = np.ascontiguousarray(values, np.float32)
+    if bpy.app.version >= (4, 0, 0):
+        attr = mesh.attributes.get("crease_edge") or mesh.attributes.new("crease_edge", 'FLOAT', 'EDGE')
+        attr.data.foreach_set("value", values)
+    else:
+        mesh.edges.foreach_set("crease", values)
+    mesh.update()
+
+
+def set_vertex_creases(mesh, values):
+    values = np.ascontiguousarray(values, np.float32)
+    if bpy.app.version >= (4, 0, 0):
+        attr = mesh.attributes.get("crease_vert") or mesh.attributes.new("crease_vert", 'FLOAT', 'POINT')
+        attr.data.foreach_set("value", values)
+    else:
+        bm = bmesh.new()
+        bm.from_mesh(mesh)
+        layer = bm.verts.layers.crease.verify()
+        for vert, value in zip(bm.verts, values.tolist()):
+            vert[layer] = value
+        bm.to_mesh(mesh)
+        bm.free()
+    mesh.update()
+
+
+def _from_bmesh(name, build):
+    bm = bmesh.new()
+    build(bm)
+    mesh = bpy.data.meshes.new(name)
+    bm.to_mesh(mesh)
+    bm.free()
+    return link_and_activate(bpy.data.objects.new(name, mesh))
+
+
+def _subdivided_cube(bm, cuts=2):
+    bmesh.ops.create_cube(bm, size=2.0)
+    bmesh.ops.subdivide_edges(bm, edges=bm.edges[:], cuts=cuts, use_grid_fill=True)
+
+
+def cube():
+    """Eight valence-3 extraordinary vertices."""
+    bpy.ops.mesh.primitive_cube_add()
+    return jitter(bpy.context.active_object)
+
+
+def uv_sphere():
+    """Quads with triangle fans around two valence-10 poles."""
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=10, ring_count=6)
+    return jitter(bpy.context.active_object)
+
+
+def ico_sphere():
+    """Triangles only, valence 5 and 6."""
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=2)
+    return jitter(bpy.context.active_object, 0.03)
+
+
+def ngon_cylinder():
+    """Quads around two 7-gon caps."""
+    bpy.ops.mesh.primitive_cylinder_add(vertices=7, end_fill_type='NGON')
+    return jitter(bpy.context.active_object)
+
+
+def open_grid():
+    """Open quad grid: boundary edges and four valence-2 corners."""
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=5, y_subdivisions=4, size=2.0)
+    return jitter(bpy.context.active_object, 0.1)
+
+
+def edge_creases():
+    """Semi-sharp and sharp edge creases (0.3, 0.5, 0.9, 1.0) on a subdivided cube."""
+    obj = jitter(_from_bmesh("EdgeCreases", _subdivided_cube))
+    values = np.zeros(len(obj.data.edges), np.float32)
+    values[::3] = np.resize(np.array(CREASE_VALUES, np.float32), len(values[::3]))
+    set_edge_creases(obj.data, values)
+    return obj
+
+
+def vertex_creases():
+    """Vertex creases 0.3 .. 1.0 on a subdivided cube, with one creased edge loop."""
+    obj = jitter(_from_bmesh("VertexCreases", _subdivided_cube))
+    values = np.zeros(len(obj.data.vertices), np.float32)
+    values[::5] = np.resize(np.array(CREASE_VALUES, np.float32), len(values[::5]))
+    set_vertex_creases(obj.data, values)
+    return obj
+
+
+def loose_parts():
+    """A cube plus loose vertices, a loose edge chain and a loose edge hanging off a face vertex."""
+    verts = [(-1, -1, -1), (1, -1, -1), (1, 1, -1), (-1, 1, -1),
+             (-1, -1, 1), (1, -1, 1), (1, 1, 1), (-1, 1, 1),
+             (3, 0, 0), (3, 1, 0),            # loose vertices
+             (0, 3, 0), (0, 3, 1), (0, 4, 1),  # loose edge chain
+             (2, 2, 2)]                        # end of an edge attached to vertex 6
+    faces = [(0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)]
+    edges = [(10, 11), (11, 12), (6, 13)]
+    return jitter(object_from_pydata("LooseParts", verts, faces, edges))
+
+
+def fin():
+    """Non-manifold: three quads share one edge (a strip with a fin)."""
+    verts = [(0, 0, 0), (0, 1, 0),                  # shared edge
+             (1, 0, 0), (1, 1, 0), (-1, 0, 0), (-1, 1, 0), (0, 0, 1), (0, 1, 1),
+             (2, 0, 0), (2, 1, 0), (-2, 0, 0), (-2, 1, 0)]
+    faces = [(0, 2, 3, 1), (4, 0, 1, 5), (0, 1, 7, 6), (2, 8, 9, 3), (10, 4, 5, 11)]
+    return jitter(object_from_pydata("Fin", verts, faces))
+
+
+def mixed():
+    """Triangles, quads and an n-gon in one open surface."""
+    verts = [(0, 0, 0), (1, 0, 0), (2, 0, 0), (0, 1, 0), (1, 1, 0.3), (2, 1, 0),
+             (0, 2, 0), (1, 2, 0), (2, 2, 0.2), (3, 0.5, 0), (3, 1.5, 0.1)]
+    faces = [(0, 1, 4, 3), (1, 2, 5, 4), (3, 4, 7, 6), (4, 5, 8), (4, 8, 7),
+             (2, 9, 10, 8, 5)]
+    return jitter(object_from_pydata("Mixed", verts, faces))
+
+
+ALL = (cube, uv_sphere, ico_sphere, ngon_cylinder, open_grid, edge_creases,
+       vertex_creases, loose_parts, fin, mixed)

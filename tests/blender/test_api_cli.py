@@ -1,0 +1,102 @@
+# SPDX-License-Identifier: GPL-2.0-or-later
+"""Script API (subdiv_pia.interpolate) and the command line (cli.py)."""
+
+import os
+import subprocess
+import sys
+
+import bpy
+import numpy as np
+import pytest
+
+import shapes
+import subdiv_pia
+from subdiv_pia import native
+from conftest import DATA, MATCH, assert_unchanged, positions, relative_miss, snapshot
+
+
+def test_api_returns_object_and_report():
+    source = shapes.ngon_cylinder()
+    before = snapshot(source)
+    targets = positions(source.data).astype(np.float64)
+    new_obj, report = subdiv_pia.interpolate(source, levels=1, quality=4, method='GS_PIA')
+    assert report.converged and report.status == 'CONVERGED'
+    assert report.max_error_relative <= 1e-6
+    assert new_obj["pia_iterations"] == report.iterations
+    assert new_obj["pia_method"] == report.method
+    assert new_obj.modifiers[0].quality == 4
+    assert relative_miss(new_obj, targets) <= MATCH
+    assert_unchanged(source, before)
+
+
+def test_api_not_converged_is_not_an_error():
+    source = shapes.open_grid()
+    new_obj, report = subdiv_pia.interpolate(source, max_iterations=1, tolerance=1e-12, method='PIA')
+    assert not report.converged and report.status in ('MAX_ITERATIONS', 'STAGNATED')
+    assert new_obj["pia_status"] == report.status
+
+
+def test_api_errors():
+    n_objects = len(bpy.data.objects)
+    with pytest.raises(ValueError, match="No active object"):
+        subdiv_pia.interpolate(None)
+    empty = bpy.data.objects.new("Empty", None)
+    with pytest.raises(ValueError, match=r"'Empty' is not a mesh object \(type EMPTY\)"):
+        subdiv_pia.interpolate(empty)
+    source = shapes.cube()
+    with pytest.raises(ValueError, match="Unknown setting"):
+        subdiv_pia.interpolate(source, level=2)
+    with pytest.raises(ValueError, match="quality"):
+        subdiv_pia.interpolate(source, quality=0)
+    co = positions(source.data).copy()
+    co[0, 0] = np.inf
+    source.data.vertices.foreach_set("co", co.ravel())
+    with pytest.raises(native.PiaError):
+        subdiv_pia.interpolate(source)
+    assert len(bpy.data.objects) == n_objects + 2  # the empty and the cube only
+
+
+def test_api_takes_settings_from_modifier():
+    source = shapes.cube()
+    mod = source.modifiers.new("Subsurf", 'SUBSURF')
+    mod.levels, mod.quality, mod.use_limit_surface = 1, 2, False
+    new_obj, report = subdiv_pia.interpolate(source)
+    assert (new_obj.modifiers[0].levels, new_obj.modifiers[0].quality) == (1, 2)
+    assert new_obj.modifiers[0].use_limit_surface
+
+
+# --- cli.py ----------------------------------------------------------------------
+
+CLI = os.path.join(os.path.dirname(os.path.abspath(subdiv_pia.__file__)), "cli.py")
+
+
+def run_cli(*args):
+    command = [bpy.app.binary_path, "-b", "--factory-startup", "--python-exit-code", "1",
+               "--python", CLI, "--"] + list(args)
+    return subprocess.run(command, capture_output=True, text=True, timeout=120)
+
+
+def test_cli_writes_blend(tmp_path):
+    output = str(tmp_path / "mushroom_cage.blend")
+    result = run_cli(os.path.join(DATA, "mushroom.obj"), output, "--levels", "1",
+                     "--quality", "4", "--boundary-smooth", "PRESERVE_CORNERS")
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "Converged" in result.stdout
+    assert os.path.isfile(output)
+    with bpy.data.libraries.load(output) as (data_from, data_to):
+        names = list(data_from.objects)
+    assert "mushroom_pia" in names and "mushroom" in names
+
+
+def test_cli_error_exit_status(tmp_path):
+    output = str(tmp_path / "never.blend")
+    result = run_cli(os.path.join(DATA, "no_such_mesh.obj"), output)
+    assert result.returncode == 1
+    assert "Input file not found" in result.stderr
+    assert not os.path.exists(output)
+
+
+def test_cli_help():
+    result = run_cli("--help")
+    assert result.returncode == 0
+    assert "--boundary-smooth" in result.stdout

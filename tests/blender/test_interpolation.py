@@ -1,0 +1,118 @@
+# SPDX-License-Identifier: GPL-2.0-or-later
+"""The oracle is Blender itself: after the operator, the new object's
+Subdivision Surface modifier (use_limit_surface) must put its first N
+evaluated vertices (the control vertices) on the original vertices."""
+
+import os
+
+import bpy
+import pytest
+
+import shapes
+from conftest import (DATA, MATCH, assert_unchanged, import_obj, positions,
+                      relative_miss, run_operator, snapshot)
+
+
+def make_cage(source, **settings):
+    before = snapshot(source)
+    targets = positions(source.data).astype("float64")
+    assert run_operator(**settings) == {'FINISHED'}
+    new_obj = bpy.context.active_object
+    assert new_obj is not source and new_obj.name == source.name + "_pia"
+    assert_unchanged(source, before)
+    assert new_obj["pia_status"] == 'CONVERGED', new_obj["pia_status"]
+    return new_obj, targets
+
+
+def check_modifier(obj, **expected):
+    mods = [m for m in obj.modifiers if m.type == 'SUBSURF']
+    assert len(mods) == 1
+    mod = mods[0]
+    assert mod.use_limit_surface
+    for name, value in expected.items():
+        assert getattr(mod, name) == value, name
+    return mod
+
+
+# --- generated shapes -------------------------------------------------------
+
+@pytest.mark.parametrize("levels", (1, 2, 3))
+@pytest.mark.parametrize("shape", shapes.ALL, ids=lambda f: f.__name__)
+def test_shape_levels(shape, levels):
+    new_obj, targets = make_cage(shape(), levels=levels, render_levels=levels)
+    check_modifier(new_obj, levels=levels, render_levels=levels, quality=3)
+    miss = relative_miss(new_obj, targets)
+    assert miss <= MATCH, "levels=%d: miss %.3g of diagonal" % (levels, miss)
+
+
+@pytest.mark.parametrize("quality", (1, 3, 6))
+@pytest.mark.parametrize("boundary_smooth", ('ALL', 'PRESERVE_CORNERS'))
+@pytest.mark.parametrize("shape", shapes.ALL, ids=lambda f: f.__name__)
+def test_shape_settings(shape, boundary_smooth, quality):
+    new_obj, targets = make_cage(shape(), levels=2, quality=quality,
+                                 boundary_smooth=boundary_smooth)
+    check_modifier(new_obj, quality=quality, boundary_smooth=boundary_smooth)
+    miss = relative_miss(new_obj, targets)
+    assert miss <= MATCH, "miss %.3g of diagonal" % miss
+
+
+@pytest.mark.parametrize("shape", (shapes.edge_creases, shapes.vertex_creases),
+                         ids=lambda f: f.__name__)
+def test_creases_ignored_when_off(shape):
+    new_obj, targets = make_cage(shape(), use_creases=False)
+    check_modifier(new_obj, use_creases=False)
+    assert relative_miss(new_obj, targets) <= MATCH
+
+
+# --- meshes made by others (tests/data, see README there) -------------------
+
+# name -> levels at which the cage is checked (the control points are limit
+# points at every level; big meshes are evaluated at level 1 only to keep the
+# suite quick).
+REAL = {
+    "bunny": (1, 2, 3),
+    "elephant-with-holes": (1, 2),
+    "bun_zipper": (1,),
+    "mushroom": (1, 2, 3),
+    "double-torus": (1, 2, 3),
+    "catmark_car": (1, 2, 3),
+    "catmark_nonman_edges": (1, 2, 3),
+    "teapot": (1, 2, 3),
+}
+if os.path.exists(os.path.join(DATA, "dragon_res2.obj")):
+    REAL["dragon_res2"] = (1,)
+
+REAL_CASES = [(name, levels) for name, all_levels in REAL.items() for levels in all_levels]
+
+
+@pytest.mark.parametrize("name,levels", REAL_CASES, ids=["%s-L%d" % c for c in REAL_CASES])
+def test_real_mesh(name, levels):
+    source = import_obj(os.path.join(DATA, name + ".obj"))
+    new_obj, targets = make_cage(source, levels=levels, render_levels=levels)
+    miss = relative_miss(new_obj, targets)
+    assert miss <= MATCH, "%s levels=%d: miss %.3g of diagonal" % (name, levels, miss)
+
+
+@pytest.mark.parametrize("name", ("catmark_car", "teapot", "elephant-with-holes"))
+def test_real_mesh_preserve_corners(name):
+    source = import_obj(os.path.join(DATA, name + ".obj"))
+    new_obj, targets = make_cage(source, levels=1, boundary_smooth='PRESERVE_CORNERS')
+    assert relative_miss(new_obj, targets) <= MATCH
+
+
+# --- the plain modifier does not interpolate ---------------------------------
+
+@pytest.mark.parametrize("make", (shapes.cube, shapes.edge_creases,
+                                  lambda: import_obj(os.path.join(DATA, "bunny.obj")),
+                                  lambda: import_obj(os.path.join(DATA, "mushroom.obj"))),
+                         ids=("cube", "edge_creases", "bunny", "mushroom"))
+def test_plain_modifier_misses_by_far(make):
+    source = make()
+    new_obj, targets = make_cage(source, levels=2)
+    interpolated = relative_miss(new_obj, targets)
+    mod = source.modifiers.new("Subdivision", 'SUBSURF')
+    mod.levels = 2
+    mod.use_limit_surface = True
+    plain = relative_miss(source, targets)
+    assert plain > 1e-3, plain
+    assert plain > 100 * max(interpolated, 1e-9), (plain, interpolated)
