@@ -1,0 +1,437 @@
+"""ctypes binding to the subdiv_pia C library.
+
+This module imports no ``bpy``: it runs in plain Python with numpy as well as
+inside Blender.  numpy arrays are handed to C as pointers, without copies
+when they already have the right dtype and layout.
+
+    mesh = Mesh(positions, face_sizes, face_vertices, edges, edge_creases, vertex_creases)
+    cage, report = interpolate(mesh, quality=3, boundary_smooth='ALL')
+    stencils = limit_stencils(mesh)          # CSR arrays: offsets, indices, weights
+
+The shared library is looked up next to this file (``libsubdiv_pia.so``,
+``subdiv_pia.dll`` or ``libsubdiv_pia.dylib``), or at the path in the
+environment variable ``SUBDIV_PIA_LIBRARY``.  It is loaded on first use; if it
+cannot be, :func:`available` is False and :func:`load_error` says why.
+"""
+
+import ctypes
+import os
+import sys
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = [
+    "Mesh", "Report", "Stencils", "PiaError", "PiaCancelled",
+    "available", "load_error", "version", "validate", "limit_stencils", "solve", "interpolate",
+    "SCHEMES", "BOUNDARY_SMOOTH", "METHODS",
+]
+
+SCHEMES = ("CATMULL_CLARK",)
+BOUNDARY_SMOOTH = ("ALL", "PRESERVE_CORNERS")
+METHODS = ("AUTO", "PIA", "GS_PIA")
+
+_RESULT_NAMES = {
+    0: "OK", 1: "MAX_ITERATIONS", 2: "STAGNATED",
+    -1: "INVALID_ARGUMENT", -2: "EMPTY_MESH", -3: "FACE_SIZE", -4: "INDEX_RANGE",
+    -5: "NONFINITE", -6: "DEGENERATE_FACE", -7: "TOPOLOGY", -8: "OUT_OF_MEMORY",
+    -9: "CANCELLED", -10: "DIVERGED", -11: "INTERNAL",
+}
+_STATUS_OF_RESULT = {0: "CONVERGED", 1: "MAX_ITERATIONS", 2: "STAGNATED"}
+
+
+class PiaError(Exception):
+    """The library refused the input or failed; ``code`` names why."""
+
+    def __init__(self, code, message, index=-1):
+        super().__init__(message)
+        self.code = code
+        self.message = message
+        self.index = index
+
+
+class PiaCancelled(PiaError):
+    """The progress callback asked to stop."""
+
+
+# --------------------------------------------------------------------------
+# C declarations
+# --------------------------------------------------------------------------
+
+_i32p = ctypes.POINTER(ctypes.c_int32)
+_i64p = ctypes.POINTER(ctypes.c_int64)
+_f32p = ctypes.POINTER(ctypes.c_float)
+_f64p = ctypes.POINTER(ctypes.c_double)
+
+_PROGRESS = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_int32, ctypes.c_double)
+
+
+class _Status(ctypes.Structure):
+    _fields_ = [("code", ctypes.c_int), ("index", ctypes.c_int64), ("message", ctypes.c_char * 256)]
+
+
+class _Mesh(ctypes.Structure):
+    _fields_ = [
+        ("vertex_count", ctypes.c_int32), ("positions", _f32p),
+        ("face_count", ctypes.c_int32), ("face_sizes", _i32p), ("face_vertices", _i32p),
+        ("edge_count", ctypes.c_int32), ("edges", _i32p), ("edge_creases", _f32p),
+        ("vertex_creases", _f32p),
+    ]
+
+
+class _Options(ctypes.Structure):
+    _fields_ = [
+        ("scheme", ctypes.c_int), ("boundary_smooth", ctypes.c_int), ("ignore_creases", ctypes.c_int32),
+        ("quality", ctypes.c_int32), ("method", ctypes.c_int), ("tolerance", ctypes.c_double),
+        ("max_iterations", ctypes.c_int32), ("progress", _PROGRESS), ("progress_user_data", ctypes.c_void_p),
+    ]
+
+
+class _Report(ctypes.Structure):
+    _fields_ = [
+        ("result", ctypes.c_int), ("method", ctypes.c_int), ("iterations", ctypes.c_int32),
+        ("diagonal", ctypes.c_double), ("max_error", ctypes.c_double), ("mean_error", ctypes.c_double),
+        ("max_error_relative", ctypes.c_double), ("mean_error_relative", ctypes.c_double),
+        ("initial_max_error_relative", ctypes.c_double),
+        ("stencil_seconds", ctypes.c_double), ("solve_seconds", ctypes.c_double),
+        ("history", _f64p), ("history_capacity", ctypes.c_int32), ("history_count", ctypes.c_int32),
+    ]
+
+
+_lib = None
+_load_error = None
+
+
+def _library_candidates():
+    env = os.environ.get("SUBDIV_PIA_LIBRARY")
+    if env:
+        yield env
+    here = os.path.dirname(os.path.abspath(__file__))
+    names = {"win32": ["subdiv_pia.dll"], "darwin": ["libsubdiv_pia.dylib"]}.get(sys.platform, ["libsubdiv_pia.so"])
+    for name in names:
+        yield os.path.join(here, name)
+
+
+def _declare(lib):
+    def fn(name, restype, *argtypes):
+        f = getattr(lib, name)
+        f.restype = restype
+        f.argtypes = list(argtypes)
+
+    P = ctypes.c_void_p
+    fn("spia_version", ctypes.c_int)
+    fn("spia_result_name", ctypes.c_char_p, ctypes.c_int)
+    fn("spia_mesh_validate", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(_Status))
+    fn("spia_limit_stencils_create", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(_Options),
+       ctypes.POINTER(P), ctypes.POINTER(_Status))
+    fn("spia_stencils_free", None, P)
+    fn("spia_stencils_row_count", ctypes.c_int32, P)
+    fn("spia_stencils_weight_count", ctypes.c_int64, P)
+    fn("spia_stencils_copy_csr", ctypes.c_int, P, _i64p, _i32p, _f64p)
+    fn("spia_solve", ctypes.c_int, P, _f32p, ctypes.POINTER(_Options), _f32p, ctypes.POINTER(_Report),
+       ctypes.POINTER(_Status))
+    fn("spia_interpolate", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(_Options), _f32p,
+       ctypes.POINTER(_Report), ctypes.POINTER(_Status))
+
+
+def _library():
+    global _lib, _load_error
+    if _lib is not None:
+        return _lib
+    errors = []
+    for path in _library_candidates():
+        if not os.path.exists(path):
+            errors.append(f"{path}: not found")
+            continue
+        try:
+            lib = ctypes.CDLL(path)
+            _declare(lib)
+        except (OSError, AttributeError) as exc:
+            errors.append(f"{path}: {exc}")
+            continue
+        _lib, _load_error = lib, None
+        return lib
+    _load_error = "the subdiv_pia native library could not be loaded (" + "; ".join(errors) + ")"
+    raise PiaError("LIBRARY", _load_error)
+
+
+def available():
+    """True when the native library can be loaded."""
+    try:
+        _library()
+        return True
+    except PiaError:
+        return False
+
+
+def load_error():
+    """Why the native library could not be loaded, or None."""
+    available()
+    return _load_error
+
+
+def version():
+    """The library's version as a string, e.g. '0.1.0'."""
+    v = _library().spia_version()
+    return f"{v // 10000}.{v // 100 % 100}.{v % 100}"
+
+
+# --------------------------------------------------------------------------
+# Mesh and options
+# --------------------------------------------------------------------------
+
+def _as(array, dtype, shape_tail=None, name="array"):
+    a = np.ascontiguousarray(array, dtype=dtype)
+    if shape_tail is not None:
+        a = a.reshape((-1,) + shape_tail) if a.size else a.reshape((0,) + shape_tail)
+    return a
+
+
+def _ptr(a, ctype):
+    return a.ctypes.data_as(ctypes.POINTER(ctype)) if a is not None else None
+
+
+class Mesh:
+    """A polygon mesh in the library's layout (Blender's, flattened).
+
+    positions       (N, 3) float32
+    face_sizes      (F,)   int32, corners per face
+    face_vertices   (sum(face_sizes),) int32, faces one after another
+    edges           (E, 2) int32, all edges incl. loose ones, or None
+    edge_creases    (E,)   float32 in [0, 1], or None
+    vertex_creases  (N,)   float32 in [0, 1], or None
+
+    Arrays that already have these dtypes and are C-contiguous are used in
+    place; the Mesh keeps references to them while it lives.
+    """
+
+    def __init__(self, positions, face_sizes, face_vertices, edges=None, edge_creases=None, vertex_creases=None):
+        self.positions = _as(positions, np.float32, (3,))
+        self.face_sizes = _as(face_sizes, np.int32).ravel()
+        self.face_vertices = _as(face_vertices, np.int32).ravel()
+        self.edges = None if edges is None else _as(edges, np.int32, (2,))
+        self.edge_creases = None if edge_creases is None else _as(edge_creases, np.float32).ravel()
+        self.vertex_creases = None if vertex_creases is None else _as(vertex_creases, np.float32).ravel()
+        if self.face_vertices.size != int(self.face_sizes.astype(np.int64).sum()):
+            raise PiaError("INVALID_ARGUMENT",
+                           f"face_vertices has {self.face_vertices.size} entries but face_sizes add up to "
+                           f"{int(self.face_sizes.astype(np.int64).sum())}")
+        if self.edge_creases is not None and (self.edges is None or len(self.edge_creases) != len(self.edges)):
+            raise PiaError("INVALID_ARGUMENT", "edge_creases needs one value per edge")
+        if self.vertex_creases is not None and len(self.vertex_creases) != len(self.positions):
+            raise PiaError("INVALID_ARGUMENT", "vertex_creases needs one value per vertex")
+
+    @classmethod
+    def from_faces(cls, positions, faces, **kwargs):
+        """Builds a Mesh from a list of faces (lists of vertex indices)."""
+        sizes = np.fromiter((len(f) for f in faces), dtype=np.int32, count=len(faces))
+        verts = np.fromiter((v for f in faces for v in f), dtype=np.int32, count=int(sizes.sum()))
+        return cls(positions, sizes, verts, **kwargs)
+
+    @property
+    def vertex_count(self):
+        return len(self.positions)
+
+    def _c(self):
+        return _Mesh(
+            len(self.positions), _ptr(self.positions, ctypes.c_float),
+            len(self.face_sizes), _ptr(self.face_sizes, ctypes.c_int32), _ptr(self.face_vertices, ctypes.c_int32),
+            0 if self.edges is None else len(self.edges), _ptr(self.edges, ctypes.c_int32),
+            _ptr(self.edge_creases, ctypes.c_float), _ptr(self.vertex_creases, ctypes.c_float))
+
+
+def _enum(value, names, what):
+    try:
+        return names.index(value)
+    except ValueError:
+        raise PiaError("INVALID_ARGUMENT", f"{what} must be one of {', '.join(names)}, not {value!r}") from None
+
+
+def _options(scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases=True, quality=3, method="AUTO",
+             tolerance=1e-6, max_iterations=1000, progress=None):
+    if not (isinstance(quality, (int, np.integer)) and 1 <= quality <= 10):
+        raise PiaError("INVALID_ARGUMENT", f"quality must be an integer from 1 to 10, not {quality!r}")
+    if not (tolerance > 0 and np.isfinite(tolerance)):
+        raise PiaError("INVALID_ARGUMENT", f"tolerance must be a positive number, not {tolerance!r}")
+    if not (isinstance(max_iterations, (int, np.integer)) and max_iterations >= 1):
+        raise PiaError("INVALID_ARGUMENT", f"max_iterations must be a positive integer, not {max_iterations!r}")
+    opts = _Options()
+    opts.scheme = _enum(scheme, SCHEMES, "scheme")
+    opts.boundary_smooth = _enum(boundary_smooth, BOUNDARY_SMOOTH, "boundary_smooth")
+    opts.ignore_creases = 0 if use_creases else 1
+    opts.quality = int(quality)
+    opts.method = _enum(method, METHODS, "method")
+    opts.tolerance = float(tolerance)
+    opts.max_iterations = int(max_iterations)
+    callback = None
+    if progress is not None:
+        def callback(_user, iteration, relative_error):
+            try:
+                return 1 if progress(int(iteration), float(relative_error)) else 0
+            except Exception:  # an exception cannot cross C: treat it as a cancel
+                return 1
+        callback = _PROGRESS(callback)
+        opts.progress = callback
+    return opts, callback
+
+
+def _raise(code, status):
+    name = _RESULT_NAMES.get(code, str(code))
+    message = status.message.decode("utf-8", "replace") or name
+    cls = PiaCancelled if name == "CANCELLED" else PiaError
+    raise cls(name, message, status.index)
+
+
+# --------------------------------------------------------------------------
+# Results
+# --------------------------------------------------------------------------
+
+@dataclass
+class Report:
+    """What a solve did.  Errors are distances |P_i - (L V)_i|."""
+    status: str                 # 'CONVERGED', 'MAX_ITERATIONS' or 'STAGNATED'
+    converged: bool
+    message: str
+    method: str                 # the method used (AUTO resolved)
+    iterations: int
+    diagonal: float             # bounding-box diagonal of the targets
+    max_error: float
+    mean_error: float
+    max_error_relative: float
+    mean_error_relative: float
+    initial_max_error_relative: float
+    stencil_seconds: float
+    solve_seconds: float
+    history: np.ndarray = field(repr=False)   # relative max error after each iteration
+
+    def summary(self):
+        state = "converged" if self.converged else self.status.lower().replace("_", " ")
+        return (f"{state} in {self.iterations} iterations ({self.method}): max error "
+                f"{self.max_error_relative:.3g}, mean {self.mean_error_relative:.3g} of the diagonal "
+                f"(was {self.initial_max_error_relative:.3g})")
+
+
+def _report(code, rep, history, status):
+    return Report(
+        status=_STATUS_OF_RESULT[code], converged=code == 0,
+        message=status.message.decode("utf-8", "replace"),
+        method=METHODS[rep.method] if 0 <= rep.method < len(METHODS) else str(rep.method),
+        iterations=rep.iterations, diagonal=rep.diagonal, max_error=rep.max_error, mean_error=rep.mean_error,
+        max_error_relative=rep.max_error_relative, mean_error_relative=rep.mean_error_relative,
+        initial_max_error_relative=rep.initial_max_error_relative,
+        stencil_seconds=rep.stencil_seconds, solve_seconds=rep.solve_seconds,
+        history=history[: rep.history_count].copy())
+
+
+class Stencils:
+    """A limit stencil table: row i gives the limit point of vertex i as
+    ``sum(weights[k] * cage[indices[k]] for k in range(offsets[i], offsets[i+1]))``."""
+
+    def __init__(self, handle, lib):
+        self._handle = ctypes.c_void_p(handle)
+        self._lib = lib
+        rows = lib.spia_stencils_row_count(self._handle)
+        nnz = lib.spia_stencils_weight_count(self._handle)
+        self.offsets = np.empty(rows + 1, dtype=np.int64)
+        self.indices = np.empty(nnz, dtype=np.int32)
+        self.weights = np.empty(nnz, dtype=np.float64)
+        lib.spia_stencils_copy_csr(self._handle, _ptr(self.offsets, ctypes.c_int64),
+                                   _ptr(self.indices, ctypes.c_int32), _ptr(self.weights, ctypes.c_double))
+
+    def __del__(self):
+        handle, self._handle = getattr(self, "_handle", None), None
+        if handle:
+            self._lib.spia_stencils_free(handle)
+
+    @property
+    def row_count(self):
+        return len(self.offsets) - 1
+
+    def to_scipy(self):
+        """The table as a scipy.sparse.csr_matrix (needs scipy)."""
+        import scipy.sparse
+        n = self.row_count
+        return scipy.sparse.csr_matrix((self.weights, self.indices, self.offsets), shape=(n, n))
+
+    def apply(self, cage):
+        """Limit points (N, 3) of a cage (N, 3), computed in numpy."""
+        cage = np.asarray(cage, dtype=np.float64).reshape(-1, 3)
+        rows = np.repeat(np.arange(self.row_count), np.diff(self.offsets))
+        out = np.zeros((self.row_count, 3))
+        np.add.at(out, rows, self.weights[:, None] * cage[self.indices])
+        return out
+
+    def solve(self, targets, **options):
+        """Solves L V = targets; returns (cage, Report).  See :func:`interpolate`."""
+        lib = self._lib
+        targets = _as(targets, np.float32, (3,))
+        if len(targets) != self.row_count:
+            raise PiaError("INVALID_ARGUMENT", f"{len(targets)} targets for {self.row_count} stencils")
+        opts, _keep = _options(**options)
+        cage = np.empty_like(targets)
+        history = np.empty(opts.max_iterations, dtype=np.float64)
+        rep = _Report(history=_ptr(history, ctypes.c_double), history_capacity=len(history))
+        status = _Status()
+        code = lib.spia_solve(self._handle, _ptr(targets, ctypes.c_float), ctypes.byref(opts),
+                              _ptr(cage, ctypes.c_float), ctypes.byref(rep), ctypes.byref(status))
+        if code < 0:
+            _raise(code, status)
+        return cage, _report(code, rep, history, status)
+
+
+# --------------------------------------------------------------------------
+# Entry points
+# --------------------------------------------------------------------------
+
+def validate(mesh):
+    """Raises PiaError if the library would refuse the mesh."""
+    status = _Status()
+    cm = mesh._c()
+    code = _library().spia_mesh_validate(ctypes.byref(cm), ctypes.byref(status))
+    if code != 0:
+        _raise(code, status)
+
+
+def limit_stencils(mesh, scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases=True, quality=3, progress=None):
+    """The limit stencils of ``mesh`` (a :class:`Stencils`)."""
+    lib = _library()
+    opts, _keep = _options(scheme=scheme, boundary_smooth=boundary_smooth, use_creases=use_creases,
+                           quality=quality, progress=progress)
+    handle = ctypes.c_void_p()
+    status = _Status()
+    cm = mesh._c()
+    code = lib.spia_limit_stencils_create(ctypes.byref(cm), ctypes.byref(opts), ctypes.byref(handle),
+                                          ctypes.byref(status))
+    if code != 0:
+        _raise(code, status)
+    return Stencils(handle.value, lib)
+
+
+def solve(stencils, targets, **options):
+    """Solves ``stencils`` V = targets; the same as ``stencils.solve(targets, **options)``."""
+    return stencils.solve(targets, **options)
+
+
+def interpolate(mesh, scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases=True, quality=3, method="AUTO",
+                tolerance=1e-6, max_iterations=1000, progress=None):
+    """A cage whose limit surface passes through the mesh's vertices.
+
+    Returns ``(cage, report)``: cage is an (N, 3) float32 array of new
+    control positions, report a :class:`Report`.  Stopping at
+    max_iterations or on stagnation is not an error: ``report.converged`` is
+    False then.  Bad input raises :class:`PiaError`; a progress callback
+    ``progress(iteration, relative_error)`` that returns True cancels and
+    raises :class:`PiaCancelled`.
+    """
+    lib = _library()
+    opts, _keep = _options(scheme, boundary_smooth, use_creases, quality, method, tolerance, max_iterations, progress)
+    cage = np.empty_like(mesh.positions)
+    history = np.empty(opts.max_iterations, dtype=np.float64)
+    rep = _Report(history=_ptr(history, ctypes.c_double), history_capacity=len(history))
+    status = _Status()
+    cm = mesh._c()
+    code = lib.spia_interpolate(ctypes.byref(cm), ctypes.byref(opts), _ptr(cage, ctypes.c_float),
+                                ctypes.byref(rep), ctypes.byref(status))
+    if code < 0:
+        _raise(code, status)
+    return cage, _report(code, rep, history, status)

@@ -1,0 +1,294 @@
+/*
+ * subdiv_pia: subdivision surfaces that pass through the points you gave them.
+ *
+ * Given a polygon mesh, the library computes a new control cage (same
+ * topology, new positions) whose subdivision LIMIT surface interpolates the
+ * original vertices: the limit point of control vertex i is the original
+ * position of vertex i.  It does so by progressive iterative approximation
+ * (PIA) and related iterations on the limit stencils of the mesh.
+ *
+ * The Catmull-Clark limit stencils are those of Blender's Subdivision Surface
+ * modifier with "Use Limit Surface" on (OpenSubdiv adaptive patches at the
+ * modifier's quality level), so that the modifier on the returned cage shows
+ * a surface through the original points.
+ *
+ * Conventions
+ * -----------
+ * - Plain data in, plain data out.  The mesh is described by a spia_mesh
+ *   struct of counts and const pointers, laid out as Blender holds it; the
+ *   library never copies what it only reads and never keeps a pointer to it
+ *   after a call returns.
+ * - Output buffers are owned and sized by the caller.  The one object the
+ *   library owns, a stencil table, is an opaque handle with one create and
+ *   one free.
+ * - Every function that can fail returns a spia_result.  When the optional
+ *   spia_status pointer is not NULL it receives the same code and a message
+ *   in words.  The library never prints, never exits and never asserts on
+ *   input.
+ * - An options struct set to all zeros means the defaults
+ *   (spia_options_default() is the same as memset to 0).
+ * - No global state: every function is reentrant.  Progress and
+ *   cancellation go through a callback with a user pointer.
+ * - Indices are int32_t, as in Blender.  Positions are float (Blender's
+ *   storage); all arithmetic is carried out in double.
+ */
+#ifndef SUBDIV_PIA_H
+#define SUBDIV_PIA_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#if defined(_WIN32)
+#  ifdef SPIA_BUILDING_LIBRARY
+#    define SPIA_API __declspec(dllexport)
+#  else
+#    define SPIA_API __declspec(dllimport)
+#  endif
+#else
+#  define SPIA_API __attribute__((visibility("default")))
+#endif
+
+#define SPIA_VERSION_MAJOR 0
+#define SPIA_VERSION_MINOR 1
+#define SPIA_VERSION_PATCH 0
+
+/* ------------------------------------------------------------------------ */
+/* Result codes                                                              */
+/* ------------------------------------------------------------------------ */
+
+typedef enum spia_result {
+    SPIA_OK = 0,
+    /* The solver stopped at max_iterations before reaching the tolerance.
+     * The cage written is the last iterate and is usable.  Not a failure of
+     * the call: the report tells how far it got. */
+    SPIA_MAX_ITERATIONS = 1,
+    /* The error stopped falling before the tolerance was reached (for
+     * example the tolerance is below what rounding allows).  The cage
+     * written is the best iterate seen. */
+    SPIA_STAGNATED = 2,
+
+    /* Failures: nothing was written to the output buffers. */
+    SPIA_ERROR_INVALID_ARGUMENT = -1, /* NULL pointer, negative count, bad option value */
+    SPIA_ERROR_EMPTY_MESH = -2,       /* no vertices, or no faces                      */
+    SPIA_ERROR_FACE_SIZE = -3,        /* a face with fewer than 3 vertices             */
+    SPIA_ERROR_INDEX_RANGE = -4,      /* a face or edge index outside [0, vertex_count) */
+    SPIA_ERROR_NONFINITE = -5,        /* a NaN or infinite position or crease          */
+    SPIA_ERROR_DEGENERATE_FACE = -6,  /* a face that uses one vertex more than once    */
+    SPIA_ERROR_TOPOLOGY = -7,         /* a topology the subdivision scheme rejects     */
+    SPIA_ERROR_OUT_OF_MEMORY = -8,
+    SPIA_ERROR_CANCELLED = -9,        /* the progress callback asked to stop           */
+    SPIA_ERROR_DIVERGED = -10,        /* the iteration blew up; nothing was written     */
+    SPIA_ERROR_INTERNAL = -11         /* an unexpected failure inside the library      */
+} spia_result;
+
+/* Longest message, terminating NUL included. */
+#define SPIA_MESSAGE_SIZE 256
+
+typedef struct spia_status {
+    spia_result code;
+    /* The first offending element where one applies (face, vertex or edge
+     * index), else -1. */
+    int64_t index;
+    char message[SPIA_MESSAGE_SIZE];
+} spia_status;
+
+/* A short constant name for a code, e.g. "SPIA_ERROR_FACE_SIZE".  Never NULL. */
+SPIA_API const char *spia_result_name(spia_result code);
+
+/* The library's version as major * 10000 + minor * 100 + patch. */
+SPIA_API int spia_version(void);
+
+/* ------------------------------------------------------------------------ */
+/* The mesh                                                                  */
+/* ------------------------------------------------------------------------ */
+
+/*
+ * A polygon mesh as Blender holds it.  Everything is read only and must stay
+ * valid for the duration of the call it is passed to.
+ *
+ *   positions       vertex_count * 3 floats, x y z of each vertex.
+ *   face_sizes      face_count ints, the number of corners of each face (>= 3).
+ *   face_vertices   sum(face_sizes) ints: the vertex indices of each face's
+ *                   corners, faces one after another in face order.
+ *   edges           edge_count * 2 ints, the two vertices of each edge, or
+ *                   NULL.  Edges used by no face are "loose edges".  Edges of
+ *                   faces need not be listed; they are only needed here to
+ *                   carry creases and to mark loose edges.  May be NULL when
+ *                   edge_count is 0.
+ *   edge_creases    edge_count floats in [0, 1] (Blender's edge crease), or
+ *                   NULL for none.
+ *   vertex_creases  vertex_count floats in [0, 1] (Blender's vertex crease),
+ *                   or NULL for none.
+ *
+ * Vertices used by no face and no edge ("loose vertices") are allowed; their
+ * limit point is the vertex itself.
+ */
+typedef struct spia_mesh {
+    int32_t vertex_count;
+    const float *positions;
+    int32_t face_count;
+    const int32_t *face_sizes;
+    const int32_t *face_vertices;
+    int32_t edge_count;
+    const int32_t *edges;
+    const float *edge_creases;
+    const float *vertex_creases;
+} spia_mesh;
+
+/* ------------------------------------------------------------------------ */
+/* Options                                                                   */
+/* ------------------------------------------------------------------------ */
+
+typedef enum spia_scheme {
+    SPIA_SCHEME_CATMULL_CLARK = 0 /* Blender's Subdivision Surface modifier */
+} spia_scheme;
+
+typedef enum spia_boundary_smooth {
+    SPIA_BOUNDARY_SMOOTH_ALL = 0,             /* Blender's "All" (its default)   */
+    SPIA_BOUNDARY_SMOOTH_PRESERVE_CORNERS = 1 /* Blender's "Keep Corners"        */
+} spia_boundary_smooth;
+
+typedef enum spia_method {
+    SPIA_METHOD_AUTO = 0,  /* the fastest method the library has for the matrix      */
+    SPIA_METHOD_PIA = 1,   /* V += P - L V (Jacobi-like, the papers' PIA)            */
+    SPIA_METHOD_GS_PIA = 2 /* Gauss-Seidel PIA: vertex by vertex, in place           */
+} spia_method;
+
+/*
+ * Progress callback: called once per iteration (and once when the stencils
+ * are ready, with iteration 0).  relative_error is the current largest
+ * distance |P_i - (L V)_i| divided by the bounding-box diagonal.  Return
+ * nonzero to cancel: the call then returns SPIA_ERROR_CANCELLED and writes
+ * nothing.
+ */
+typedef int (*spia_progress_fn)(void *user_data, int32_t iteration, double relative_error);
+
+/* All zeros means the defaults given in brackets. */
+typedef struct spia_options {
+    spia_scheme scheme;                   /* [CATMULL_CLARK] */
+    spia_boundary_smooth boundary_smooth; /* [ALL] */
+    int32_t ignore_creases;               /* nonzero: Blender's use_creases off [0: creases used] */
+    int32_t quality;                      /* Blender's quality, 1..10 [3] */
+    spia_method method;                   /* [AUTO] */
+    double tolerance;                     /* stop when max |P - L V| <= tolerance * diagonal [1e-6] */
+    int32_t max_iterations;               /* [1000] */
+    spia_progress_fn progress;            /* [none] */
+    void *progress_user_data;
+} spia_options;
+
+/* The defaults, as a value (the same as an all-zero struct). */
+SPIA_API spia_options spia_options_default(void);
+
+/* ------------------------------------------------------------------------ */
+/* Validation                                                                */
+/* ------------------------------------------------------------------------ */
+
+/*
+ * Checks a mesh the way every other function does before it works on it:
+ * counts, pointers, face sizes, index ranges, degenerate faces, finite
+ * positions, creases.  Returns SPIA_OK or the first problem found.
+ */
+SPIA_API spia_result spia_mesh_validate(const spia_mesh *mesh, spia_status *status);
+
+/* ------------------------------------------------------------------------ */
+/* Limit stencils                                                            */
+/* ------------------------------------------------------------------------ */
+
+/*
+ * A limit stencil table: one row per control vertex, in vertex order.  Row i
+ * holds the weights w_ij over control vertices j such that sum_j w_ij V_j is
+ * the limit point of vertex i.  Rows are stored as CSR (compressed sparse
+ * rows): row i occupies entries offsets[i] .. offsets[i+1]-1 of indices and
+ * weights; column indices within a row are increasing and unique.
+ */
+typedef struct spia_stencils spia_stencils;
+
+/*
+ * Builds the limit stencils of `mesh` under `options` (scheme,
+ * boundary_smooth, ignore_creases and quality are used; the solver fields
+ * are ignored; the progress callback may cancel before the work starts and
+ * after it ends).  On success *out receives a table to be freed with
+ * spia_stencils_free.  On failure *out is set to NULL.
+ */
+SPIA_API spia_result spia_limit_stencils_create(const spia_mesh *mesh, const spia_options *options,
+                                                spia_stencils **out, spia_status *status);
+
+/* Frees a table from spia_limit_stencils_create.  NULL is allowed. */
+SPIA_API void spia_stencils_free(spia_stencils *stencils);
+
+/* Number of rows (control vertices) and of stored weights. */
+SPIA_API int32_t spia_stencils_row_count(const spia_stencils *stencils);
+SPIA_API int64_t spia_stencils_weight_count(const spia_stencils *stencils);
+
+/*
+ * Copies the table out as CSR arrays into caller buffers of sizes
+ * row_count + 1 (offsets), weight_count (indices) and weight_count (weights).
+ * Any of the three may be NULL to skip it.
+ */
+SPIA_API spia_result spia_stencils_copy_csr(const spia_stencils *stencils, int64_t *offsets,
+                                            int32_t *indices, double *weights);
+
+/*
+ * Limit points of a cage: out[i] = sum_j w_ij cage[j], for row_count points of
+ * 3 doubles each.  `cage` and `out` must not overlap.
+ */
+SPIA_API spia_result spia_stencils_apply(const spia_stencils *stencils, const double *cage, double *out);
+
+/* ------------------------------------------------------------------------ */
+/* Solving                                                                   */
+/* ------------------------------------------------------------------------ */
+
+typedef struct spia_report {
+    spia_result result;        /* what the call returned                               */
+    spia_method method;        /* the method actually used (AUTO resolved)             */
+    int32_t iterations;        /* iterations carried out                               */
+    double diagonal;           /* bounding-box diagonal of the targets                 */
+    double max_error;          /* max_i |P_i - (L V)_i| for the cage written            */
+    double mean_error;         /* mean of the same distances                           */
+    double max_error_relative; /* max_error / diagonal                                 */
+    double mean_error_relative;
+    double initial_max_error_relative; /* the same before any iteration (cage = P) */
+    double stencil_seconds;    /* wall time building stencils (spia_interpolate only)  */
+    double solve_seconds;      /* wall time in the solver                              */
+    /* Optional caller-owned buffer: the relative max error after each
+     * iteration is written to history[k] for k < history_capacity. */
+    double *history;
+    int32_t history_capacity;
+    int32_t history_count;     /* entries written */
+} spia_report;
+
+/*
+ * Solves for a cage V with (L V)_i = targets_i, L the stencil table.
+ *
+ *   targets   row_count * 3 floats: the points the limit surface must pass
+ *             through (usually the mesh's own positions).
+ *   cage      row_count * 3 floats, written on success, SPIA_MAX_ITERATIONS
+ *             and SPIA_STAGNATED; untouched on failure.  May alias targets.
+ *   report    optional; filled in whatever the outcome.
+ *
+ * Uses options->method, tolerance, max_iterations and the progress callback.
+ * Fails with SPIA_ERROR_DIVERGED if the error grows without bound (a stencil
+ * table with a zero or negative diagonal entry cannot be solved by these
+ * methods either and is rejected as SPIA_ERROR_INVALID_ARGUMENT).
+ */
+SPIA_API spia_result spia_solve(const spia_stencils *stencils, const float *targets,
+                                const spia_options *options, float *cage, spia_report *report,
+                                spia_status *status);
+
+/*
+ * The whole path: validate, build stencils, solve with the mesh's positions
+ * as targets, write the cage (vertex_count * 3 floats).  Equivalent to
+ * spia_limit_stencils_create + spia_solve + spia_stencils_free.
+ */
+SPIA_API spia_result spia_interpolate(const spia_mesh *mesh, const spia_options *options, float *cage,
+                                      spia_report *report, spia_status *status);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* SUBDIV_PIA_H */

@@ -1,0 +1,82 @@
+/* Private declarations shared by the library's source files. */
+#ifndef SPIA_INTERNAL_H
+#define SPIA_INTERNAL_H
+
+#include "subdiv_pia.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* The stencil table behind the opaque handle: CSR rows, one per control
+ * vertex.  offsets has rows + 1 entries. */
+struct spia_stencils {
+    int32_t rows;
+    int64_t nnz;
+    int64_t *offsets;
+    int32_t *indices;
+    double *weights;
+};
+
+/* Writes code and a printf-style message into status (if not NULL) and
+ * returns code, so that failures read `return spia__fail(...)`. */
+spia_result spia__fail(spia_status *status, spia_result code, int64_t index, const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 4, 5)))
+#endif
+    ;
+void spia__ok(spia_status *status);
+
+/* Options with every zero field replaced by its default, or an error for
+ * out-of-range values. */
+spia_result spia__resolve_options(const spia_options *in, spia_options *out, spia_status *status);
+
+/* Monotonic wall clock in seconds. */
+double spia__now(void);
+
+/* A table with room for `rows` rows and `nnz` weights (offsets zeroed). */
+spia_stencils *spia__stencils_alloc(int32_t rows, int64_t nnz);
+
+/* Sorts the column indices of every row, adds up repeated columns and drops
+ * exact zeros, compacting the arrays in place. */
+void spia__stencils_canonicalize(spia_stencils *s);
+
+/* Per-vertex adjacency derived from the faces: for vertex v, the corners
+ * (face-vertex slots) that use it are corner_of[first[v] .. first[v+1]-1],
+ * in face order.  face_of_corner maps a corner to its face and
+ * corner_start[f] is the first corner of face f. */
+typedef struct spia_adjacency {
+    int32_t vertex_count;
+    int32_t face_count;
+    int64_t corner_count;
+    int64_t *corner_start;   /* face_count + 1 */
+    int32_t *face_of_corner; /* corner_count   */
+    int64_t *first;          /* vertex_count + 1 */
+    int64_t *corner_of;      /* corner_count   */
+} spia_adjacency;
+
+spia_result spia__adjacency_build(const spia_mesh *mesh, spia_adjacency *adj, spia_status *status);
+void spia__adjacency_free(spia_adjacency *adj);
+
+/* The vertices before and after corner c within its face. */
+static inline int32_t spia__corner_prev(const spia_mesh *m, const spia_adjacency *a, int64_t c) {
+    int32_t f = a->face_of_corner[c];
+    int64_t s = a->corner_start[f];
+    return m->face_vertices[c == s ? a->corner_start[f + 1] - 1 : c - 1];
+}
+static inline int32_t spia__corner_next(const spia_mesh *m, const spia_adjacency *a, int64_t c) {
+    int32_t f = a->face_of_corner[c];
+    int64_t e = a->corner_start[f + 1];
+    return m->face_vertices[c + 1 == e ? a->corner_start[f] : c + 1];
+}
+
+/* Catmull-Clark limit stencils matching Blender's modifier (catmark_osd.cpp). */
+spia_result spia__catmark_limit_stencils(const spia_mesh *mesh, const spia_adjacency *adj,
+                                         const spia_options *options, spia_stencils **out,
+                                         spia_status *status);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif

@@ -1,0 +1,61 @@
+/* Entry points that tie validation, stencils and solvers together. */
+#include "internal.h"
+
+#include <stdlib.h>
+
+/* Scheme dispatch: one line per scheme. */
+typedef spia_result (*stencil_builder)(const spia_mesh *, const spia_adjacency *, const spia_options *,
+                                       spia_stencils **, spia_status *);
+static stencil_builder builder_for(spia_scheme scheme) {
+    switch (scheme) {
+    case SPIA_SCHEME_CATMULL_CLARK: return spia__catmark_limit_stencils;
+    }
+    return NULL;
+}
+
+static int cancelled(const spia_options *o) {
+    return o->progress && o->progress(o->progress_user_data, 0, 0.0);
+}
+
+spia_result spia_limit_stencils_create(const spia_mesh *mesh, const spia_options *options, spia_stencils **out,
+                                       spia_status *status) {
+    if (!out) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "out must not be NULL");
+    *out = NULL;
+    spia_options opt;
+    spia_result r = spia__resolve_options(options, &opt, status);
+    if (r != SPIA_OK) return r;
+    r = spia_mesh_validate(mesh, status);
+    if (r != SPIA_OK) return r;
+    if (cancelled(&opt)) return spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled before computing stencils");
+    spia_adjacency adj;
+    r = spia__adjacency_build(mesh, &adj, status);
+    if (r != SPIA_OK) return r;
+    r = builder_for(opt.scheme)(mesh, &adj, &opt, out, status);
+    spia__adjacency_free(&adj);
+    if (r == SPIA_OK && cancelled(&opt)) {
+        spia_stencils_free(*out);
+        *out = NULL;
+        return spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled after computing stencils");
+    }
+    return r;
+}
+
+spia_result spia_interpolate(const spia_mesh *mesh, const spia_options *options, float *cage, spia_report *report,
+                             spia_status *status) {
+    if (!cage) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "cage must not be NULL");
+    const double t0 = spia__now();
+    spia_stencils *L = NULL;
+    spia_result r = spia_limit_stencils_create(mesh, options, &L, status);
+    const double t1 = spia__now();
+    if (r != SPIA_OK) {
+        if (report) {
+            report->result = r;
+            report->stencil_seconds = t1 - t0;
+        }
+        return r;
+    }
+    r = spia_solve(L, mesh->positions, options, cage, report, status);
+    if (report) report->stencil_seconds = t1 - t0;
+    spia_stencils_free(L);
+    return r;
+}

@@ -1,0 +1,240 @@
+/* Solvers on a limit stencil table L: find V with L V = P.
+ *
+ * PIA (the papers' progressive iterative approximation) is the Richardson
+ * iteration V += P - L V: every control point moves by the gap between its
+ * target and its current limit point.  It converges when the eigenvalues of L
+ * lie in (0, 1], as they do for the limit matrices of the schemes here.
+ *
+ * GS-PIA (Gauss-Seidel PIA) visits the vertices in order and moves each one,
+ * in place, so that its own limit point lands on its target given the
+ * current positions of the others: V_i += (P_i - (L V)_i) / L_ii.  For a
+ * limit matrix that is a positive diagonal times a symmetric positive
+ * definite matrix (closed Loop meshes) this is Gauss-Seidel on the SPD
+ * matrix and converges; on Catmull-Clark cages it converges faster than PIA
+ * in practice, which the tests check on every mesh they use.
+ *
+ * Both stop when max_i |P_i - (L V)_i| <= tolerance * diagonal, at
+ * max_iterations, when the error has not fallen for STAGNATION_WINDOW
+ * iterations, or (as a failure) when it blows up.
+ */
+#include "internal.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+enum {
+    STAGNATION_WINDOW = 50 /* iterations without a 0.1% improvement */
+};
+#define DIVERGENCE_FACTOR 1e4 /* error this many times the initial one */
+
+typedef struct solver_state {
+    const spia_stencils *L;
+    int32_t n;
+    double *P; /* targets              */
+    double *V; /* current cage         */
+    double *R; /* residual P - L V     */
+    double *diag;
+} solver_state;
+
+/* R = P - L V; returns the max distance and writes the mean. */
+static double residual(solver_state *s, double *mean) {
+    const spia_stencils *L = s->L;
+    double maxd = 0.0, sum = 0.0;
+    for (int32_t r = 0; r < s->n; ++r) {
+        double x = 0.0, y = 0.0, z = 0.0;
+        for (int64_t k = L->offsets[r]; k < L->offsets[r + 1]; ++k) {
+            const double w = L->weights[k];
+            const double *p = s->V + 3 * (int64_t)L->indices[k];
+            x += w * p[0];
+            y += w * p[1];
+            z += w * p[2];
+        }
+        double *q = s->R + 3 * (int64_t)r;
+        const double *t = s->P + 3 * (int64_t)r;
+        q[0] = t[0] - x;
+        q[1] = t[1] - y;
+        q[2] = t[2] - z;
+        double d = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]);
+        if (d > maxd || d != d) maxd = d != d ? NAN : d;
+        sum += d;
+    }
+    *mean = s->n ? sum / s->n : 0.0;
+    return maxd;
+}
+
+static void step_pia(solver_state *s) {
+    const int64_t m = 3 * (int64_t)s->n;
+    for (int64_t k = 0; k < m; ++k) s->V[k] += s->R[k];
+}
+
+static void step_gs_pia(solver_state *s) {
+    const spia_stencils *L = s->L;
+    for (int32_t r = 0; r < s->n; ++r) {
+        double x = 0.0, y = 0.0, z = 0.0;
+        for (int64_t k = L->offsets[r]; k < L->offsets[r + 1]; ++k) {
+            const double w = L->weights[k];
+            const double *p = s->V + 3 * (int64_t)L->indices[k];
+            x += w * p[0];
+            y += w * p[1];
+            z += w * p[2];
+        }
+        const double *t = s->P + 3 * (int64_t)r;
+        double *v = s->V + 3 * (int64_t)r;
+        const double inv = 1.0 / s->diag[r];
+        v[0] += (t[0] - x) * inv;
+        v[1] += (t[1] - y) * inv;
+        v[2] += (t[2] - z) * inv;
+    }
+}
+
+static double bbox_diagonal(const double *P, int32_t n) {
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (int32_t i = 0; i < n; ++i)
+        for (int a = 0; a < 3; ++a) {
+            double x = P[3 * (int64_t)i + a];
+            if (x < lo[a]) lo[a] = x;
+            if (x > hi[a]) hi[a] = x;
+        }
+    double d2 = 0.0;
+    for (int a = 0; a < 3; ++a) d2 += (hi[a] - lo[a]) * (hi[a] - lo[a]);
+    return sqrt(d2);
+}
+
+static void report_reset(spia_report *rep) {
+    if (!rep) return;
+    double *h = rep->history;
+    int32_t cap = rep->history_capacity;
+    memset(rep, 0, sizeof *rep);
+    rep->history = h;
+    rep->history_capacity = cap;
+}
+
+spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_options *options, float *cage,
+                       spia_report *report, spia_status *status) {
+    report_reset(report);
+    spia_options opt;
+    spia_result res = spia__resolve_options(options, &opt, status);
+    if (res != SPIA_OK) goto done_early;
+    if (!L || !targets || !cage) {
+        res = spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "stencils, targets and cage must not be NULL");
+        goto done_early;
+    }
+    const int32_t n = L->rows;
+    if (n == 0) {
+        res = spia__fail(status, SPIA_ERROR_EMPTY_MESH, -1, "the stencil table has no rows");
+        goto done_early;
+    }
+    for (int64_t k = 0; k < 3 * (int64_t)n; ++k)
+        if (!isfinite(targets[k])) {
+            res = spia__fail(status, SPIA_ERROR_NONFINITE, k / 3, "target %lld is NaN or infinite", (long long)(k / 3));
+            goto done_early;
+        }
+
+    const spia_method method = opt.method == SPIA_METHOD_AUTO ? SPIA_METHOD_GS_PIA : opt.method;
+    const double t0 = spia__now();
+    solver_state s;
+    memset(&s, 0, sizeof s);
+    s.L = L;
+    s.n = n;
+    s.P = (double *)malloc(sizeof(double) * 3 * (size_t)n);
+    s.V = (double *)malloc(sizeof(double) * 3 * (size_t)n);
+    s.R = (double *)malloc(sizeof(double) * 3 * (size_t)n);
+    s.diag = (double *)malloc(sizeof(double) * (size_t)n);
+    if (!s.P || !s.V || !s.R || !s.diag) {
+        res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
+        goto done;
+    }
+    for (int64_t k = 0; k < 3 * (int64_t)n; ++k) s.P[k] = s.V[k] = (double)targets[k];
+    for (int32_t r = 0; r < n; ++r) {
+        s.diag[r] = 0.0;
+        for (int64_t k = L->offsets[r]; k < L->offsets[r + 1]; ++k)
+            if (L->indices[k] == r) s.diag[r] = L->weights[k];
+        if (method == SPIA_METHOD_GS_PIA && !(s.diag[r] > 0.0)) {
+            res = spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, r,
+                             "stencil of vertex %d has weight %g on itself; GS-PIA needs a positive one", (int)r,
+                             s.diag[r]);
+            goto done;
+        }
+    }
+
+    const double diagonal = bbox_diagonal(s.P, n);
+    const double scale = diagonal > 0.0 ? diagonal : 1.0;
+    const double threshold = opt.tolerance * scale;
+    double mean;
+    double err = residual(&s, &mean);
+    const double initial = err;
+    double best = err;
+    int32_t it = 0, it_best = 0;
+    res = SPIA_OK;
+    if (report) {
+        report->initial_max_error_relative = initial / scale;
+        report->method = method;
+    }
+    while (!(err <= threshold)) {
+        if (it >= opt.max_iterations) {
+            res = SPIA_MAX_ITERATIONS;
+            break;
+        }
+        if (method == SPIA_METHOD_PIA)
+            step_pia(&s);
+        else
+            step_gs_pia(&s);
+        ++it;
+        err = residual(&s, &mean);
+        if (report && report->history && it <= report->history_capacity) {
+            report->history[it - 1] = err / scale;
+            report->history_count = it;
+        }
+        if (!isfinite(err) || err > DIVERGENCE_FACTOR * (initial > threshold ? initial : threshold)) {
+            res = spia__fail(status, SPIA_ERROR_DIVERGED, -1,
+                             "the iteration diverged after %d iterations (max error %g of the diagonal)", (int)it,
+                             err / scale);
+            break;
+        }
+        if (err < best * (1.0 - 1e-3)) {
+            best = err;
+            it_best = it;
+        } else if (it - it_best >= STAGNATION_WINDOW) {
+            res = SPIA_STAGNATED;
+            break;
+        }
+        if (opt.progress && opt.progress(opt.progress_user_data, it, err / scale)) {
+            res = spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled after %d iterations", (int)it);
+            break;
+        }
+    }
+    if (res >= 0) {
+        /* Write the cage, then measure it as stored (in float). */
+        for (int64_t k = 0; k < 3 * (int64_t)n; ++k) {
+            cage[k] = (float)s.V[k];
+            s.V[k] = (double)cage[k];
+        }
+        err = residual(&s, &mean);
+        if (res == SPIA_OK)
+            spia__ok(status);
+        else if (res == SPIA_MAX_ITERATIONS)
+            spia__fail(status, res, -1, "stopped at max_iterations (%d) with max error %.3g of the diagonal, above the tolerance %.3g",
+                       (int)it, err / scale, opt.tolerance);
+        else
+            spia__fail(status, res, -1, "the error stopped falling after %d iterations at %.3g of the diagonal, above the tolerance %.3g",
+                       (int)it, err / scale, opt.tolerance);
+    }
+    if (report) {
+        report->iterations = it;
+        report->diagonal = diagonal;
+        report->max_error = err;
+        report->mean_error = mean;
+        report->max_error_relative = err / scale;
+        report->mean_error_relative = mean / scale;
+    }
+done:
+    free(s.P);
+    free(s.V);
+    free(s.R);
+    free(s.diag);
+    if (report) report->solve_seconds = spia__now() - t0;
+done_early:
+    if (report) report->result = res;
+    return res;
+}

@@ -1,0 +1,91 @@
+/* The CSR stencil table shared by every scheme: storage, access, product. */
+#include "internal.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+spia_stencils *spia__stencils_alloc(int32_t rows, int64_t nnz) {
+    spia_stencils *s = (spia_stencils *)calloc(1, sizeof *s);
+    if (!s) return NULL;
+    s->rows = rows;
+    s->nnz = nnz;
+    s->offsets = (int64_t *)calloc((size_t)rows + 1, sizeof(int64_t));
+    s->indices = (int32_t *)malloc(sizeof(int32_t) * (size_t)(nnz > 0 ? nnz : 1));
+    s->weights = (double *)malloc(sizeof(double) * (size_t)(nnz > 0 ? nnz : 1));
+    if (!s->offsets || !s->indices || !s->weights) {
+        spia_stencils_free(s);
+        return NULL;
+    }
+    return s;
+}
+
+void spia_stencils_free(spia_stencils *s) {
+    if (!s) return;
+    free(s->offsets);
+    free(s->indices);
+    free(s->weights);
+    free(s);
+}
+
+void spia__stencils_canonicalize(spia_stencils *s) {
+    int64_t out = 0;
+    for (int32_t r = 0; r < s->rows; ++r) {
+        int64_t b = s->offsets[r], e = s->offsets[r + 1];
+        /* Insertion sort: rows are short (the vertices of the incident faces). */
+        for (int64_t i = b + 1; i < e; ++i) {
+            int32_t ki = s->indices[i];
+            double wi = s->weights[i];
+            int64_t j = i - 1;
+            while (j >= b && s->indices[j] > ki) {
+                s->indices[j + 1] = s->indices[j];
+                s->weights[j + 1] = s->weights[j];
+                --j;
+            }
+            s->indices[j + 1] = ki;
+            s->weights[j + 1] = wi;
+        }
+        s->offsets[r] = out;
+        for (int64_t i = b; i < e;) {
+            int32_t k = s->indices[i];
+            double w = 0.0;
+            while (i < e && s->indices[i] == k) w += s->weights[i++];
+            if (w != 0.0) {
+                s->indices[out] = k;
+                s->weights[out] = w;
+                ++out;
+            }
+        }
+    }
+    s->offsets[s->rows] = out;
+    s->nnz = out;
+}
+
+int32_t spia_stencils_row_count(const spia_stencils *s) { return s ? s->rows : 0; }
+
+int64_t spia_stencils_weight_count(const spia_stencils *s) { return s ? s->nnz : 0; }
+
+spia_result spia_stencils_copy_csr(const spia_stencils *s, int64_t *offsets, int32_t *indices, double *weights) {
+    if (!s) return SPIA_ERROR_INVALID_ARGUMENT;
+    if (offsets) memcpy(offsets, s->offsets, sizeof(int64_t) * ((size_t)s->rows + 1));
+    if (indices) memcpy(indices, s->indices, sizeof(int32_t) * (size_t)s->nnz);
+    if (weights) memcpy(weights, s->weights, sizeof(double) * (size_t)s->nnz);
+    return SPIA_OK;
+}
+
+spia_result spia_stencils_apply(const spia_stencils *s, const double *cage, double *out) {
+    if (!s || !cage || !out) return SPIA_ERROR_INVALID_ARGUMENT;
+    for (int32_t r = 0; r < s->rows; ++r) {
+        double x = 0.0, y = 0.0, z = 0.0;
+        for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k) {
+            const double w = s->weights[k];
+            const double *p = cage + 3 * (int64_t)s->indices[k];
+            x += w * p[0];
+            y += w * p[1];
+            z += w * p[2];
+        }
+        out[3 * (int64_t)r] = x;
+        out[3 * (int64_t)r + 1] = y;
+        out[3 * (int64_t)r + 2] = z;
+    }
+    return SPIA_OK;
+}

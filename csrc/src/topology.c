@@ -1,0 +1,144 @@
+/* Mesh validation and vertex-to-corner adjacency. */
+#include "internal.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+spia_result spia_mesh_validate(const spia_mesh *m, spia_status *status) {
+    if (!m) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "mesh is NULL");
+    if (m->vertex_count < 0 || m->face_count < 0 || m->edge_count < 0)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "negative vertex, face or edge count");
+    if (m->vertex_count == 0) return spia__fail(status, SPIA_ERROR_EMPTY_MESH, -1, "the mesh has no vertices");
+    if (m->face_count == 0)
+        return spia__fail(status, SPIA_ERROR_EMPTY_MESH, -1, "the mesh has no faces, so it has no surface to subdivide");
+    if (!m->positions || !m->face_sizes || !m->face_vertices)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "positions, face_sizes and face_vertices must not be NULL");
+    if (m->edge_count > 0 && !m->edges)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "edge_count is %d but edges is NULL", (int)m->edge_count);
+
+    const int32_t n = m->vertex_count;
+    int64_t bad = 0, first_bad = -1;
+    for (int32_t v = 0; v < n; ++v) {
+        const float *p = m->positions + 3 * (int64_t)v;
+        if (!isfinite(p[0]) || !isfinite(p[1]) || !isfinite(p[2])) {
+            if (first_bad < 0) first_bad = v;
+            ++bad;
+        }
+    }
+    if (bad)
+        return spia__fail(status, SPIA_ERROR_NONFINITE, first_bad,
+                          "%lld vertices have NaN or infinite coordinates (first: vertex %lld)", (long long)bad,
+                          (long long)first_bad);
+
+    for (int32_t f = 0; f < m->face_count; ++f) {
+        if (m->face_sizes[f] < 3) {
+            if (first_bad < 0) first_bad = f;
+            ++bad;
+        }
+    }
+    if (bad)
+        return spia__fail(status, SPIA_ERROR_FACE_SIZE, first_bad,
+                          "%lld faces have fewer than 3 vertices (first: face %lld)", (long long)bad,
+                          (long long)first_bad);
+
+    int32_t *stamp = (int32_t *)malloc(sizeof(int32_t) * (size_t)n);
+    if (!stamp) return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory validating the mesh");
+    for (int32_t v = 0; v < n; ++v) stamp[v] = -1;
+    int64_t c = 0, degenerate = 0, first_degenerate = -1;
+    spia_result r = SPIA_OK;
+    for (int32_t f = 0; f < m->face_count && r == SPIA_OK; ++f) {
+        int is_degenerate = 0;
+        for (int32_t k = 0; k < m->face_sizes[f]; ++k, ++c) {
+            int32_t v = m->face_vertices[c];
+            if (v < 0 || v >= n) {
+                r = spia__fail(status, SPIA_ERROR_INDEX_RANGE, f,
+                               "face %d uses vertex index %d, outside 0..%d", (int)f, (int)v, (int)(n - 1));
+                break;
+            }
+            if (stamp[v] == f) is_degenerate = 1;
+            stamp[v] = f;
+        }
+        if (is_degenerate) {
+            if (first_degenerate < 0) first_degenerate = f;
+            ++degenerate;
+        }
+    }
+    free(stamp);
+    if (r != SPIA_OK) return r;
+    if (degenerate)
+        return spia__fail(status, SPIA_ERROR_DEGENERATE_FACE, first_degenerate,
+                          "%lld degenerate faces use one vertex more than once (first: face %lld); "
+                          "merge or dissolve them first",
+                          (long long)degenerate, (long long)first_degenerate);
+
+    for (int32_t e = 0; e < m->edge_count; ++e) {
+        int32_t a = m->edges[2 * (int64_t)e], b = m->edges[2 * (int64_t)e + 1];
+        if (a < 0 || a >= n || b < 0 || b >= n)
+            return spia__fail(status, SPIA_ERROR_INDEX_RANGE, e, "edge %d joins vertices %d and %d, outside 0..%d",
+                              (int)e, (int)a, (int)b, (int)(n - 1));
+        if (a == b)
+            return spia__fail(status, SPIA_ERROR_DEGENERATE_FACE, e, "edge %d joins vertex %d to itself", (int)e, (int)a);
+        if (m->edge_creases) {
+            float w = m->edge_creases[e];
+            if (!isfinite(w)) return spia__fail(status, SPIA_ERROR_NONFINITE, e, "edge %d has a NaN or infinite crease", (int)e);
+            if (w < 0.0f || w > 1.0f)
+                return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, e, "edge %d has crease %g, outside 0..1", (int)e, (double)w);
+        }
+    }
+    if (m->vertex_creases) {
+        for (int32_t v = 0; v < n; ++v) {
+            float w = m->vertex_creases[v];
+            if (!isfinite(w)) return spia__fail(status, SPIA_ERROR_NONFINITE, v, "vertex %d has a NaN or infinite crease", (int)v);
+            if (w < 0.0f || w > 1.0f)
+                return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, v, "vertex %d has crease %g, outside 0..1", (int)v, (double)w);
+        }
+    }
+    spia__ok(status);
+    return SPIA_OK;
+}
+
+void spia__adjacency_free(spia_adjacency *a) {
+    free(a->corner_start);
+    free(a->face_of_corner);
+    free(a->first);
+    free(a->corner_of);
+    memset(a, 0, sizeof *a);
+}
+
+/* Assumes a validated mesh. */
+spia_result spia__adjacency_build(const spia_mesh *m, spia_adjacency *a, spia_status *status) {
+    memset(a, 0, sizeof *a);
+    a->vertex_count = m->vertex_count;
+    a->face_count = m->face_count;
+    a->corner_start = (int64_t *)malloc(sizeof(int64_t) * ((size_t)m->face_count + 1));
+    a->first = (int64_t *)calloc((size_t)m->vertex_count + 1, sizeof(int64_t));
+    if (!a->corner_start || !a->first) goto oom;
+    int64_t cc = 0;
+    for (int32_t f = 0; f < m->face_count; ++f) {
+        a->corner_start[f] = cc;
+        cc += m->face_sizes[f];
+    }
+    a->corner_start[m->face_count] = cc;
+    a->corner_count = cc;
+    a->face_of_corner = (int32_t *)malloc(sizeof(int32_t) * (size_t)cc);
+    a->corner_of = (int64_t *)malloc(sizeof(int64_t) * (size_t)cc);
+    if (!a->face_of_corner || !a->corner_of) goto oom;
+    for (int32_t f = 0; f < m->face_count; ++f)
+        for (int64_t c = a->corner_start[f]; c < a->corner_start[f + 1]; ++c) a->face_of_corner[c] = f;
+    /* Counting sort of corners by vertex keeps face order within a vertex. */
+    for (int64_t c = 0; c < cc; ++c) a->first[m->face_vertices[c] + 1]++;
+    for (int32_t v = 0; v < m->vertex_count; ++v) a->first[v + 1] += a->first[v];
+    {
+        int64_t *fill = (int64_t *)malloc(sizeof(int64_t) * (size_t)m->vertex_count);
+        if (!fill) goto oom;
+        memcpy(fill, a->first, sizeof(int64_t) * (size_t)m->vertex_count);
+        for (int64_t c = 0; c < cc; ++c) a->corner_of[fill[m->face_vertices[c]]++] = c;
+        free(fill);
+    }
+    spia__ok(status);
+    return SPIA_OK;
+oom:
+    spia__adjacency_free(a);
+    return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory building vertex adjacency");
+}
