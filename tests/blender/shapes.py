@@ -63,10 +63,16 @@ def _subdivided_cube(bm, cuts=2):
     bmesh.ops.subdivide_edges(bm, edges=bm.edges[:], cuts=cuts, use_grid_fill=True)
 
 
-def cube():
-    """Eight valence-3 extraordinary vertices."""
+def plain_cube():
+    """The 8-vertex cube: its limit matrix is singular (the alternating
+    +1/-1 mode maps to 0: (9 - 4*3 + 3) / 24), so it cannot be interpolated."""
     bpy.ops.mesh.primitive_cube_add()
     return jitter(bpy.context.active_object)
+
+
+def cube():
+    """Cube cut once: eight valence-3 extraordinary vertices among valence-4 ones."""
+    return jitter(_from_bmesh("Cube", lambda bm: _subdivided_cube(bm, cuts=1)))
 
 
 def uv_sphere():

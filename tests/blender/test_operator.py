@@ -89,6 +89,17 @@ def test_max_iterations_reached():
     assert_unchanged(source, before)
 
 
+def test_singular_cube_is_reported_not_converged():
+    source = shapes.plain_cube()
+    before = snapshot(source)
+    assert run_operator(max_iterations=200) == {'FINISHED'}
+    new_obj = bpy.context.active_object
+    assert new_obj is not source
+    assert new_obj["pia_status"] in ('MAX_ITERATIONS', 'STAGNATED')
+    assert new_obj["pia_max_error"] > 1e-6
+    assert_unchanged(source, before)
+
+
 # --- what the operator makes -------------------------------------------------------
 
 def test_new_object_copies_placement_and_data():
