@@ -93,8 +93,10 @@ class _Report(ctypes.Structure):
         ("diagonal", ctypes.c_double), ("max_error", ctypes.c_double), ("mean_error", ctypes.c_double),
         ("max_error_relative", ctypes.c_double), ("mean_error_relative", ctypes.c_double),
         ("initial_max_error_relative", ctypes.c_double),
+        ("unreachable_count", ctypes.c_int32), ("reachable_max_error_relative", ctypes.c_double),
         ("stencil_seconds", ctypes.c_double), ("solve_seconds", ctypes.c_double),
         ("history", _f64p), ("history_capacity", ctypes.c_int32), ("history_count", ctypes.c_int32),
+        ("unreachable", ctypes.POINTER(ctypes.c_uint8)),
     ]
 
 
@@ -300,18 +302,31 @@ class Report:
     max_error_relative: float
     mean_error_relative: float
     initial_max_error_relative: float
+    unreachable_count: int      # vertices whose limit points are tied to others' and cannot be reached
+    reachable_max_error_relative: float   # max error over the other vertices
     stencil_seconds: float
     solve_seconds: float
     history: np.ndarray = field(repr=False)   # relative max error after each iteration
+    unreachable: np.ndarray = field(repr=False)  # bool per vertex
 
     def summary(self):
         state = "converged" if self.converged else self.status.lower().replace("_", " ")
+        extra = (f"; {self.unreachable_count} vertices cannot be reached (the others: "
+                 f"{self.reachable_max_error_relative:.3g})") if self.unreachable_count else ""
         return (f"{state} in {self.iterations} iterations ({self.method}): max error "
                 f"{self.max_error_relative:.3g}, mean {self.mean_error_relative:.3g} of the diagonal "
-                f"(was {self.initial_max_error_relative:.3g})")
+                f"(was {self.initial_max_error_relative:.3g}){extra}")
 
 
-def _report(code, rep, history, status):
+def _report_buffers(max_iterations, vertex_count):
+    history = np.empty(max_iterations, dtype=np.float64)
+    unreachable = np.zeros(vertex_count, dtype=np.uint8)
+    rep = _Report(history=_ptr(history, ctypes.c_double), history_capacity=len(history),
+                  unreachable=_ptr(unreachable, ctypes.c_uint8))
+    return rep, history, unreachable
+
+
+def _report(code, rep, history, unreachable, status):
     return Report(
         status=_STATUS_OF_RESULT[code], converged=code == 0,
         message=status.message.decode("utf-8", "replace"),
@@ -319,6 +334,8 @@ def _report(code, rep, history, status):
         iterations=rep.iterations, diagonal=rep.diagonal, max_error=rep.max_error, mean_error=rep.mean_error,
         max_error_relative=rep.max_error_relative, mean_error_relative=rep.mean_error_relative,
         initial_max_error_relative=rep.initial_max_error_relative,
+        unreachable_count=rep.unreachable_count, reachable_max_error_relative=rep.reachable_max_error_relative,
+        unreachable=unreachable.astype(bool),
         stencil_seconds=rep.stencil_seconds, solve_seconds=rep.solve_seconds,
         history=history[: rep.history_count].copy())
 
@@ -369,14 +386,13 @@ class Stencils:
             raise PiaError("INVALID_ARGUMENT", f"{len(targets)} targets for {self.row_count} stencils")
         opts, _keep = _options(**options)
         cage = np.empty_like(targets)
-        history = np.empty(opts.max_iterations, dtype=np.float64)
-        rep = _Report(history=_ptr(history, ctypes.c_double), history_capacity=len(history))
+        rep, history, unreachable = _report_buffers(opts.max_iterations, len(targets))
         status = _Status()
         code = lib.spia_solve(self._handle, _ptr(targets, ctypes.c_float), ctypes.byref(opts),
                               _ptr(cage, ctypes.c_float), ctypes.byref(rep), ctypes.byref(status))
         if code < 0:
             _raise(code, status)
-        return cage, _report(code, rep, history, status)
+        return cage, _report(code, rep, history, unreachable, status)
 
 
 # --------------------------------------------------------------------------
@@ -426,12 +442,11 @@ def interpolate(mesh, scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases
     lib = _library()
     opts, _keep = _options(scheme, boundary_smooth, use_creases, quality, method, tolerance, max_iterations, progress)
     cage = np.empty_like(mesh.positions)
-    history = np.empty(opts.max_iterations, dtype=np.float64)
-    rep = _Report(history=_ptr(history, ctypes.c_double), history_capacity=len(history))
+    rep, history, unreachable = _report_buffers(opts.max_iterations, mesh.vertex_count)
     status = _Status()
     cm = mesh._c()
     code = lib.spia_interpolate(ctypes.byref(cm), ctypes.byref(opts), _ptr(cage, ctypes.c_float),
                                 ctypes.byref(rep), ctypes.byref(status))
     if code < 0:
         _raise(code, status)
-    return cage, _report(code, rep, history, status)
+    return cage, _report(code, rep, history, unreachable, status)

@@ -66,9 +66,14 @@ typedef enum spia_result {
      * The cage written is the last iterate and is usable.  Not a failure of
      * the call: the report tells how far it got. */
     SPIA_MAX_ITERATIONS = 1,
-    /* The error stopped falling before the tolerance was reached (for
-     * example the tolerance is below what rounding allows).  The cage
-     * written is the best iterate seen. */
+    /* The error stopped falling before the tolerance was reached: the
+     * tolerance is below what rounding allows, or some vertices cannot
+     * reach their targets at all because their limit points are tied to
+     * other vertices' (double-sided faces in scans: the three vertices of a
+     * triangle and of its reversed twin all have the centroid as limit
+     * point).  Such vertices are counted in spia_report.unreachable_count
+     * and keep their positions; the others are solved.  The cage written
+     * is usable. */
     SPIA_STAGNATED = 2,
 
     /* Failures: nothing was written to the output buffers. */
@@ -252,6 +257,10 @@ typedef struct spia_report {
     double max_error_relative; /* max_error / diagonal                                 */
     double mean_error_relative;
     double initial_max_error_relative; /* the same before any iteration (cage = P) */
+    /* Vertices that cannot reach their targets (see SPIA_STAGNATED), and the
+     * relative max error over all the others. */
+    int32_t unreachable_count;
+    double reachable_max_error_relative;
     double stencil_seconds;    /* wall time building stencils (spia_interpolate only)  */
     double solve_seconds;      /* wall time in the solver                              */
     /* Optional caller-owned buffer: the relative max error after each
@@ -259,6 +268,9 @@ typedef struct spia_report {
     double *history;
     int32_t history_capacity;
     int32_t history_count;     /* entries written */
+    /* Optional caller-owned buffer of row_count flags: 1 for an unreachable
+     * vertex, else 0.  Written whenever a cage is written. */
+    uint8_t *unreachable;
 } spia_report;
 
 /*

@@ -14,10 +14,14 @@
 //    EDGE_AND_CORNER, creasing CREASE_UNIFORM;
 //  - adaptive refinement with isolation level = quality and infinitely
 //    sharp patches, limit evaluated at the control vertex's corner of the
-//    first face (in face order) that uses it.
+//    first face (in face order) that uses it;
+//  - where Blender's patches give the exact limit point anyway, Bfr gives
+//    the same stencil directly (see step 5).
 
 #include "internal.h"
 
+#include <opensubdiv/bfr/refinerSurfaceFactory.h>
+#include <opensubdiv/bfr/surface.h>
 #include <opensubdiv/far/patchTableFactory.h>
 #include <opensubdiv/far/ptexIndices.h>
 #include <opensubdiv/far/stencilTable.h>
@@ -50,6 +54,27 @@ bool is_face_edge(const spia_mesh *m, const spia_adjacency *adj, int32_t a, int3
         if (spia__corner_next(m, adj, c) == b || spia__corner_prev(m, adj, c) == b) return true;
     }
     return false;
+}
+
+// A Catmull-Clark refiner for a face list, with Blender's sharpness values.
+Far::TopologyRefiner *create_refiner(int32_t vertex_count, int32_t face_count, const int32_t *face_sizes,
+                                     const int32_t *face_vertices, const std::vector<int32_t> &crease_pairs,
+                                     const std::vector<float> &crease_weights,
+                                     const std::vector<int32_t> &corner_indices,
+                                     const std::vector<float> &corner_weights, const Sdc::Options &sdc) {
+    Far::TopologyDescriptor desc;
+    desc.numVertices = vertex_count;
+    desc.numFaces = face_count;
+    desc.numVertsPerFace = face_sizes;
+    desc.vertIndicesPerFace = face_vertices;
+    desc.numCreases = (int)crease_weights.size();
+    desc.creaseVertexIndexPairs = crease_pairs.empty() ? nullptr : crease_pairs.data();
+    desc.creaseWeights = crease_weights.empty() ? nullptr : crease_weights.data();
+    desc.numCorners = (int)corner_weights.size();
+    desc.cornerVertexIndices = corner_indices.empty() ? nullptr : corner_indices.data();
+    desc.cornerWeights = corner_weights.empty() ? nullptr : corner_weights.data();
+    typedef Far::TopologyRefinerFactory<Far::TopologyDescriptor> RefinerFactory;
+    return RefinerFactory::Create(desc, RefinerFactory::Options(Sdc::SCHEME_CATMARK, sdc));
 }
 
 spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, spia_stencils **out,
@@ -147,73 +172,237 @@ spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_opti
     }
 
     // 4. The refiner.
-    Far::TopologyDescriptor desc;
-    desc.numVertices = osd_n;
-    desc.numFaces = m->face_count;
-    desc.numVertsPerFace = m->face_sizes;
-    desc.vertIndicesPerFace = fv;
-    desc.numCreases = (int)crease_weights.size();
-    desc.creaseVertexIndexPairs = crease_pairs.empty() ? nullptr : crease_pairs.data();
-    desc.creaseWeights = crease_weights.empty() ? nullptr : crease_weights.data();
-    desc.numCorners = (int)corner_weights.size();
-    desc.cornerVertexIndices = corner_indices.empty() ? nullptr : corner_indices.data();
-    desc.cornerWeights = corner_weights.empty() ? nullptr : corner_weights.data();
-
     Sdc::Options sdc;
     sdc.SetVtxBoundaryInterpolation(opt->boundary_smooth == SPIA_BOUNDARY_SMOOTH_PRESERVE_CORNERS
                                         ? Sdc::Options::VTX_BOUNDARY_EDGE_AND_CORNER
                                         : Sdc::Options::VTX_BOUNDARY_EDGE_ONLY);
     sdc.SetCreasingMethod(Sdc::Options::CREASE_UNIFORM);
     sdc.SetFVarLinearInterpolation(Sdc::Options::FVAR_LINEAR_ALL);
-
-    typedef Far::TopologyRefinerFactory<Far::TopologyDescriptor> RefinerFactory;
-    std::unique_ptr<Far::TopologyRefiner> refiner(
-        RefinerFactory::Create(desc, RefinerFactory::Options(Sdc::SCHEME_CATMARK, sdc)));
+    std::unique_ptr<Far::TopologyRefiner> refiner(create_refiner(osd_n, m->face_count, m->face_sizes, fv, crease_pairs,
+                                                                 crease_weights, corner_indices, corner_weights, sdc));
     if (!refiner)
         return spia__fail(status, SPIA_ERROR_TOPOLOGY, -1, "OpenSubdiv rejected the mesh topology");
 
-    Far::TopologyRefiner::AdaptiveOptions adaptive(opt->quality);
-    adaptive.useInfSharpPatch = true;
-    adaptive.considerFVarChannels = false;
-    refiner->RefineAdaptive(adaptive);
-
-    // 5. One limit location per used vertex: its corner of its first face.
-    static const double corner_s[4] = {0.0, 1.0, 1.0, 0.0};
-    static const double corner_t[4] = {0.0, 0.0, 1.0, 1.0};
-    Far::PtexIndices ptex(*refiner);
-    LimitFactory::LocationArrayVec locations((size_t)osd_n);
+    // 5. Which vertices need Blender's adaptive patches.  Where the limit
+    //    point has a closed form (smooth interior and boundary vertices,
+    //    extraordinary or not, any face sizes) Blender's patches reproduce it
+    //    exactly and Bfr evaluates it directly, at a fraction of the cost.
+    //    Near semi-sharp or sharp features, darts, non-manifold parts and
+    //    smooth valence-2 boundary corners Blender's surface depends on the
+    //    isolation level, so those vertices go through the adaptive
+    //    LimitStencilTableFactory restricted to their faces, as Blender
+    //    builds them.
+    const Far::TopologyLevel &base = refiner->GetLevel(0);
+    std::vector<char> feature((size_t)osd_n, 0);
+    std::vector<Far::Index> feature_faces;
+    int32_t feature_count = 0;
     for (int32_t o = 0; o < osd_n; ++o) {
-        int32_t v = vertex_of[o];
-        int64_t c = adj->corner_of[adj->first[v]];
-        int32_t f = adj->face_of_corner[c];
-        int32_t k = (int32_t)(c - adj->corner_start[f]);
-        LimitFactory::LocationArray &loc = locations[o];
-        loc.numLocations = 1;
-        if (m->face_sizes[f] == 4) {
-            loc.ptexIdx = ptex.GetFaceId(f);
-            loc.s = &corner_s[k];
-            loc.t = &corner_t[k];
-        } else {
-            loc.ptexIdx = ptex.GetFaceId(f) + k;
-            loc.s = &corner_s[0];
-            loc.t = &corner_t[0];
+        bool f = base.GetVertexSharpness(o) > 0.0f || base.IsVertexNonManifold(o);
+        Far::ConstIndexArray ve = base.GetVertexEdges(o);
+        for (int k = 0; k < ve.size() && !f; ++k) {
+            Far::Index e = ve[k];
+            f = base.IsEdgeNonManifold(e) || (base.GetEdgeSharpness(e) > 0.0f && base.GetEdgeFaces(e).size() != 1);
+        }
+        if (!f && opt->boundary_smooth == SPIA_BOUNDARY_SMOOTH_ALL && base.IsVertexBoundary(o) && ve.size() == 2)
+            f = true;
+        if (f) {
+            feature[o] = 1;
+            ++feature_count;
+            Far::ConstIndexArray vf = base.GetVertexFaces(o);
+            feature_faces.insert(feature_faces.end(), vf.begin(), vf.end());
         }
     }
-    LimitFactory::Options limit_options;
-    limit_options.generate1stDerivatives = false;
-    limit_options.generate2ndDerivatives = false;
-    std::unique_ptr<const LimitTable> table(LimitFactory::Create(*refiner, locations, nullptr, nullptr, limit_options));
-    if (!table || table->GetNumStencils() != osd_n)
-        return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "OpenSubdiv returned %d limit stencils for %d vertices",
-                          table ? table->GetNumStencils() : -1, (int)osd_n);
 
-    // 6. Into the library's table, in the caller's vertex numbering.
-    const std::vector<int> &sizes = table->GetSizes();
-    const std::vector<Far::Index> &offsets = table->GetOffsets();
-    const std::vector<Far::Index> &indices = table->GetControlIndices();
-    const std::vector<double> &weights = table->GetWeights();
-    int64_t nnz = (int64_t)(n - osd_n);
-    for (int32_t o = 0; o < osd_n; ++o) nnz += sizes[o];
+    // Bfr's irregular patch builder in OpenSubdiv 3.5 writes out of bounds
+    // on some faces next to non-manifold vertices (seen on the Stanford
+    // dragon scan), so a vertex whose first face touches any feature vertex
+    // takes the adaptive path too.
+    for (int32_t o = 0; o < osd_n; ++o) {
+        if (feature[o]) continue;
+        int64_t c0 = adj->corner_of[adj->first[vertex_of[o]]];
+        int32_t f = adj->face_of_corner[c0];
+        bool touches = false;
+        for (int64_t c = adj->corner_start[f]; c < adj->corner_start[f + 1] && !touches; ++c)
+            touches = feature[osd_of[m->face_vertices[c]]] == 1;
+        if (touches) {
+            feature[o] = 2;
+            ++feature_count;
+            Far::ConstIndexArray vf = base.GetVertexFaces(o);
+            feature_faces.insert(feature_faces.end(), vf.begin(), vf.end());
+        }
+    }
+
+    // Rows in OpenSubdiv numbering, filled in any order, then gathered.
+    std::vector<int64_t> row_start((size_t)osd_n, -1);
+    std::vector<int32_t> row_size((size_t)osd_n, 0);
+    std::vector<Far::Index> row_indices;
+    std::vector<double> row_weights;
+    row_indices.reserve((size_t)osd_n * 16);
+    row_weights.reserve((size_t)osd_n * 16);
+
+    // 6. Smooth vertices: Bfr at the vertex's corner of its first face.
+    if (feature_count < osd_n) {
+        Bfr::RefinerSurfaceFactory<> factory(*refiner, Bfr::SurfaceFactory::Options());
+        Bfr::Surface<double> surface;
+        std::vector<Far::Index> cv;
+        std::vector<double> w;
+        for (int32_t f = 0; f < m->face_count; ++f) {
+            bool initialized = false;
+            for (int64_t c = adj->corner_start[f]; c < adj->corner_start[f + 1]; ++c) {
+                int32_t v = m->face_vertices[c];
+                int32_t o = osd_of[v];
+                if (feature[o] || adj->corner_of[adj->first[v]] != c) continue;
+                if (!initialized) {
+                    if (!factory.InitVertexSurface(f, &surface) || !surface.IsValid())
+                        return spia__fail(status, SPIA_ERROR_INTERNAL, f, "OpenSubdiv built no limit surface for face %d", (int)f);
+                    cv.resize((size_t)surface.GetNumControlPoints());
+                    w.resize(cv.size());
+                    surface.GetControlPointIndices(cv.data());
+                    initialized = true;
+                }
+                double uv[2];
+                surface.GetParameterization().GetVertexCoord((int)(c - adj->corner_start[f]), uv);
+                surface.EvaluateStencil(uv, w.data());
+                row_start[o] = (int64_t)row_indices.size();
+                for (size_t k = 0; k < cv.size(); ++k) {
+                    if (w[k] == 0.0) continue;
+                    row_indices.push_back(cv[k]);
+                    row_weights.push_back(w[k]);
+                }
+                row_size[o] = (int32_t)((int64_t)row_indices.size() - row_start[o]);
+            }
+        }
+    }
+
+    // 7. Feature vertices: Blender's adaptive patches at quality, one limit
+    //    location per vertex: its corner of its first face.  Patches are
+    //    built for every face of a refiner, so the adaptive refiner holds
+    //    only the faces within two rings of the feature vertices: a vertex's
+    //    limit point depends on its incident faces alone, and the second
+    //    ring gives their vertices complete neighbourhoods.  Sharpness comes
+    //    from the whole mesh.
+    if (feature_count > 0) {
+        std::vector<char> near_vertex((size_t)osd_n, 0), in_sub((size_t)m->face_count, 0);
+        for (int32_t o = 0; o < osd_n; ++o) {
+            if (!feature[o]) continue;
+            int32_t v = vertex_of[o];
+            for (int64_t i = adj->first[v]; i < adj->first[v + 1]; ++i) {
+                int32_t f = adj->face_of_corner[adj->corner_of[i]];
+                for (int64_t c = adj->corner_start[f]; c < adj->corner_start[f + 1]; ++c)
+                    near_vertex[osd_of[m->face_vertices[c]]] = 1;
+            }
+        }
+        for (int32_t o = 0; o < osd_n; ++o) {
+            if (!near_vertex[o]) continue;
+            int32_t v = vertex_of[o];
+            for (int64_t i = adj->first[v]; i < adj->first[v + 1]; ++i) in_sub[adj->face_of_corner[adj->corner_of[i]]] = 1;
+        }
+        std::vector<int32_t> sub_face_of((size_t)m->face_count, -1), sub_sizes, sub_fv, sub_of((size_t)osd_n, -1);
+        int32_t sub_n = 0;
+        for (int32_t f = 0; f < m->face_count; ++f) {
+            if (!in_sub[f]) continue;
+            sub_face_of[f] = (int32_t)sub_sizes.size();
+            sub_sizes.push_back(m->face_sizes[f]);
+            for (int64_t c = adj->corner_start[f]; c < adj->corner_start[f + 1]; ++c) {
+                int32_t o = osd_of[m->face_vertices[c]];
+                if (sub_of[o] < 0) sub_of[o] = sub_n++;
+                sub_fv.push_back(sub_of[o]);
+            }
+        }
+        std::vector<int32_t> sub_crease_pairs, sub_corner_indices;
+        std::vector<float> sub_crease_weights, sub_corner_weights;
+        for (size_t k = 0; k < crease_weights.size(); ++k) {
+            int32_t a = crease_pairs[2 * k], b = crease_pairs[2 * k + 1];
+            if (sub_of[a] < 0 || sub_of[b] < 0) continue;
+            // Only edges the sub-mesh has (OpenSubdiv warns about others).
+            bool present = false;
+            int32_t va = vertex_of[a];
+            for (int64_t i = adj->first[va]; i < adj->first[va + 1] && !present; ++i) {
+                int64_t c = adj->corner_of[i];
+                present = in_sub[adj->face_of_corner[c]] &&
+                          (osd_of[spia__corner_next(m, adj, c)] == b || osd_of[spia__corner_prev(m, adj, c)] == b);
+            }
+            if (!present) continue;
+            sub_crease_pairs.push_back(sub_of[a]);
+            sub_crease_pairs.push_back(sub_of[b]);
+            sub_crease_weights.push_back(crease_weights[k]);
+        }
+        for (size_t k = 0; k < corner_weights.size(); ++k) {
+            if (sub_of[corner_indices[k]] < 0) continue;
+            sub_corner_indices.push_back(sub_of[corner_indices[k]]);
+            sub_corner_weights.push_back(corner_weights[k]);
+        }
+        std::unique_ptr<Far::TopologyRefiner> sub(create_refiner(sub_n, (int32_t)sub_sizes.size(), sub_sizes.data(),
+                                                                 sub_fv.data(), sub_crease_pairs, sub_crease_weights,
+                                                                 sub_corner_indices, sub_corner_weights, sdc));
+        if (!sub)
+            return spia__fail(status, SPIA_ERROR_TOPOLOGY, -1, "OpenSubdiv rejected the topology around sharp features");
+        for (Far::Index &f : feature_faces) f = sub_face_of[f];
+        std::sort(feature_faces.begin(), feature_faces.end());
+        feature_faces.erase(std::unique(feature_faces.begin(), feature_faces.end()), feature_faces.end());
+        Far::TopologyRefiner::AdaptiveOptions adaptive(opt->quality);
+        adaptive.useInfSharpPatch = true;
+        adaptive.considerFVarChannels = false;
+        sub->RefineAdaptive(adaptive, Far::ConstIndexArray(feature_faces.data(), (int)feature_faces.size()));
+
+        static const double corner_s[4] = {0.0, 1.0, 1.0, 0.0};
+        static const double corner_t[4] = {0.0, 0.0, 1.0, 1.0};
+        Far::PtexIndices ptex(*sub);
+        LimitFactory::LocationArrayVec locations;
+        std::vector<int32_t> location_vertex;
+        locations.reserve((size_t)feature_count);
+        location_vertex.reserve((size_t)feature_count);
+        for (int32_t o = 0; o < osd_n; ++o) {
+            if (!feature[o]) continue;
+            int32_t v = vertex_of[o];
+            int64_t c = adj->corner_of[adj->first[v]];
+            int32_t f = adj->face_of_corner[c];
+            int32_t k = (int32_t)(c - adj->corner_start[f]);
+            LimitFactory::LocationArray loc;
+            loc.numLocations = 1;
+            if (m->face_sizes[f] == 4) {
+                loc.ptexIdx = ptex.GetFaceId(sub_face_of[f]);
+                loc.s = &corner_s[k];
+                loc.t = &corner_t[k];
+            } else {
+                loc.ptexIdx = ptex.GetFaceId(sub_face_of[f]) + k;
+                loc.s = &corner_s[0];
+                loc.t = &corner_t[0];
+            }
+            locations.push_back(loc);
+            location_vertex.push_back(o);
+        }
+        std::vector<int32_t> osd_of_sub((size_t)sub_n);
+        for (int32_t o = 0; o < osd_n; ++o)
+            if (sub_of[o] >= 0) osd_of_sub[sub_of[o]] = o;
+        LimitFactory::Options limit_options;
+        limit_options.generate1stDerivatives = false;
+        limit_options.generate2ndDerivatives = false;
+        std::unique_ptr<const LimitTable> table(LimitFactory::Create(*sub, locations, nullptr, nullptr, limit_options));
+        if (!table || table->GetNumStencils() != feature_count)
+            return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "OpenSubdiv returned %d limit stencils for %d vertices",
+                              table ? table->GetNumStencils() : -1, (int)feature_count);
+        const std::vector<int> &sizes = table->GetSizes();
+        const std::vector<Far::Index> &offsets = table->GetOffsets();
+        const std::vector<Far::Index> &indices = table->GetControlIndices();
+        const std::vector<double> &weights = table->GetWeights();
+        for (int32_t i = 0; i < feature_count; ++i) {
+            int32_t o = location_vertex[i];
+            row_start[o] = (int64_t)row_indices.size();
+            row_size[o] = sizes[i];
+            for (int k = 0; k < sizes[i]; ++k) {
+                Far::Index j = indices[offsets[i] + k];
+                if (j < 0 || j >= sub_n)
+                    return spia__fail(status, SPIA_ERROR_INTERNAL, vertex_of[o],
+                                      "OpenSubdiv stencil refers to point %d, not a control vertex", (int)j);
+                row_indices.push_back(osd_of_sub[j]);
+            }
+            row_weights.insert(row_weights.end(), weights.begin() + offsets[i], weights.begin() + offsets[i] + sizes[i]);
+        }
+    }
+
+    // 8. Into the library's table, in the caller's vertex numbering.
+    int64_t nnz = (int64_t)(n - osd_n) + (int64_t)row_indices.size();
     spia_stencils *s = spia__stencils_alloc(n, nnz);
     if (!s) return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for %lld stencil weights", (long long)nnz);
     int64_t pos = 0;
@@ -225,14 +414,14 @@ spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_opti
             s->weights[pos++] = 1.0;
             continue;
         }
-        for (int k = 0; k < sizes[o]; ++k) {
-            Far::Index j = indices[offsets[o] + k];
+        for (int32_t k = 0; k < row_size[o]; ++k) {
+            Far::Index j = row_indices[row_start[o] + k];
             if (j < 0 || j >= osd_n) {
                 spia_stencils_free(s);
                 return spia__fail(status, SPIA_ERROR_INTERNAL, v, "OpenSubdiv stencil refers to point %d, not a control vertex", (int)j);
             }
             s->indices[pos] = vertex_of[j];
-            s->weights[pos++] = weights[offsets[o] + k];
+            s->weights[pos++] = row_weights[row_start[o] + k];
         }
     }
     s->offsets[n] = pos;

@@ -35,12 +35,15 @@ typedef struct solver_state {
     double *V; /* current cage         */
     double *R; /* residual P - L V     */
     double *diag;
+    double *initial; /* |P_i - (L P)_i|, to tell stuck vertices from slow ones */
+    unsigned char *stuck; /* rows no longer updated (see spia_solve)  */
 } solver_state;
 
-/* R = P - L V; returns the max distance and writes the mean. */
-static double residual(solver_state *s, double *mean) {
+/* R = P - L V; returns the max distance over all rows and writes the mean
+ * and the max over rows that are not stuck. */
+static double residual(solver_state *s, double *mean, double *max_active) {
     const spia_stencils *L = s->L;
-    double maxd = 0.0, sum = 0.0;
+    double maxd = 0.0, maxa = 0.0, sum = 0.0;
     for (int32_t r = 0; r < s->n; ++r) {
         double x = 0.0, y = 0.0, z = 0.0;
         for (int64_t k = L->offsets[r]; k < L->offsets[r + 1]; ++k) {
@@ -57,20 +60,24 @@ static double residual(solver_state *s, double *mean) {
         q[2] = t[2] - z;
         double d = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]);
         if (d > maxd || d != d) maxd = d != d ? NAN : d;
+        if (!s->stuck[r] && (d > maxa || d != d)) maxa = d != d ? NAN : d;
         sum += d;
     }
     *mean = s->n ? sum / s->n : 0.0;
+    *max_active = maxa;
     return maxd;
 }
 
 static void step_pia(solver_state *s) {
     const int64_t m = 3 * (int64_t)s->n;
-    for (int64_t k = 0; k < m; ++k) s->V[k] += s->R[k];
+    for (int64_t k = 0; k < m; ++k)
+        if (!s->stuck[k / 3]) s->V[k] += s->R[k];
 }
 
 static void step_gs_pia(solver_state *s) {
     const spia_stencils *L = s->L;
     for (int32_t r = 0; r < s->n; ++r) {
+        if (s->stuck[r]) continue;
         double x = 0.0, y = 0.0, z = 0.0;
         for (int64_t k = L->offsets[r]; k < L->offsets[r + 1]; ++k) {
             const double w = L->weights[k];
@@ -110,38 +117,60 @@ static void report_reset(spia_report *rep) {
     rep->history_capacity = cap;
 }
 
+/* Rows whose residual has not fallen below half its initial value when the
+ * iteration stagnates cannot be reached: their limit points are tied to
+ * others' (a double-sided face, whose three vertices all have the centroid
+ * as limit point, is the common case in scans).  Every update would only
+ * push them along the null space of L, so they are put back on their
+ * targets and left there, and the rest is solved without them. */
+static int32_t mark_stuck(solver_state *s, double threshold) {
+    int32_t count = 0;
+    for (int32_t r = 0; r < s->n; ++r) {
+        const double *q = s->R + 3 * (int64_t)r;
+        double d = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]);
+        if (d > threshold && d > 0.5 * s->initial[r]) {
+            s->stuck[r] = 1;
+            for (int a = 0; a < 3; ++a) s->V[3 * (int64_t)r + a] = s->P[3 * (int64_t)r + a];
+            ++count;
+        }
+    }
+    return count;
+}
+
 spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_options *options, float *cage,
                        spia_report *report, spia_status *status) {
     report_reset(report);
     spia_options opt;
+    double t0 = spia__now();
+    solver_state s;
+    memset(&s, 0, sizeof s);
     spia_result res = spia__resolve_options(options, &opt, status);
-    if (res != SPIA_OK) goto done_early;
+    if (res != SPIA_OK) goto done;
     if (!L || !targets || !cage) {
         res = spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "stencils, targets and cage must not be NULL");
-        goto done_early;
+        goto done;
     }
     const int32_t n = L->rows;
     if (n == 0) {
         res = spia__fail(status, SPIA_ERROR_EMPTY_MESH, -1, "the stencil table has no rows");
-        goto done_early;
+        goto done;
     }
     for (int64_t k = 0; k < 3 * (int64_t)n; ++k)
         if (!isfinite(targets[k])) {
             res = spia__fail(status, SPIA_ERROR_NONFINITE, k / 3, "target %lld is NaN or infinite", (long long)(k / 3));
-            goto done_early;
+            goto done;
         }
 
     const spia_method method = opt.method == SPIA_METHOD_AUTO ? SPIA_METHOD_GS_PIA : opt.method;
-    const double t0 = spia__now();
-    solver_state s;
-    memset(&s, 0, sizeof s);
     s.L = L;
     s.n = n;
     s.P = (double *)malloc(sizeof(double) * 3 * (size_t)n);
     s.V = (double *)malloc(sizeof(double) * 3 * (size_t)n);
     s.R = (double *)malloc(sizeof(double) * 3 * (size_t)n);
     s.diag = (double *)malloc(sizeof(double) * (size_t)n);
-    if (!s.P || !s.V || !s.R || !s.diag) {
+    s.initial = (double *)malloc(sizeof(double) * (size_t)n);
+    s.stuck = (unsigned char *)calloc((size_t)n, 1);
+    if (!s.P || !s.V || !s.R || !s.diag || !s.initial || !s.stuck) {
         res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
         goto done;
     }
@@ -161,14 +190,19 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
     const double diagonal = bbox_diagonal(s.P, n);
     const double scale = diagonal > 0.0 ? diagonal : 1.0;
     const double threshold = opt.tolerance * scale;
-    double mean;
-    double err = residual(&s, &mean);
+    double mean, err; /* err: max over rows still solved */
+    double err_all = residual(&s, &mean, &err);
+    for (int32_t r = 0; r < n; ++r) {
+        const double *q = s.R + 3 * (int64_t)r;
+        s.initial[r] = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]);
+    }
     const double initial = err;
     double best = err;
-    int32_t it = 0, it_best = 0;
+    int32_t it = 0, it_best = 0, stuck_count = 0;
+    int stuck_checked = 0;
     res = SPIA_OK;
     if (report) {
-        report->initial_max_error_relative = initial / scale;
+        report->initial_max_error_relative = err_all / scale;
         report->method = method;
     }
     while (!(err <= threshold)) {
@@ -181,9 +215,9 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
         else
             step_gs_pia(&s);
         ++it;
-        err = residual(&s, &mean);
+        err_all = residual(&s, &mean, &err);
         if (report && report->history && it <= report->history_capacity) {
-            report->history[it - 1] = err / scale;
+            report->history[it - 1] = err_all / scale;
             report->history_count = it;
         }
         if (!isfinite(err) || err > DIVERGENCE_FACTOR * (initial > threshold ? initial : threshold)) {
@@ -196,10 +230,21 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
             best = err;
             it_best = it;
         } else if (it - it_best >= STAGNATION_WINDOW) {
-            res = SPIA_STAGNATED;
-            break;
+            if (stuck_checked) {
+                res = SPIA_STAGNATED;
+                break;
+            }
+            stuck_checked = 1;
+            stuck_count = mark_stuck(&s, threshold);
+            if (stuck_count == 0) {
+                res = SPIA_STAGNATED;
+                break;
+            }
+            err_all = residual(&s, &mean, &err);
+            best = err;
+            it_best = it;
         }
-        if (opt.progress && opt.progress(opt.progress_user_data, it, err / scale)) {
+        if (opt.progress && opt.progress(opt.progress_user_data, it, err_all / scale)) {
             res = spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled after %d iterations", (int)it);
             break;
         }
@@ -210,31 +255,49 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
             cage[k] = (float)s.V[k];
             s.V[k] = (double)cage[k];
         }
-        err = residual(&s, &mean);
+        err_all = residual(&s, &mean, &err);
+        if (stuck_count > 0 && res == SPIA_OK) res = SPIA_STAGNATED;
         if (res == SPIA_OK)
             spia__ok(status);
         else if (res == SPIA_MAX_ITERATIONS)
-            spia__fail(status, res, -1, "stopped at max_iterations (%d) with max error %.3g of the diagonal, above the tolerance %.3g",
-                       (int)it, err / scale, opt.tolerance);
+            spia__fail(status, res, -1,
+                       "stopped at max_iterations (%d) with max error %.3g of the diagonal, above the tolerance %.3g",
+                       (int)it, err_all / scale, opt.tolerance);
+        else if (stuck_count > 0)
+            spia__fail(status, res, -1,
+                       "%d vertices cannot reach their targets: their limit points are tied to other vertices' "
+                       "(as on double-sided faces); they keep their positions, with max error %.3g of the diagonal. "
+                       "The other vertices reach %.3g",
+                       (int)stuck_count, err_all / scale, err / scale);
         else
-            spia__fail(status, res, -1, "the error stopped falling after %d iterations at %.3g of the diagonal, above the tolerance %.3g",
-                       (int)it, err / scale, opt.tolerance);
-    }
-    if (report) {
+            spia__fail(status, res, -1,
+                       "the error stopped falling after %d iterations at %.3g of the diagonal, above the tolerance %.3g",
+                       (int)it, err_all / scale, opt.tolerance);
+        if (report) {
+            report->iterations = it;
+            report->diagonal = diagonal;
+            report->max_error = err_all;
+            report->mean_error = mean;
+            report->max_error_relative = err_all / scale;
+            report->mean_error_relative = mean / scale;
+            report->reachable_max_error_relative = err / scale;
+            report->unreachable_count = stuck_count;
+            if (report->unreachable) memcpy(report->unreachable, s.stuck, (size_t)n);
+        }
+    } else if (report) {
         report->iterations = it;
         report->diagonal = diagonal;
-        report->max_error = err;
-        report->mean_error = mean;
-        report->max_error_relative = err / scale;
-        report->mean_error_relative = mean / scale;
     }
 done:
     free(s.P);
     free(s.V);
     free(s.R);
     free(s.diag);
-    if (report) report->solve_seconds = spia__now() - t0;
-done_early:
-    if (report) report->result = res;
+    free(s.initial);
+    free(s.stuck);
+    if (report) {
+        report->solve_seconds = spia__now() - t0;
+        report->result = res;
+    }
     return res;
 }

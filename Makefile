@@ -1,0 +1,53 @@
+# The front door.  `make demo` and `make test` do everything on a fresh
+# Debian bookworm machine (as root, or with sudo): install what is missing,
+# build, run.
+
+PYTHON  ?= /usr/bin/python3
+BLENDER ?= blender
+BLENDER_RUN = $(BLENDER) -b --factory-startup --python-exit-code 1
+DEBIAN_PACKAGES = blender libosd-dev cmake g++ make python3-numpy python3-scipy python3-pytest python3-matplotlib
+SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+
+.PHONY: all deps build test test-c test-asan test-python test-blender demo bench clean
+
+all: build
+
+# Installs only the packages that are missing (apt-get update once, first).
+deps:
+	@missing=$$(for p in $(DEBIAN_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || echo $$p; done); \
+	if [ -n "$$missing" ]; then \
+	  echo "installing:" $$missing; \
+	  $(SUDO) apt-get update -qq && \
+	  DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends $$missing; \
+	fi
+
+build: deps
+	$(PYTHON) setup.py build
+
+test: build test-c test-asan test-python test-blender
+
+test-c: build
+	ctest --test-dir build/cmake --output-on-failure
+
+test-asan: deps
+	cmake -S . -B build/asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSPIA_SANITIZE=ON
+	cmake --build build/asan --parallel 2
+	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+	  ctest --test-dir build/asan --output-on-failure
+
+test-python: build
+	SUBDIV_PIA_ADDON_DIR=build/addon $(PYTHON) -m pytest -q tests/python
+
+test-blender: build
+	$(BLENDER_RUN) --python tests/blender/run.py -- -q
+
+demo: build
+	mkdir -p out
+	$(BLENDER_RUN) --python build/addon/subdiv_pia/cli.py -- tests/data/bunny.obj out/bunny_interpolated.blend
+	$(BLENDER_RUN) --python bench/render_comparison.py -- tests/data/bunny.obj out/bunny_comparison.png
+
+bench: build
+	$(PYTHON) bench/bench_interpolate.py
+
+clean:
+	$(PYTHON) setup.py clean
