@@ -296,6 +296,9 @@ def interpolate(obj, *, context=None, name=None, progress=None, **settings):
     nothing is created then and obj is never changed.
     """
     check_source(obj)
+    if obj.mode == 'EDIT':  # edits live in the edit-mesh until synced
+        obj.update_from_editmode()
+        check_source(obj)
     merged = settings_from_modifier(obj)
     merged.update(settings)
     s = check_settings(merged)

@@ -75,8 +75,13 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
         try:
             obj = context.active_object
             api.check_source(obj)
+            if obj.mode == 'EDIT':  # the new object becomes active: leave edit mode first
+                bpy.ops.object.mode_set(mode='OBJECT')
             new_obj, report = api.interpolate(obj, context=context, progress=progress, **settings)
-        except (ValueError, RuntimeError, native.PiaError) as error:
+        except native.PiaError as error:  # the library's words, with the object named
+            self.report({'ERROR'}, "'%s': %s" % (context.active_object.name, error))
+            return {'CANCELLED'}
+        except (ValueError, RuntimeError) as error:
             self.report({'ERROR'}, str(error))
             return {'CANCELLED'}
         finally:

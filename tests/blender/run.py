@@ -29,8 +29,10 @@ def main():
     import subdiv_pia
     subdiv_pia.register()
     argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
+    if not any(os.path.exists(a.split("::")[0]) for a in argv if not a.startswith("-")):
+        argv = [HERE] + argv  # no test paths given: the whole Blender suite
     try:
-        code = pytest.main([HERE, "-p", "no:cacheprovider", "-q"] + argv)
+        code = pytest.main(["-p", "no:cacheprovider", "-q", "--rootdir", ROOT] + argv)
     finally:
         try:
             subdiv_pia.unregister()

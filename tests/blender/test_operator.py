@@ -5,6 +5,7 @@ when the operator reports an error."""
 
 import math
 
+import bmesh
 import bpy
 import numpy as np
 import pytest
@@ -192,3 +193,17 @@ def test_menu_and_panel_registered():
     settings = bpy.context.scene.subdiv_pia
     assert settings.levels == 2 and settings.quality == 3
     assert math.isclose(settings.tolerance, 1e-6, rel_tol=1e-6)
+
+
+def test_edit_mode_edits_are_used():
+    source = shapes.open_grid()
+    bpy.ops.object.mode_set(mode='EDIT')
+    bm = bmesh.from_edit_mesh(source.data)
+    bm.verts.ensure_lookup_table()
+    bm.verts[0].co.z += 0.5
+    bmesh.update_edit_mesh(source.data)
+    assert run_operator() == {'FINISHED'}
+    assert source.mode == 'OBJECT'
+    targets = positions(source.data).astype(np.float64)
+    assert abs(targets[0, 2]) > 0.4
+    assert relative_miss(bpy.context.active_object, targets) <= MATCH
