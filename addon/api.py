@@ -315,6 +315,9 @@ def format_report(report):
         head = "Stagnated (tolerance not reached)"
     else:
         head = "Stopped at max iterations (tolerance not reached)"
-    return ("%s: %d iterations (%s), max error %.3g, mean error %.3g of the bounding-box diagonal"
+    line = ("%s: %d iterations (%s), max error %.3g, mean error %.3g of the bounding-box diagonal"
             % (head, report.iterations, report.method,
                report.max_error_relative, report.mean_error_relative))
+    if not report.converged and report.message:
+        line += " (%s)" % report.message
+    return line
