@@ -66,7 +66,7 @@ spia_result spia__resolve_options(const spia_options *in, spia_options *out, spi
         (int)o.boundary_smooth != SPIA_BOUNDARY_SMOOTH_PRESERVE_CORNERS)
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "unknown boundary_smooth value %d",
                           (int)o.boundary_smooth);
-    if ((int)o.method < SPIA_METHOD_AUTO || (int)o.method > SPIA_METHOD_GS_PIA)
+    if ((int)o.method < SPIA_METHOD_AUTO || (int)o.method > SPIA_METHOD_CHEBYSHEV)
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "unknown solver method %d", (int)o.method);
     if (o.quality == 0) o.quality = 3;
     if (o.quality < 1 || o.quality > 10)
