@@ -47,11 +47,19 @@ def parse_args(argv):
     return parser.parse_args(argv)
 
 
+def operator_exists(module_name, op_name):
+    """bpy.ops.<module>.<name> exists (hasattr on bpy.ops is always True)."""
+    try:
+        getattr(getattr(bpy.ops, module_name), op_name).get_rna_type()
+        return True
+    except (AttributeError, KeyError):
+        return False
+
+
 def _call_first(names, **kwargs):
     for module_name, op_name in names:
-        module = getattr(bpy.ops, module_name)
-        if hasattr(module, op_name):
-            return getattr(module, op_name)(**kwargs)
+        if operator_exists(module_name, op_name):
+            return getattr(getattr(bpy.ops, module_name), op_name)(**kwargs)
     raise RuntimeError("No importer available (%s)" % ", ".join("%s.%s" % n for n in names))
 
 
@@ -78,7 +86,7 @@ def load_input(path, object_name=None):
     bpy.ops.wm.read_factory_settings(use_empty=True)
     before = set(bpy.data.objects)
     if ext == ".obj":
-        if hasattr(bpy.ops.wm, "obj_import"):  # C++ importer (3.3+): keeps vertex order
+        if operator_exists("wm", "obj_import"):  # C++ importer (3.3+): keeps vertex order
             known = bpy.ops.wm.obj_import.get_rna_type().properties.keys()
             options = {k: False for k in ("use_split_objects", "use_split_groups") if k in known}
             bpy.ops.wm.obj_import(filepath=path, **options)

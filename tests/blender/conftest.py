@@ -43,9 +43,18 @@ def object_from_pydata(name, vertices, faces, edges=(), validate=True):
     return link_and_activate(bpy.data.objects.new(name, mesh))
 
 
+def operator_exists(module_name, op_name):
+    """bpy.ops.<module>.<name> exists (hasattr on bpy.ops is always True)."""
+    try:
+        getattr(getattr(bpy.ops, module_name), op_name).get_rna_type()
+        return True
+    except (AttributeError, KeyError):
+        return False
+
+
 def import_obj(path):
     before = set(bpy.data.objects)
-    if hasattr(bpy.ops.wm, "obj_import"):
+    if operator_exists("wm", "obj_import"):
         bpy.ops.wm.obj_import(filepath=path)
     else:
         bpy.ops.import_scene.obj(filepath=path, split_mode='OFF')

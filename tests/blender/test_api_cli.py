@@ -12,7 +12,8 @@ import pytest
 import shapes
 import subdiv_pia
 from subdiv_pia import native
-from conftest import DATA, MATCH, assert_unchanged, positions, relative_miss, snapshot
+from conftest import (DATA, MATCH, assert_unchanged, operator_exists, positions,
+                      relative_miss, snapshot)
 
 
 def test_api_returns_object_and_report():
@@ -100,3 +101,35 @@ def test_cli_help():
     result = run_cli("--help")
     assert result.returncode == 0
     assert "--boundary-smooth" in result.stdout
+
+
+def _export(kind, path):
+    """Write the active object to .ply / .stl with whichever exporter this Blender has."""
+    candidates = {"ply": (("wm", "ply_export"), ("export_mesh", "ply")),
+                  "stl": (("wm", "stl_export"), ("export_mesh", "stl"))}[kind]
+    for module, name in candidates:
+        if operator_exists(module, name):
+            return getattr(getattr(bpy.ops, module), name)(filepath=path)
+    pytest.skip("no %s exporter" % kind)
+
+
+@pytest.mark.parametrize("kind", ("ply", "stl", "blend"))
+def test_cli_other_inputs(tmp_path, kind):
+    source = shapes.uv_sphere()
+    source.name = "Ball"
+    path = str(tmp_path / ("ball." + kind))
+    extra = []
+    if kind == "blend":
+        shapes.cube()  # the active object is the cube, --object picks the ball
+        bpy.ops.wm.save_as_mainfile(filepath=path, copy=True)
+        extra = ["--object", "Ball"]
+    else:
+        _export(kind, path)
+    output = str(tmp_path / "out.blend")
+    result = run_cli(path, output, "--levels", "1", *extra)
+    assert result.returncode == 0, result.stdout + result.stderr
+    with bpy.data.libraries.load(output) as (data_from, data_to):
+        names = list(data_from.objects)
+    assert any(name.endswith("_pia") for name in names), names
+    if kind == "blend":
+        assert "Ball_pia" in names
