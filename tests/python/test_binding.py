@@ -1,0 +1,217 @@
+"""The binding on every mesh shipped in tests/data, checked with scipy."""
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import scipy.sparse
+
+from conftest import ADDON_DIR, MESHES, load
+
+
+def diagonal(points):
+    return float(np.linalg.norm(points.max(0) - points.min(0)))
+
+
+def without_degenerate(faces):
+    return [f for f in faces if len(set(f)) == len(f)]
+
+
+def double_sided_vertices(faces):
+    """Vertices of faces that appear twice with the same vertex set."""
+    seen, tied = {}, set()
+    for f in faces:
+        key = frozenset(f)
+        if key in seen:
+            tied.update(f)
+        seen[key] = True
+    return tied
+
+
+@pytest.mark.parametrize("name", MESHES)
+def test_interpolates_every_shipped_mesh(native, name):
+    P, faces, _ = load(name)
+    faces = without_degenerate(faces)
+    mesh = native.Mesh.from_faces(P, faces)
+    stencils = native.limit_stencils(mesh)
+    L = stencils.to_scipy()
+    # Row sums are 1 (affine invariance) and the table is sorted CSR.
+    assert np.allclose(np.asarray(L.sum(axis=1)).ravel(), 1.0, atol=1e-12)
+    assert L.has_sorted_indices
+    cage, report = stencils.solve(P)
+    d = diagonal(P.astype(np.float64))
+    err = np.linalg.norm(L @ cage.astype(np.float64) - P, axis=1) / d
+    used = np.zeros(len(P), bool)
+    used[np.concatenate([np.asarray(f) for f in faces])] = True
+    # The plain modifier misses the points; the cage's limit hits them.
+    before = np.linalg.norm(L @ P.astype(np.float64) - P, axis=1) / d
+    assert before[used].max() > 1e-3
+    tied = double_sided_vertices(faces)
+    if report.converged:
+        assert not tied
+        assert err.max() <= 1e-5, err.max()
+        assert err.max() <= report.max_error_relative * (1 + 1e-6) + 1e-12
+    else:
+        # Only vertices whose limit points are tied to others' (double-sided
+        # faces) may be left out, and everything else must be reached.
+        assert report.status == "STAGNATED"
+        flagged = set(np.nonzero(report.unreachable)[0])
+        assert flagged and flagged <= tied, (len(flagged), len(tied))
+        assert err[~report.unreachable].max() <= 1e-5
+        assert np.array_equal(cage[report.unreachable], P[report.unreachable])
+    # Vertices no face uses keep their position, as in Blender.
+    assert np.array_equal(cage[~used], P[~used])
+
+
+def quad_neighbourhoods(faces, nv):
+    """For each vertex: incident faces if all are quads, else None."""
+    inc = [[] for _ in range(nv)]
+    for f in faces:
+        for k, v in enumerate(f):
+            inc[v].append((f, k))
+    return inc
+
+
+def test_closed_form_masks_on_a_real_quad_mesh(native):
+    """Interior vertices of catmark_car whose faces are all quads: Blender's
+    limit mask (n^2 V + 4 sum E + sum F) / (n (n + 5)); smooth boundary
+    vertices: (E_prev + 4 V + E_next) / 6.  Built here from the formulas."""
+    P, faces, _ = load("catmark_car")
+    L = native.limit_stencils(native.Mesh.from_faces(P, faces), use_creases=False).to_scipy().tolil()
+    nv = len(P)
+    inc = quad_neighbourhoods(faces, nv)
+    edge_faces = {}
+    for f in faces:
+        for k in range(len(f)):
+            e = frozenset((f[k], f[(k + 1) % len(f)]))
+            edge_faces[e] = edge_faces.get(e, 0) + 1
+    checked_interior = checked_boundary = 0
+    for v in range(nv):
+        ring = inc[v]
+        if not ring or any(len(f) != 4 for f, _ in ring):
+            continue
+        nbrs = {f[(k + 1) % 4] for f, k in ring} | {f[(k + 3) % 4] for f, k in ring}
+        boundary = [w for w in nbrs if edge_faces[frozenset((v, w))] == 1]
+        expect = {}
+        if not boundary:
+            n = len(ring)
+            if len(nbrs) != n:
+                continue
+            d = n * (n + 5)
+            expect[v] = n * n / d
+            for f, k in ring:
+                expect[f[(k + 2) % 4]] = expect.get(f[(k + 2) % 4], 0) + 1 / d
+            for w in nbrs:
+                expect[w] = expect.get(w, 0) + 4 / d
+            checked_interior += 1
+        elif len(boundary) == 2 and len(ring) >= 2:
+            expect = {v: 4 / 6, boundary[0]: 1 / 6, boundary[1]: 1 / 6}
+            checked_boundary += 1
+        else:
+            continue
+        row = dict(zip(L.rows[v], L.data[v]))
+        for j in set(row) | set(expect):
+            assert abs(row.get(j, 0) - expect.get(j, 0)) < 1e-12, (v, j)
+    assert checked_interior > 500 and checked_boundary > 20
+
+
+def test_degenerate_faces_are_refused_with_a_count(native):
+    P, faces, _ = load("catmark_nonman_edges")
+    with pytest.raises(native.PiaError) as info:
+        native.interpolate(native.Mesh.from_faces(P, faces))
+    assert info.value.code == "DEGENERATE_FACE"
+    assert "14 degenerate faces" in str(info.value)
+
+
+def grid(n=4):
+    P = np.array([(i, j, 0.1 * np.sin(i + j)) for j in range(n + 1) for i in range(n + 1)], np.float32)
+    faces = [[j * (n + 1) + i, j * (n + 1) + i + 1, (j + 1) * (n + 1) + i + 1, (j + 1) * (n + 1) + i]
+             for j in range(n) for i in range(n)]
+    return P, faces
+
+
+@pytest.mark.parametrize("case, code", [
+    ("nan", "NONFINITE"), ("face_size", "FACE_SIZE"), ("index", "INDEX_RANGE"),
+    ("no_faces", "EMPTY_MESH"), ("no_vertices", "EMPTY_MESH"), ("crease", "INVALID_ARGUMENT"),
+])
+def test_bad_input_raises_with_code(native, case, code):
+    P, faces = grid()
+    kwargs = {}
+    if case == "nan":
+        P[3, 1] = np.nan
+    elif case == "face_size":
+        faces[2] = faces[2][:2]
+    elif case == "index":
+        faces[1][2] = len(P) + 4
+    elif case == "no_faces":
+        faces = []
+    elif case == "no_vertices":
+        P, faces = np.zeros((0, 3), np.float32), []
+    elif case == "crease":
+        kwargs = dict(edges=np.array([[0, 1]], np.int32), edge_creases=np.array([2.0], np.float32))
+    mesh = native.Mesh.from_faces(P, faces, **kwargs)
+    with pytest.raises(native.PiaError) as info:
+        native.interpolate(mesh)
+    assert info.value.code == code
+    assert len(str(info.value)) > 15
+
+
+@pytest.mark.parametrize("option", [dict(quality=0), dict(quality=11), dict(tolerance=-1.0),
+                                    dict(method="NEWTON"), dict(boundary_smooth="SOME"), dict(max_iterations=0)])
+def test_bad_options(native, option):
+    P, faces = grid()
+    with pytest.raises(native.PiaError):
+        native.interpolate(native.Mesh.from_faces(P, faces), **option)
+
+
+def test_progress_cancel_and_max_iterations(native):
+    P, faces = grid(8)
+    mesh = native.Mesh.from_faces(P, faces)
+    seen = []
+    cage, report = native.interpolate(mesh, progress=lambda it, err: seen.append((it, err)) and False)
+    assert report.converged and len(seen) >= report.iterations
+    with pytest.raises(native.PiaCancelled):
+        native.interpolate(mesh, method="PIA", progress=lambda it, err: it >= 2)
+    cage, report = native.interpolate(mesh, method="PIA", max_iterations=3)
+    assert report.status == "MAX_ITERATIONS" and not report.converged and report.iterations == 3
+    assert report.max_error_relative < report.initial_max_error_relative
+    assert len(report.history) == 3 and np.all(np.diff(report.history) < 0)
+
+
+def test_every_method_reaches_the_tolerance(native):
+    P, faces, _ = load("double-torus")
+    mesh = native.Mesh.from_faces(P, faces)
+    L = native.limit_stencils(mesh).to_scipy()
+    d = diagonal(P)
+    for method in native.METHODS:
+        cage, report = native.interpolate(mesh, method=method, tolerance=1e-6)
+        assert report.converged, (method, report)
+        err = np.linalg.norm(L @ cage.astype(np.float64) - P, axis=1).max() / d
+        assert err <= 1.5e-6, (method, err)
+
+
+def test_agrees_with_a_sparse_direct_solve(native):
+    P, faces, _ = load("mushroom")
+    mesh = native.Mesh.from_faces(P, faces)
+    L = native.limit_stencils(mesh).to_scipy().tocsc()
+    exact = scipy.sparse.linalg.spsolve(L, P.astype(np.float64))
+    cage, report = native.interpolate(mesh, tolerance=1e-7)
+    assert np.abs(cage - exact).max() / diagonal(P) < 1e-5
+
+
+def test_mesh_arrays_are_not_copied(native):
+    P, faces = grid()
+    sizes = np.full(len(faces), 4, np.int32)
+    fv = np.asarray(faces, np.int32).ravel()
+    mesh = native.Mesh(P, sizes, fv)
+    assert np.shares_memory(mesh.positions, P)
+    assert np.shares_memory(mesh.face_sizes, sizes) and np.shares_memory(mesh.face_vertices, fv)
+    assert mesh._c().positions[0] == P[0, 0]  # the C struct points at the same floats
+
+
+def test_binding_runs_without_blender():
+    code = ("import sys; sys.path.insert(0, %r); from subdiv_pia import native; "
+            "assert native.available(); assert 'bpy' not in sys.modules; print(native.version())" % ADDON_DIR)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip().count(".") == 2
