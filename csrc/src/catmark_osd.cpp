@@ -185,52 +185,18 @@ spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_opti
 
     // 5. Which vertices need Blender's adaptive patches.  Where the limit
     //    point has a closed form (smooth interior and boundary vertices,
-    //    extraordinary or not, any face sizes) Blender's patches reproduce it
-    //    exactly and Bfr evaluates it directly, at a fraction of the cost.
-    //    Near semi-sharp or sharp features, darts, non-manifold parts and
-    //    smooth valence-2 boundary corners Blender's surface depends on the
-    //    isolation level, so those vertices go through the adaptive
-    //    LimitStencilTableFactory restricted to their faces, as Blender
-    //    builds them.
+    //    extraordinary or not, any face sizes, infinitely sharp creases and
+    //    corners) Blender's patches reproduce it exactly, and Bfr (or the
+    //    closed form itself) gives it at a fraction of the cost.  At
+    //    semi-sharp features and darts, and at smooth valence-2 boundary
+    //    corners, Blender's surface depends on the isolation level, so those
+    //    vertices go through the adaptive LimitStencilTableFactory, on their
+    //    neighbourhood only, as Blender builds it.  The test against the full
+    //    adaptive table (tests/c/test_reference.cpp) holds this to 1e-12.
     const Far::TopologyLevel &base = refiner->GetLevel(0);
     std::vector<char> feature((size_t)osd_n, 0);
     std::vector<Far::Index> feature_faces;
     int32_t feature_count = 0;
-    for (int32_t o = 0; o < osd_n; ++o) {
-        bool f = base.GetVertexSharpness(o) > 0.0f || base.IsVertexNonManifold(o);
-        Far::ConstIndexArray ve = base.GetVertexEdges(o);
-        for (int k = 0; k < ve.size() && !f; ++k) {
-            Far::Index e = ve[k];
-            f = base.IsEdgeNonManifold(e) || (base.GetEdgeSharpness(e) > 0.0f && base.GetEdgeFaces(e).size() != 1);
-        }
-        if (!f && opt->boundary_smooth == SPIA_BOUNDARY_SMOOTH_ALL && base.IsVertexBoundary(o) && ve.size() == 2)
-            f = true;
-        if (f) {
-            feature[o] = 1;
-            ++feature_count;
-            Far::ConstIndexArray vf = base.GetVertexFaces(o);
-            feature_faces.insert(feature_faces.end(), vf.begin(), vf.end());
-        }
-    }
-
-    // Bfr's irregular patch builder in OpenSubdiv 3.5 writes out of bounds
-    // on some faces next to non-manifold vertices (seen on the Stanford
-    // dragon scan), so a vertex whose first face touches any feature vertex
-    // takes the adaptive path too.
-    for (int32_t o = 0; o < osd_n; ++o) {
-        if (feature[o]) continue;
-        int64_t c0 = adj->corner_of[adj->first[vertex_of[o]]];
-        int32_t f = adj->face_of_corner[c0];
-        bool touches = false;
-        for (int64_t c = adj->corner_start[f]; c < adj->corner_start[f + 1] && !touches; ++c)
-            touches = feature[osd_of[m->face_vertices[c]]] == 1;
-        if (touches) {
-            feature[o] = 2;
-            ++feature_count;
-            Far::ConstIndexArray vf = base.GetVertexFaces(o);
-            feature_faces.insert(feature_faces.end(), vf.begin(), vf.end());
-        }
-    }
 
     // Rows in OpenSubdiv numbering, filled in any order, then gathered.
     std::vector<int64_t> row_start((size_t)osd_n, -1);
@@ -239,9 +205,86 @@ spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_opti
     std::vector<double> row_weights;
     row_indices.reserve((size_t)osd_n * 16);
     row_weights.reserve((size_t)osd_n * 16);
+    auto begin_row = [&](int32_t o) { row_start[o] = (int64_t)row_indices.size(); };
+    auto add_weight = [&](Far::Index j, double w) {
+        row_indices.push_back(j);
+        row_weights.push_back(w);
+    };
+    auto end_row = [&](int32_t o) { row_size[o] = (int32_t)((int64_t)row_indices.size() - row_start[o]); };
 
-    // 6. Smooth vertices: Bfr at the vertex's corner of its first face.
-    if (feature_count < osd_n) {
+    // The corner at which Bfr evaluates a smooth vertex: its corner of its
+    // first face, or of the first face with no non-manifold vertex, since
+    // Bfr's irregular patch builder in OpenSubdiv 3.5 writes out of bounds on
+    // some faces next to non-manifold vertices (seen on the Stanford dragon
+    // scan).  The limit point of a smooth vertex is the same from every face.
+    std::vector<int64_t> bfr_corner((size_t)osd_n, -1);
+    for (int32_t o = 0; o < osd_n; ++o) {
+        const float vs = base.GetVertexSharpness(o);
+        Far::ConstIndexArray ve = base.GetVertexEdges(o);
+        // Infinitely sharp interior edges (non-manifold edges are, in Far).
+        Far::Index sharp[2] = {-1, -1};
+        int infinitely_sharp = 0;
+        bool semi_sharp = vs > 0.0f && vs < kInfiniteSharpness;
+        for (int k = 0; k < ve.size(); ++k) {
+            Far::Index e = ve[k];
+            if (base.GetEdgeFaces(e).size() == 1 && !base.IsEdgeNonManifold(e)) continue;  // boundary
+            const float es = base.GetEdgeSharpness(e);
+            if (es >= kInfiniteSharpness || base.IsEdgeNonManifold(e)) {
+                if (infinitely_sharp < 2) sharp[infinitely_sharp] = e;
+                ++infinitely_sharp;
+            } else if (es > 0.0f) {
+                semi_sharp = true;
+            }
+        }
+        // Darts (one infinitely sharp edge at a manifold vertex).
+        bool adaptive = semi_sharp || (infinitely_sharp == 1 && !base.IsVertexNonManifold(o));
+        if (!adaptive && base.IsVertexNonManifold(o)) {
+            // Closed forms where Blender's patches are exact: an infinitely
+            // sharp corner stays put; an infinitely sharp crease follows the
+            // cubic B-spline of its two crease edges.
+            Sdc::Crease::Rule rule = base.GetVertexRule(o);
+            if (rule == Sdc::Crease::RULE_CORNER) {
+                begin_row(o);
+                add_weight(o, 1.0);
+                end_row(o);
+                continue;
+            }
+            if (rule == Sdc::Crease::RULE_CREASE && infinitely_sharp == 2) {
+                begin_row(o);
+                add_weight(o, 4.0 / 6.0);
+                for (Far::Index e : sharp) {
+                    Far::ConstIndexArray ev = base.GetEdgeVertices(e);
+                    add_weight(ev[0] == o ? ev[1] : ev[0], 1.0 / 6.0);
+                }
+                end_row(o);
+                continue;
+            }
+            adaptive = true;
+        }
+        if (!adaptive && opt->boundary_smooth == SPIA_BOUNDARY_SMOOTH_ALL && base.IsVertexBoundary(o) && ve.size() == 2)
+            adaptive = true;  // smooth corner: Blender is not at the limit
+        if (!adaptive) {
+            const int32_t v = vertex_of[o];
+            for (int64_t i = adj->first[v]; i < adj->first[v + 1] && bfr_corner[o] < 0; ++i) {
+                int64_t c = adj->corner_of[i];
+                int32_t f = adj->face_of_corner[c];
+                bool clean = true;
+                for (int64_t d = adj->corner_start[f]; d < adj->corner_start[f + 1] && clean; ++d)
+                    clean = !base.IsVertexNonManifold(osd_of[m->face_vertices[d]]);
+                if (clean) bfr_corner[o] = c;
+            }
+            adaptive = bfr_corner[o] < 0;
+        }
+        if (adaptive) {
+            feature[o] = 1;
+            ++feature_count;
+            Far::ConstIndexArray vf = base.GetVertexFaces(o);
+            feature_faces.insert(feature_faces.end(), vf.begin(), vf.end());
+        }
+    }
+
+    // 6. Smooth vertices: Bfr at the corner chosen above.
+    {
         Bfr::RefinerSurfaceFactory<> factory(*refiner, Bfr::SurfaceFactory::Options());
         Bfr::Surface<double> surface;
         std::vector<Far::Index> cv;
@@ -249,9 +292,8 @@ spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_opti
         for (int32_t f = 0; f < m->face_count; ++f) {
             bool initialized = false;
             for (int64_t c = adj->corner_start[f]; c < adj->corner_start[f + 1]; ++c) {
-                int32_t v = m->face_vertices[c];
-                int32_t o = osd_of[v];
-                if (feature[o] || adj->corner_of[adj->first[v]] != c) continue;
+                int32_t o = osd_of[m->face_vertices[c]];
+                if (bfr_corner[o] != c) continue;
                 if (!initialized) {
                     if (!factory.InitVertexSurface(f, &surface) || !surface.IsValid())
                         return spia__fail(status, SPIA_ERROR_INTERNAL, f, "OpenSubdiv built no limit surface for face %d", (int)f);
@@ -263,13 +305,10 @@ spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_opti
                 double uv[2];
                 surface.GetParameterization().GetVertexCoord((int)(c - adj->corner_start[f]), uv);
                 surface.EvaluateStencil(uv, w.data());
-                row_start[o] = (int64_t)row_indices.size();
-                for (size_t k = 0; k < cv.size(); ++k) {
-                    if (w[k] == 0.0) continue;
-                    row_indices.push_back(cv[k]);
-                    row_weights.push_back(w[k]);
-                }
-                row_size[o] = (int32_t)((int64_t)row_indices.size() - row_start[o]);
+                begin_row(o);
+                for (size_t k = 0; k < cv.size(); ++k)
+                    if (w[k] != 0.0) add_weight(cv[k], w[k]);
+                end_row(o);
             }
         }
     }
