@@ -43,8 +43,8 @@ test-blender: build
 
 demo: build
 	mkdir -p out
-	$(BLENDER_RUN) --python build/addon/subdiv_pia/cli.py -- tests/data/bunny.obj out/bunny_interpolated.blend
-	$(BLENDER_RUN) --python bench/render_comparison.py -- tests/data/bunny.obj out/bunny_comparison.png
+	$(BLENDER_RUN) --python build/addon/subdiv_pia/cli.py -- tests/data/mushroom.obj out/mushroom_interpolated.blend
+	$(BLENDER_RUN) --python bench/render_comparison.py -- tests/data/mushroom.obj out/mushroom_comparison.png
 
 bench: build
 	$(PYTHON) bench/bench_interpolate.py
