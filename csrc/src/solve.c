@@ -167,13 +167,23 @@ static void report_reset(spia_report *rep) {
  * others' (a double-sided face, whose three vertices all have the centroid
  * as limit point, is the common case in scans).  Every update would only
  * push them along the null space of L, so they are put back on their
- * targets and left there, and the rest is solved without them. */
+ * targets and left there, and the rest is solved without them.  GS-PIA
+ * zeroes the residual of the last vertex it visits in such a group, which
+ * then shows only by its drift: a cage vertex that has moved DRIFT_FACTOR
+ * times farther than the largest initial distance of any vertex to its
+ * limit point (a solvable cage moves by far less). */
+#define DRIFT_FACTOR 50.0
 static int32_t mark_stuck(solver_state *s, double threshold) {
     int32_t count = 0;
+    double initial_max = threshold;
+    for (int32_t r = 0; r < s->n; ++r)
+        if (s->initial[r] > initial_max) initial_max = s->initial[r];
     for (int32_t r = 0; r < s->n; ++r) {
         const double *q = s->R + 3 * (int64_t)r;
+        const double *v = s->V + 3 * (int64_t)r, *p = s->P + 3 * (int64_t)r;
         double d = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]);
-        if (d > threshold && d > 0.5 * s->initial[r]) {
+        double moved = sqrt((v[0] - p[0]) * (v[0] - p[0]) + (v[1] - p[1]) * (v[1] - p[1]) + (v[2] - p[2]) * (v[2] - p[2]));
+        if ((d > threshold && d > 0.5 * s->initial[r]) || moved > DRIFT_FACTOR * initial_max) {
             s->stuck[r] = 1;
             for (int a = 0; a < 3; ++a) s->V[3 * (int64_t)r + a] = s->P[3 * (int64_t)r + a];
             ++count;
