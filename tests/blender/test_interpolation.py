@@ -130,7 +130,7 @@ def test_dragon_unreachable_vertices_are_reported():
     assert new_obj["pia_status"] in ('STAGNATED', 'MAX_ITERATIONS')
     miss = np.abs(evaluated_control_points(new_obj, len(targets)) - targets).max(axis=1)
     missed = np.flatnonzero(miss > MATCH * diagonal(targets))
-    assert 0 < len(missed) <= 20, missed  # 7 to 11 depending on the solver
+    assert len(missed) > 0  # which ones give way (7 to 11) depends on the solver
 
     mesh = source.data
     corners = np.empty(len(mesh.loops), np.int32)
@@ -138,4 +138,8 @@ def test_dragon_unreachable_vertices_are_reported():
     triangles = np.sort(corners.reshape(-1, 3), axis=1)  # all triangles, loops in face order
     unique, inverse, count = np.unique(triangles, axis=0, return_inverse=True, return_counts=True)
     on_duplicate = np.unique(unique[count > 1].ravel())
-    assert np.isin(missed, on_duplicate).all()
+    faces_per_vertex = np.bincount(corners, minlength=len(targets))
+    isolated = on_duplicate[faces_per_vertex[on_duplicate] == 2]  # only the doubled pair
+    wrong = missed[~np.isin(missed, isolated)]
+    assert len(wrong) == 0, "missed beyond the unreachable pairs: %s (miss %s of diagonal)" % (
+        wrong[:10].tolist(), np.round(miss[wrong[:10]] / diagonal(targets), 7).tolist())
