@@ -39,7 +39,7 @@ test-python: build
 	SUBDIV_PIA_ADDON_DIR=build/addon $(PYTHON) -m pytest -q tests/python
 
 test-blender: build
-	$(BLENDER_RUN) --python tests/blender/run.py -- -q
+	$(BLENDER_RUN) --python tests/blender/run.py
 
 demo: build
 	mkdir -p out

@@ -24,12 +24,13 @@ import numpy as np
 __all__ = [
     "Mesh", "Report", "Stencils", "PiaError", "PiaCancelled",
     "available", "load_error", "version", "validate", "limit_stencils", "solve", "interpolate",
-    "SCHEMES", "BOUNDARY_SMOOTH", "METHODS",
+    "SCHEMES", "BOUNDARY_SMOOTH", "BOUNDARY_RULES", "METHODS",
 ]
 
-SCHEMES = ("CATMULL_CLARK",)
+SCHEMES = ("CATMULL_CLARK", "LOOP")
+BOUNDARY_RULES = ("SMOOTH", "HOPPE")
 BOUNDARY_SMOOTH = ("ALL", "PRESERVE_CORNERS")
-METHODS = ("AUTO", "PIA", "GS_PIA", "CHEBYSHEV")
+METHODS = ("AUTO", "PIA", "GS_PIA", "CHEBYSHEV", "WPIA", "CG")
 
 _RESULT_NAMES = {
     0: "OK", 1: "MAX_ITERATIONS", 2: "STAGNATED",
@@ -84,6 +85,7 @@ class _Options(ctypes.Structure):
         ("scheme", ctypes.c_int), ("boundary_smooth", ctypes.c_int), ("ignore_creases", ctypes.c_int32),
         ("quality", ctypes.c_int32), ("method", ctypes.c_int), ("tolerance", ctypes.c_double),
         ("max_iterations", ctypes.c_int32), ("progress", _PROGRESS), ("progress_user_data", ctypes.c_void_p),
+        ("boundary_rule", ctypes.c_int), ("weight", ctypes.c_double), ("staged", ctypes.c_int32),
     ]
 
 
@@ -94,6 +96,7 @@ class _Report(ctypes.Structure):
         ("max_error_relative", ctypes.c_double), ("mean_error_relative", ctypes.c_double),
         ("initial_max_error_relative", ctypes.c_double),
         ("unreachable_count", ctypes.c_int32), ("reachable_max_error_relative", ctypes.c_double),
+        ("weight", ctypes.c_double), ("stage_iterations", ctypes.c_int32 * 2),
         ("stencil_seconds", ctypes.c_double), ("solve_seconds", ctypes.c_double),
         ("history", _f64p), ("history_capacity", ctypes.c_int32), ("history_count", ctypes.c_int32),
         ("unreachable", ctypes.POINTER(ctypes.c_uint8)),
@@ -250,7 +253,7 @@ def _enum(value, names, what):
 
 
 def _options(scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases=True, quality=3, method="AUTO",
-             tolerance=1e-6, max_iterations=1000, progress=None):
+             tolerance=1e-6, max_iterations=1000, progress=None, boundary_rule="SMOOTH", weight=0.0, staged=False):
     if not (isinstance(quality, (int, np.integer)) and 1 <= quality <= 10):
         raise PiaError("INVALID_ARGUMENT", f"quality must be an integer from 1 to 10, not {quality!r}")
     if not (tolerance > 0 and np.isfinite(tolerance)):
@@ -265,6 +268,11 @@ def _options(scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases=True, qu
     opts.method = _enum(method, METHODS, "method")
     opts.tolerance = float(tolerance)
     opts.max_iterations = int(max_iterations)
+    opts.boundary_rule = _enum(boundary_rule, BOUNDARY_RULES, "boundary_rule")
+    if not (0.0 <= weight < 2.0):
+        raise PiaError("INVALID_ARGUMENT", f"weight must be in (0, 2), or 0 to estimate it, not {weight!r}")
+    opts.weight = float(weight)
+    opts.staged = 1 if staged else 0
     callback = None
     if progress is not None:
         def callback(_user, iteration, relative_error):
@@ -304,6 +312,8 @@ class Report:
     initial_max_error_relative: float
     unreachable_count: int      # vertices whose limit points are tied to others' and cannot be reached
     reachable_max_error_relative: float   # max error over the other vertices
+    weight: float               # WPIA's weight (0 for the other methods)
+    stage_iterations: tuple     # staged solves: (boundary, interior) iterations
     stencil_seconds: float
     solve_seconds: float
     history: np.ndarray = field(repr=False)   # relative max error after each iteration
@@ -335,7 +345,7 @@ def _report(code, rep, history, unreachable, status):
         max_error_relative=rep.max_error_relative, mean_error_relative=rep.mean_error_relative,
         initial_max_error_relative=rep.initial_max_error_relative,
         unreachable_count=rep.unreachable_count, reachable_max_error_relative=rep.reachable_max_error_relative,
-        unreachable=unreachable.astype(bool),
+        unreachable=unreachable.astype(bool), weight=rep.weight, stage_iterations=tuple(rep.stage_iterations),
         stencil_seconds=rep.stencil_seconds, solve_seconds=rep.solve_seconds,
         history=history[: rep.history_count].copy())
 
@@ -408,11 +418,12 @@ def validate(mesh):
         _raise(code, status)
 
 
-def limit_stencils(mesh, scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases=True, quality=3, progress=None):
+def limit_stencils(mesh, scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases=True, quality=3, progress=None,
+                   boundary_rule="SMOOTH"):
     """The limit stencils of ``mesh`` (a :class:`Stencils`)."""
     lib = _library()
     opts, _keep = _options(scheme=scheme, boundary_smooth=boundary_smooth, use_creases=use_creases,
-                           quality=quality, progress=progress)
+                           quality=quality, progress=progress, boundary_rule=boundary_rule)
     handle = ctypes.c_void_p()
     status = _Status()
     cm = mesh._c()
@@ -429,8 +440,13 @@ def solve(stencils, targets, **options):
 
 
 def interpolate(mesh, scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases=True, quality=3, method="AUTO",
-                tolerance=1e-6, max_iterations=1000, progress=None):
+                tolerance=1e-6, max_iterations=1000, progress=None, boundary_rule="SMOOTH", weight=0.0,
+                staged=False):
     """A cage whose limit surface passes through the mesh's vertices.
+
+    scheme 'LOOP' (triangles only) takes boundary_rule 'SMOOTH' (OpenSubdiv's)
+    or 'HOPPE' (the open-mesh paper's); method 'WPIA' takes weight (0:
+    estimated); staged=True solves the boundary first, then the interior.
 
     Returns ``(cage, report)``: cage is an (N, 3) float32 array of new
     control positions, report a :class:`Report`.  Stopping at
@@ -440,7 +456,8 @@ def interpolate(mesh, scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases
     raises :class:`PiaCancelled`.
     """
     lib = _library()
-    opts, _keep = _options(scheme, boundary_smooth, use_creases, quality, method, tolerance, max_iterations, progress)
+    opts, _keep = _options(scheme, boundary_smooth, use_creases, quality, method, tolerance, max_iterations, progress,
+                           boundary_rule, weight, staged)
     cage = np.empty_like(mesh.positions)
     rep, history, unreachable = _report_buffers(opts.max_iterations, mesh.vertex_count)
     status = _Status()

@@ -149,8 +149,24 @@ typedef struct spia_mesh {
 /* ------------------------------------------------------------------------ */
 
 typedef enum spia_scheme {
-    SPIA_SCHEME_CATMULL_CLARK = 0 /* Blender's Subdivision Surface modifier */
+    SPIA_SCHEME_CATMULL_CLARK = 0, /* Blender's Subdivision Surface modifier             */
+    SPIA_SCHEME_LOOP = 1           /* Loop, triangle meshes only (OpenSubdiv's, USD's)   */
 } spia_scheme;
+
+/* Boundary rules for Loop (Catmull-Clark always follows Blender). */
+typedef enum spia_boundary_rule {
+    /* OpenSubdiv's (and USD's, RenderMan's): boundary edges are cubic
+     * B-splines, limit (1/6, 2/3, 1/6); corners follow boundary_smooth;
+     * creases and non-manifold parts as OpenSubdiv handles them. */
+    SPIA_BOUNDARY_RULE_SMOOTH = 0,
+    /* Hoppe et al. 1994, as in the open-mesh Loop PIA paper: a boundary
+     * vertex is regular if its valence is 4, else extraordinary; boundary
+     * edge points are midpoints unless the ends differ in type, then 5/8 on
+     * the regular end and 3/8 on the extraordinary one.  boundary_smooth
+     * and creases are ignored; non-manifold meshes are refused.  The six
+     * limit masks are derived in csrc/src/loop.c. */
+    SPIA_BOUNDARY_RULE_HOPPE = 1
+} spia_boundary_rule;
 
 typedef enum spia_boundary_smooth {
     SPIA_BOUNDARY_SMOOTH_ALL = 0,             /* Blender's "All" (its default)   */
@@ -158,13 +174,22 @@ typedef enum spia_boundary_smooth {
 } spia_boundary_smooth;
 
 typedef enum spia_method {
-    SPIA_METHOD_AUTO = 0,  /* the fastest method the library has for the matrix      */
+    SPIA_METHOD_AUTO = 0,  /* CG where it applies, else CHEBYSHEV                     */
     SPIA_METHOD_PIA = 1,   /* V += P - L V (Jacobi-like, the papers' PIA)            */
     SPIA_METHOD_GS_PIA = 2, /* Gauss-Seidel PIA: vertex by vertex, in place          */
     /* PIA with Chebyshev acceleration over the spectrum of L, estimated from
      * the first PIA steps: one stencil product per iteration like PIA, and
      * far fewer iterations on rough targets.  What AUTO uses. */
-    SPIA_METHOD_CHEBYSHEV = 3
+    SPIA_METHOD_CHEBYSHEV = 3,
+    /* Weighted PIA: V += w (P - L V), with w = spia_options.weight or, when
+     * that is 0, w = 2 / (lambda_min + lambda_max) estimated by power
+     * iterations (the best weight when the spectrum is real). */
+    SPIA_METHOD_WPIA = 4,
+    /* Conjugate gradients on S V = D^-1 P where L = D S with D a positive
+     * diagonal and S symmetric positive definite (closed Loop meshes, as the
+     * papers show); refused where L has no such form.  What AUTO uses where
+     * it applies. */
+    SPIA_METHOD_CG = 5
 } spia_method;
 
 /*
@@ -187,6 +212,13 @@ typedef struct spia_options {
     int32_t max_iterations;               /* [1000] */
     spia_progress_fn progress;            /* [none] */
     void *progress_user_data;
+    spia_boundary_rule boundary_rule;     /* Loop only [SMOOTH] */
+    double weight;                        /* WPIA's weight; 0 = estimate it [0] */
+    /* Nonzero: solve the boundary vertices first (their limit points depend
+     * only on boundary vertices), then the interior with the boundary fixed,
+     * as the open-mesh Loop paper does.  The report gives each stage's
+     * iterations.  Reaches the same cage as solving everything at once. [0] */
+    int32_t staged;
 } spia_options;
 
 /* The defaults, as a value (the same as an all-zero struct). */
@@ -265,6 +297,9 @@ typedef struct spia_report {
      * relative max error over all the others. */
     int32_t unreachable_count;
     double reachable_max_error_relative;
+    double weight;             /* WPIA: the weight used, else 0                       */
+    /* staged: iterations of the boundary stage and of the interior stage. */
+    int32_t stage_iterations[2];
     double stencil_seconds;    /* wall time building stencils (spia_interpolate only)  */
     double solve_seconds;      /* wall time in the solver                              */
     /* Optional caller-owned buffer: the relative max error after each

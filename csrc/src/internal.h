@@ -16,6 +16,10 @@ struct spia_stencils {
     int64_t *offsets;
     int32_t *indices;
     double *weights;
+    /* Per row: 1 for a boundary vertex whose stencil refers to boundary
+     * vertices only (what a staged solve does first). */
+    unsigned char *boundary;
+    int32_t boundary_count;
 };
 
 /* Writes code and a printf-style message into status (if not NULL) and
@@ -70,10 +74,32 @@ static inline int32_t spia__corner_next(const spia_mesh *m, const spia_adjacency
     return m->face_vertices[c + 1 == e ? a->corner_start[f] : c + 1];
 }
 
-/* Catmull-Clark limit stencils matching Blender's modifier (catmark_osd.cpp). */
-spia_result spia__catmark_limit_stencils(const spia_mesh *mesh, const spia_adjacency *adj,
-                                         const spia_options *options, spia_stencils **out,
-                                         spia_status *status);
+/* boundary[v] = 1 for vertices on an edge that only one face uses. */
+spia_result spia__boundary_vertices(const spia_mesh *mesh, const spia_adjacency *adj, unsigned char *boundary);
+
+/* The most corners any vertex has (its valence bound: neighbours <= 2x). */
+int32_t spia__max_corners_per_vertex(const spia_adjacency *adj);
+
+/* The distinct neighbours of v along face edges, and for each the number of
+ * faces on that edge; returns their number (at most cap are written; a cap
+ * of 2 * corners of v always suffices). */
+int32_t spia__vertex_neighbours(const spia_mesh *mesh, const spia_adjacency *adj, int32_t v, int32_t *nb,
+                                int32_t *faces_on_edge, int32_t cap);
+
+/* Fills s->boundary and s->boundary_count. */
+spia_result spia__stencils_mark_boundary(spia_stencils *s, const spia_mesh *mesh, const spia_adjacency *adj);
+
+/* Limit stencils through OpenSubdiv (catmark_osd.cpp): Catmull-Clark exactly
+ * as Blender's modifier, and Loop with OpenSubdiv's boundary rules. */
+spia_result spia__osd_limit_stencils(const spia_mesh *mesh, const spia_adjacency *adj, const spia_options *options,
+                                     spia_stencils **out, spia_status *status);
+
+/* Loop limit stencils with Hoppe et al.'s boundary rules (loop.c). */
+spia_result spia__loop_hoppe_limit_stencils(const spia_mesh *mesh, const spia_adjacency *adj,
+                                            const spia_options *options, spia_stencils **out, spia_status *status);
+
+/* Rejects Loop input that is not all triangles, naming how many faces are not. */
+spia_result spia__require_triangles(const spia_mesh *mesh, spia_status *status);
 
 #ifdef __cplusplus
 }

@@ -3,12 +3,14 @@
 
 #include <stdlib.h>
 
-/* Scheme dispatch: one line per scheme. */
+/* Scheme dispatch: one line per scheme and boundary rule. */
 typedef spia_result (*stencil_builder)(const spia_mesh *, const spia_adjacency *, const spia_options *,
                                        spia_stencils **, spia_status *);
-static stencil_builder builder_for(spia_scheme scheme) {
-    switch (scheme) {
-    case SPIA_SCHEME_CATMULL_CLARK: return spia__catmark_limit_stencils;
+static stencil_builder builder_for(const spia_options *o) {
+    switch (o->scheme) {
+    case SPIA_SCHEME_CATMULL_CLARK: return spia__osd_limit_stencils;
+    case SPIA_SCHEME_LOOP:
+        return o->boundary_rule == SPIA_BOUNDARY_RULE_HOPPE ? spia__loop_hoppe_limit_stencils : spia__osd_limit_stencils;
     }
     return NULL;
 }
@@ -26,11 +28,17 @@ spia_result spia_limit_stencils_create(const spia_mesh *mesh, const spia_options
     if (r != SPIA_OK) return r;
     r = spia_mesh_validate(mesh, status);
     if (r != SPIA_OK) return r;
+    if (opt.scheme == SPIA_SCHEME_LOOP && (r = spia__require_triangles(mesh, status)) != SPIA_OK) return r;
     if (cancelled(&opt)) return spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled before computing stencils");
     spia_adjacency adj;
     r = spia__adjacency_build(mesh, &adj, status);
     if (r != SPIA_OK) return r;
-    r = builder_for(opt.scheme)(mesh, &adj, &opt, out, status);
+    r = builder_for(&opt)(mesh, &adj, &opt, out, status);
+    if (r == SPIA_OK && spia__stencils_mark_boundary(*out, mesh, &adj) != SPIA_OK) {
+        spia_stencils_free(*out);
+        *out = NULL;
+        r = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory classifying boundary vertices");
+    }
     spia__adjacency_free(&adj);
     if (r == SPIA_OK && cancelled(&opt)) {
         spia_stencils_free(*out);

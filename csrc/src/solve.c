@@ -5,20 +5,26 @@
  * target and its current limit point.  It converges when the eigenvalues of L
  * lie in (0, 1], as they do for the limit matrices of the schemes here.
  *
+ * WPIA (weighted PIA) is V += w (P - L V); with the spectrum in
+ * [lambda_min, lambda_max] the best weight is 2 / (lambda_min + lambda_max).
+ *
  * GS-PIA (Gauss-Seidel PIA) visits the vertices in order and moves each one,
  * in place, so that its own limit point lands on its target given the
  * current positions of the others: V_i += (P_i - (L V)_i) / L_ii.  For a
  * limit matrix that is a positive diagonal times a symmetric positive
- * definite matrix (closed Loop meshes) this is Gauss-Seidel on the SPD
- * matrix and converges; on Catmull-Clark cages it converges faster than PIA
- * in practice, which the tests check on every mesh they use.
+ * definite matrix (closed Loop meshes: L = D S) this is Gauss-Seidel on the
+ * SPD matrix S, since scaling rows by D^-1 changes neither the sweep nor the
+ * iterates, and so it converges.
  *
- * AUTO is Chebyshev-accelerated PIA (see step_chebyshev), after a few PIA
- * steps that estimate the spectrum.
+ * CG is conjugate gradients on the symmetrized system where the limit
+ * matrix allows it (closed Loop meshes, see step_cg).  AUTO uses CG where it
+ * applies and else Chebyshev-accelerated PIA (see step_chebyshev), after a
+ * few PIA steps that estimate the spectrum.
  *
  * All stop when max_i |P_i - (L V)_i| <= tolerance * diagonal, at
  * max_iterations, when the error has not fallen for STAGNATION_WINDOW
- * iterations, or (as a failure) when it blows up.
+ * iterations, or (as a failure) when it blows up.  With `staged` the rows of
+ * boundary vertices are solved first and then frozen.
  */
 #include "internal.h"
 
@@ -28,7 +34,8 @@
 
 enum {
     STAGNATION_WINDOW = 50, /* iterations without a 0.1% improvement */
-    ESTIMATE_STEPS = 4      /* PIA steps before Chebyshev, to estimate the spectrum */
+    ESTIMATE_STEPS = 4,     /* PIA steps before Chebyshev, to estimate the spectrum */
+    POWER_STEPS = 30        /* power iterations for WPIA's weight */
 };
 /* Bounds on the assumed smallest eigenvalue for Chebyshev: Catmull-Clark
  * limit matrices of real meshes measured between 0.07 and 0.36 (singular
@@ -36,45 +43,59 @@ enum {
 #define CHEB_A_MIN 0.05
 #define CHEB_A_MAX 0.25
 #define DIVERGENCE_FACTOR 1e4 /* error this many times the initial one */
+/* See mark_stuck. */
+#define DRIFT_FACTOR 50.0
 
 typedef struct solver_state {
     const spia_stencils *L;
     int32_t n;
+    spia_method method;
     double *P; /* targets              */
     double *V; /* current cage         */
     double *R; /* residual P - L V     */
     double *diag;
-    double *initial; /* |P_i - (L P)_i|, to tell stuck vertices from slow ones */
-    unsigned char *stuck; /* rows no longer updated (see spia_solve)  */
-    double norm2;         /* squared 2-norm of R over active rows, from residual() */
-    /* Chebyshev state (AUTO): search direction and recurrence scalars. */
+    double *initial;       /* |P_i - (L P)_i|, to tell stuck vertices from slow ones */
+    unsigned char *stuck;  /* rows that cannot be reached: left on their targets */
+    unsigned char *frozen; /* rows of the other stage (staged solves)            */
+    double norm2;          /* squared 2-norm of R over active rows, from residual() */
+    double weight;         /* WPIA */
+    /* Chebyshev and CG state: search direction and recurrence scalars. */
     double *D;
     double cheb_a, cheb_rho;
     int32_t cheb_steps;
+    /* CG on the symmetric S = diag(scale)^-1 L (see step_cg). */
+    double *scale; /* per row, or NULL when L has no such scaling */
+    double *T;     /* L p */
+    double cg_rr[3];
+    int32_t cg_steps;
 } solver_state;
 
-/* R = P - L V; returns the max distance over all rows and writes the mean
- * and the max over rows that are not stuck. */
-static double residual(solver_state *s, double *mean, double *max_active) {
-    const spia_stencils *L = s->L;
+static inline int active(const solver_state *s, int32_t r) { return !s->stuck[r] && !s->frozen[r]; }
+
+/* out = L x for the rows given (all when rows_all), 3 doubles per row. */
+static inline void row_product(const spia_stencils *L, int32_t r, const double *x, double out[3]) {
+    double a = 0.0, b = 0.0, c = 0.0;
+    for (int64_t k = L->offsets[r]; k < L->offsets[r + 1]; ++k) {
+        const double w = L->weights[k];
+        const double *p = x + 3 * (int64_t)L->indices[k];
+        a += w * p[0];
+        b += w * p[1];
+        c += w * p[2];
+    }
+    out[0] = a;
+    out[1] = b;
+    out[2] = c;
+}
+
+/* Statistics of R: returns the max distance over all rows and writes the
+ * mean over all rows and the max over active rows. */
+static double residual_stats(solver_state *s, double *mean, double *max_active) {
     double maxd = 0.0, maxa = 0.0, sum = 0.0, norm2 = 0.0;
     for (int32_t r = 0; r < s->n; ++r) {
-        double x = 0.0, y = 0.0, z = 0.0;
-        for (int64_t k = L->offsets[r]; k < L->offsets[r + 1]; ++k) {
-            const double w = L->weights[k];
-            const double *p = s->V + 3 * (int64_t)L->indices[k];
-            x += w * p[0];
-            y += w * p[1];
-            z += w * p[2];
-        }
-        double *q = s->R + 3 * (int64_t)r;
-        const double *t = s->P + 3 * (int64_t)r;
-        q[0] = t[0] - x;
-        q[1] = t[1] - y;
-        q[2] = t[2] - z;
+        const double *q = s->R + 3 * (int64_t)r;
         double d = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]);
         if (d > maxd || d != d) maxd = d != d ? NAN : d;
-        if (!s->stuck[r]) {
+        if (active(s, r)) {
             if (d > maxa || d != d) maxa = d != d ? NAN : d;
             norm2 += d * d;
         }
@@ -86,30 +107,31 @@ static double residual(solver_state *s, double *mean, double *max_active) {
     return maxd;
 }
 
-static void step_pia(solver_state *s) {
-    const int64_t m = 3 * (int64_t)s->n;
-    for (int64_t k = 0; k < m; ++k)
-        if (!s->stuck[k / 3]) s->V[k] += s->R[k];
+/* R = P - L V, then its statistics as residual_stats. */
+static double residual(solver_state *s, double *mean, double *max_active) {
+    for (int32_t r = 0; r < s->n; ++r) {
+        double lv[3];
+        row_product(s->L, r, s->V, lv);
+        for (int a = 0; a < 3; ++a) s->R[3 * (int64_t)r + a] = s->P[3 * (int64_t)r + a] - lv[a];
+    }
+    return residual_stats(s, mean, max_active);
+}
+
+static void step_richardson(solver_state *s, double w) {
+    for (int32_t r = 0; r < s->n; ++r)
+        if (active(s, r))
+            for (int a = 0; a < 3; ++a) s->V[3 * (int64_t)r + a] += w * s->R[3 * (int64_t)r + a];
 }
 
 static void step_gs_pia(solver_state *s) {
-    const spia_stencils *L = s->L;
     for (int32_t r = 0; r < s->n; ++r) {
-        if (s->stuck[r]) continue;
-        double x = 0.0, y = 0.0, z = 0.0;
-        for (int64_t k = L->offsets[r]; k < L->offsets[r + 1]; ++k) {
-            const double w = L->weights[k];
-            const double *p = s->V + 3 * (int64_t)L->indices[k];
-            x += w * p[0];
-            y += w * p[1];
-            z += w * p[2];
-        }
+        if (!active(s, r)) continue;
+        double lv[3];
+        row_product(s->L, r, s->V, lv);
         const double *t = s->P + 3 * (int64_t)r;
         double *v = s->V + 3 * (int64_t)r;
         const double inv = 1.0 / s->diag[r];
-        v[0] += (t[0] - x) * inv;
-        v[1] += (t[1] - y) * inv;
-        v[2] += (t[2] - z) * inv;
+        for (int a = 0; a < 3; ++a) v[a] += (t[a] - lv[a]) * inv;
     }
 }
 
@@ -124,18 +146,180 @@ static void step_gs_pia(solver_state *s) {
 static void step_chebyshev(solver_state *s) {
     const double theta = 0.5 * (1.0 + s->cheb_a), delta = 0.5 * (1.0 - s->cheb_a);
     const double sigma = theta / delta;
-    const int64_t m = 3 * (int64_t)s->n;
-    if (s->cheb_steps == 0) {
-        s->cheb_rho = 1.0 / sigma;
-        for (int64_t k = 0; k < m; ++k) s->D[k] = s->stuck[k / 3] ? 0.0 : s->R[k] / theta;
-    } else {
+    double c1 = 0.0, c2 = 1.0 / theta;
+    if (s->cheb_steps > 0) {
         const double rho = 1.0 / (2.0 * sigma - s->cheb_rho);
-        const double c1 = rho * s->cheb_rho, c2 = 2.0 * rho / delta;
-        for (int64_t k = 0; k < m; ++k) s->D[k] = s->stuck[k / 3] ? 0.0 : c1 * s->D[k] + c2 * s->R[k];
+        c1 = rho * s->cheb_rho;
+        c2 = 2.0 * rho / delta;
         s->cheb_rho = rho;
+    } else {
+        s->cheb_rho = 1.0 / sigma;
     }
-    for (int64_t k = 0; k < m; ++k) s->V[k] += s->D[k];
+    for (int32_t r = 0; r < s->n; ++r)
+        for (int a = 0; a < 3; ++a) {
+            const int64_t k = 3 * (int64_t)r + a;
+            const double previous = s->cheb_steps > 0 ? c1 * s->D[k] : 0.0; /* D starts unset */
+            s->D[k] = active(s, r) ? previous + c2 * s->R[k] : 0.0;
+            s->V[k] += s->D[k];
+        }
     ++s->cheb_steps;
+}
+
+/* A positive diagonal c with S = c^-1 L symmetric, as the closed Loop limit
+ * matrix has one (the papers' B = D S: c_i = (1 - beta_i) / n_i, the weight
+ * on each neighbour).  c_i is taken as row i's first off-diagonal weight and
+ * the symmetry of S is then checked entry by entry.  Returns 0 if there is
+ * no such scaling. */
+static int symmetric_scaling(const spia_stencils *L, double *c) {
+    for (int32_t r = 0; r < L->rows; ++r) {
+        c[r] = 0.0;
+        for (int64_t k = L->offsets[r]; k < L->offsets[r + 1] && c[r] == 0.0; ++k)
+            if (L->indices[k] != r) c[r] = L->weights[k];
+        if (c[r] == 0.0) c[r] = 1.0; /* a row on itself alone */
+        if (!(c[r] > 0.0)) return 0;
+    }
+    for (int32_t r = 0; r < L->rows; ++r)
+        for (int64_t k = L->offsets[r]; k < L->offsets[r + 1]; ++k) {
+            const int32_t j = L->indices[k];
+            if (j == r) continue;
+            /* L_jr by binary search (columns are sorted). */
+            int64_t lo = L->offsets[j], hi = L->offsets[j + 1];
+            while (lo < hi) {
+                int64_t mid = (lo + hi) / 2;
+                if (L->indices[mid] < r) lo = mid + 1; else hi = mid;
+            }
+            const double ljr = lo < L->offsets[j + 1] && L->indices[lo] == r ? L->weights[lo] : 0.0;
+            const double a = L->weights[k] / c[r], b = ljr / c[j];
+            if (fabs(a - b) > 1e-12 * fabs(a)) return 0;
+        }
+    return 1;
+}
+
+/* Conjugate gradients on S V = c^-1 P, S = c^-1 L symmetric (positive
+ * definite for closed Loop meshes, as the papers prove), one coordinate at
+ * a time, on the active rows (a principal submatrix, still SPD).  Its
+ * residual is c^-1 R, so R is kept by the recurrence R -= alpha L p: one
+ * product with L per step.  Returns 0 on a breakdown (p.Sp <= 0: S is not
+ * positive definite), leaving V unchanged. */
+static int step_cg(solver_state *s) {
+    const int32_t n = s->n;
+    const double *c = s->scale;
+    if (s->cg_steps == 0) {
+        for (int a = 0; a < 3; ++a) s->cg_rr[a] = 0.0;
+        for (int32_t r = 0; r < n; ++r)
+            for (int a = 0; a < 3; ++a) {
+                const int64_t k = 3 * (int64_t)r + a;
+                const double z = active(s, r) ? s->R[k] / c[r] : 0.0;
+                s->D[k] = z;
+                s->cg_rr[a] += z * z;
+            }
+    }
+    double pq[3] = {0.0, 0.0, 0.0};
+    for (int32_t r = 0; r < n; ++r) {
+        row_product(s->L, r, s->D, s->T + 3 * (int64_t)r);
+        if (active(s, r))
+            for (int a = 0; a < 3; ++a) pq[a] += s->D[3 * (int64_t)r + a] * s->T[3 * (int64_t)r + a] / c[r];
+    }
+    double alpha[3], rr[3] = {0.0, 0.0, 0.0};
+    for (int a = 0; a < 3; ++a) {
+        if (s->cg_rr[a] == 0.0) {
+            alpha[a] = 0.0; /* this coordinate is solved */
+            continue;
+        }
+        if (!(pq[a] > 0.0)) return 0;
+        alpha[a] = s->cg_rr[a] / pq[a];
+    }
+    for (int32_t r = 0; r < n; ++r)
+        for (int a = 0; a < 3; ++a) {
+            const int64_t k = 3 * (int64_t)r + a;
+            s->V[k] += alpha[a] * s->D[k];
+            s->R[k] -= alpha[a] * s->T[k];
+            if (active(s, r)) rr[a] += (s->R[k] / c[r]) * (s->R[k] / c[r]);
+        }
+    for (int a = 0; a < 3; ++a) {
+        const double beta = s->cg_rr[a] > 0.0 ? rr[a] / s->cg_rr[a] : 0.0;
+        s->cg_rr[a] = rr[a];
+        for (int32_t r = 0; r < n; ++r) {
+            const int64_t k = 3 * (int64_t)r + a;
+            s->D[k] = active(s, r) ? s->R[k] / c[r] + beta * s->D[k] : 0.0;
+        }
+    }
+    ++s->cg_steps;
+    return 1;
+}
+
+/* A deterministic start vector for power iterations. */
+static double pseudo_random(uint64_t *state) {
+    *state = *state * 6364136223846793005ULL + 1442695040888963407ULL;
+    return (double)(*state >> 11) / 9007199254740992.0 - 0.5;
+}
+
+/* Largest |eigenvalue| of (shift I - L) by power iterations (scalar field,
+ * one coordinate). */
+static double power_estimate(const spia_stencils *L, double shift, double *x, double *y) {
+    uint64_t seed = 12345;
+    for (int32_t i = 0; i < L->rows; ++i) x[i] = pseudo_random(&seed);
+    double estimate = 0.0;
+    for (int it = 0; it < POWER_STEPS; ++it) {
+        double nx = 0.0, ny = 0.0;
+        for (int32_t r = 0; r < L->rows; ++r) {
+            double lx = 0.0;
+            for (int64_t k = L->offsets[r]; k < L->offsets[r + 1]; ++k) lx += L->weights[k] * x[L->indices[k]];
+            y[r] = shift * x[r] - lx;
+            nx += x[r] * x[r];
+            ny += y[r] * y[r];
+        }
+        if (!(ny > 0.0)) return 0.0;
+        estimate = sqrt(ny / nx);
+        const double inv = 1.0 / sqrt(ny);
+        for (int32_t r = 0; r < L->rows; ++r) x[r] = y[r] * inv;
+    }
+    return estimate;
+}
+
+/* WPIA's weight 2 / (lambda_min + lambda_max).  With no negative weight,
+ * every eigenvalue has modulus at most 1 (a row's weights add up to 1) and
+ * 1 is one (L 1 = 1), so lambda_max = 1; else it is estimated too.
+ * lambda_min = lambda_max - (largest eigenvalue of lambda_max I - L).  Power
+ * iterations approach that from below, so the weight errs small: safe. */
+static double best_weight(const spia_stencils *L, double *work) {
+    int negative = 0;
+    for (int64_t k = 0; k < L->nnz && !negative; ++k) negative = L->weights[k] < 0.0;
+    double lambda_max = negative ? power_estimate(L, 0.0, work, work + L->rows) : 1.0;
+    double lambda_min = lambda_max - power_estimate(L, lambda_max, work, work + L->rows);
+    if (!(lambda_min > 0.0)) lambda_min = 0.0;
+    return 2.0 / (lambda_min + lambda_max);
+}
+
+/* Rows whose residual has not fallen below half its initial value when the
+ * iteration stagnates cannot be reached: their limit points are tied to
+ * others' (a double-sided face, whose three vertices all have the centroid
+ * as limit point, is the common case in scans).  Every update would only
+ * push them along the null space of L, so they are put back on their
+ * targets and left there, and the rest is solved without them.  GS-PIA
+ * zeroes the residual of the last vertex it visits in such a group, which
+ * then shows only by its drift: a cage vertex that has moved DRIFT_FACTOR
+ * times farther than the largest initial distance of any vertex to its
+ * limit point (a solvable cage moves by far less). */
+static int32_t mark_stuck(solver_state *s, double threshold) {
+    int32_t count = 0;
+    double initial_max = threshold;
+    for (int32_t r = 0; r < s->n; ++r)
+        if (active(s, r) && s->initial[r] > initial_max) initial_max = s->initial[r];
+    for (int32_t r = 0; r < s->n; ++r) {
+        if (!active(s, r)) continue;
+        const double *q = s->R + 3 * (int64_t)r;
+        double *v = s->V + 3 * (int64_t)r;
+        const double *p = s->P + 3 * (int64_t)r;
+        double d = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]);
+        double moved = sqrt((v[0] - p[0]) * (v[0] - p[0]) + (v[1] - p[1]) * (v[1] - p[1]) + (v[2] - p[2]) * (v[2] - p[2]));
+        if ((d > threshold && d > 0.5 * s->initial[r]) || moved > DRIFT_FACTOR * initial_max) {
+            s->stuck[r] = 1;
+            for (int a = 0; a < 3; ++a) v[a] = p[a];
+            ++count;
+        }
+    }
+    return count;
 }
 
 static double bbox_diagonal(const double *P, int32_t n) {
@@ -162,41 +346,100 @@ static void report_reset(spia_report *rep) {
     rep->unreachable = flags;
 }
 
-/* Rows whose residual has not fallen below half its initial value when the
- * iteration stagnates cannot be reached: their limit points are tied to
- * others' (a double-sided face, whose three vertices all have the centroid
- * as limit point, is the common case in scans).  Every update would only
- * push them along the null space of L, so they are put back on their
- * targets and left there, and the rest is solved without them.  GS-PIA
- * zeroes the residual of the last vertex it visits in such a group, which
- * then shows only by its drift: a cage vertex that has moved DRIFT_FACTOR
- * times farther than the largest initial distance of any vertex to its
- * limit point (a solvable cage moves by far less). */
-#define DRIFT_FACTOR 50.0
-static int32_t mark_stuck(solver_state *s, double threshold) {
-    int32_t count = 0;
-    double initial_max = threshold;
-    for (int32_t r = 0; r < s->n; ++r)
-        if (s->initial[r] > initial_max) initial_max = s->initial[r];
-    for (int32_t r = 0; r < s->n; ++r) {
-        const double *q = s->R + 3 * (int64_t)r;
-        const double *v = s->V + 3 * (int64_t)r, *p = s->P + 3 * (int64_t)r;
-        double d = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]);
-        double moved = sqrt((v[0] - p[0]) * (v[0] - p[0]) + (v[1] - p[1]) * (v[1] - p[1]) + (v[2] - p[2]) * (v[2] - p[2]));
-        if ((d > threshold && d > 0.5 * s->initial[r]) || moved > DRIFT_FACTOR * initial_max) {
-            s->stuck[r] = 1;
-            for (int a = 0; a < 3; ++a) s->V[3 * (int64_t)r + a] = s->P[3 * (int64_t)r + a];
-            ++count;
+/* Iterates on the active rows until their max error is at most threshold.
+ * *it counts iterations over all stages (for the history and the limit). */
+static spia_result run_stage(solver_state *s, const spia_options *opt, double threshold, double scale, int32_t *it,
+                             int32_t *stuck_count, spia_report *report, spia_status *status) {
+    double mean, err, best, prev_norm2, contraction = 1.0;
+    double err_all = residual(s, &mean, &err);
+    const double initial = err;
+    int32_t it_best = *it, steps = 0;
+    int stuck_checked = 0;
+    best = err;
+    prev_norm2 = s->norm2;
+    s->cheb_steps = 0;
+    s->cg_steps = 0;
+    while (!(err <= threshold)) {
+        if (*it >= opt->max_iterations) return SPIA_MAX_ITERATIONS;
+        int residual_kept = 0;
+        switch (s->method) {
+        case SPIA_METHOD_CG:
+            if (step_cg(s)) {
+                residual_kept = 1;
+                break;
+            }
+            /* not positive definite after all: Chebyshev from here on */
+            s->method = SPIA_METHOD_CHEBYSHEV;
+            if (report) report->method = s->method;
+            step_richardson(s, 1.0);
+            break;
+        case SPIA_METHOD_GS_PIA:
+            step_gs_pia(s);
+            break;
+        case SPIA_METHOD_WPIA:
+            step_richardson(s, s->weight);
+            break;
+        case SPIA_METHOD_CHEBYSHEV:
+            if (steps >= ESTIMATE_STEPS) {
+                /* PIA's residual contracts by 1 - lambda_min per step once
+                 * the slowest mode dominates; after a few steps it has not
+                 * yet, and the contraction seen then overestimates
+                 * lambda_min by a factor of three to five on the meshes
+                 * measured (eigenvalues computed with numpy). */
+                if (s->cheb_steps == 0) {
+                    double a = (1.0 - contraction) / 3.0;
+                    s->cheb_a = a < CHEB_A_MIN ? CHEB_A_MIN : a > CHEB_A_MAX ? CHEB_A_MAX : a;
+                }
+                step_chebyshev(s);
+                break;
+            }
+            /* the first steps are PIA's */
+            step_richardson(s, 1.0);
+            break;
+        default:
+            step_richardson(s, 1.0);
+            break;
         }
+        ++*it;
+        ++steps;
+        err_all = residual_kept ? residual_stats(s, &mean, &err) : residual(s, &mean, &err);
+        contraction = prev_norm2 > 0.0 ? sqrt(s->norm2 / prev_norm2) : 0.0;
+        prev_norm2 = s->norm2;
+        if (report && report->history && *it <= report->history_capacity) {
+            report->history[*it - 1] = err_all / scale;
+            report->history_count = *it;
+        }
+        if (!isfinite(err) || err > DIVERGENCE_FACTOR * (initial > threshold ? initial : threshold))
+            return spia__fail(status, SPIA_ERROR_DIVERGED, -1,
+                              "the iteration diverged after %d iterations (max error %g of the diagonal)", (int)*it,
+                              err / scale);
+        if (err < best * (1.0 - 1e-3)) {
+            best = err;
+            it_best = *it;
+        } else if (*it - it_best >= STAGNATION_WINDOW) {
+            if (stuck_checked) return SPIA_STAGNATED;
+            stuck_checked = 1;
+            int32_t found = mark_stuck(s, threshold);
+            if (found == 0) return SPIA_STAGNATED;
+            *stuck_count += found;
+            err_all = residual(s, &mean, &err);
+            prev_norm2 = s->norm2;
+            s->cheb_steps = 0;
+            s->cg_steps = 0;
+            best = err;
+            it_best = *it;
+        }
+        if (opt->progress && opt->progress(opt->progress_user_data, *it, err_all / scale))
+            return spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled after %d iterations", (int)*it);
     }
-    return count;
+    return SPIA_OK;
 }
 
 spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_options *options, float *cage,
                        spia_report *report, spia_status *status) {
     report_reset(report);
     spia_options opt;
-    double t0 = spia__now();
+    const double t0 = spia__now();
     solver_state s;
     memset(&s, 0, sizeof s);
     spia_result res = spia__resolve_options(options, &opt, status);
@@ -216,7 +459,7 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
             goto done;
         }
 
-    const spia_method method = opt.method == SPIA_METHOD_AUTO ? SPIA_METHOD_CHEBYSHEV : opt.method;
+    s.method = opt.method;
     s.L = L;
     s.n = n;
     s.P = (double *)malloc(sizeof(double) * 3 * (size_t)n);
@@ -225,101 +468,82 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
     s.diag = (double *)malloc(sizeof(double) * (size_t)n);
     s.initial = (double *)malloc(sizeof(double) * (size_t)n);
     s.stuck = (unsigned char *)calloc((size_t)n, 1);
-    if (method == SPIA_METHOD_CHEBYSHEV) s.D = (double *)malloc(sizeof(double) * 3 * (size_t)n);
-    if (!s.P || !s.V || !s.R || !s.diag || !s.initial || !s.stuck || (method == SPIA_METHOD_CHEBYSHEV && !s.D)) {
+    s.frozen = (unsigned char *)calloc((size_t)n, 1);
+    s.D = (double *)malloc(sizeof(double) * 3 * (size_t)n);
+    if (s.method == SPIA_METHOD_AUTO || s.method == SPIA_METHOD_CG) {
+        s.scale = (double *)malloc(sizeof(double) * (size_t)n);
+        s.T = (double *)malloc(sizeof(double) * 3 * (size_t)n);
+    }
+    if (!s.P || !s.V || !s.R || !s.diag || !s.initial || !s.stuck || !s.frozen || !s.D ||
+        ((s.method == SPIA_METHOD_AUTO || s.method == SPIA_METHOD_CG) && (!s.scale || !s.T))) {
         res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
         goto done;
     }
     for (int64_t k = 0; k < 3 * (int64_t)n; ++k) s.P[k] = s.V[k] = (double)targets[k];
+    /* AUTO: conjugate gradients where L is a positive diagonal times a
+     * symmetric matrix (closed Loop meshes), else Chebyshev. */
+    if (s.method == SPIA_METHOD_AUTO || s.method == SPIA_METHOD_CG) {
+        if (symmetric_scaling(L, s.scale)) {
+            s.method = SPIA_METHOD_CG;
+        } else if (s.method == SPIA_METHOD_CG) {
+            res = spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1,
+                             "CG needs a limit matrix that is a positive diagonal times a symmetric one "
+                             "(closed Loop meshes); use AUTO");
+            goto done;
+        } else {
+            s.method = SPIA_METHOD_CHEBYSHEV;
+        }
+    }
     for (int32_t r = 0; r < n; ++r) {
         s.diag[r] = 0.0;
         for (int64_t k = L->offsets[r]; k < L->offsets[r + 1]; ++k)
             if (L->indices[k] == r) s.diag[r] = L->weights[k];
-        if (method == SPIA_METHOD_GS_PIA && !(s.diag[r] > 0.0)) {
+        if (s.method == SPIA_METHOD_GS_PIA && !(s.diag[r] > 0.0)) {
             res = spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, r,
                              "stencil of vertex %d has weight %g on itself; GS-PIA needs a positive one", (int)r,
                              s.diag[r]);
             goto done;
         }
     }
+    if (s.method == SPIA_METHOD_WPIA) {
+        if (opt.weight < 0.0 || opt.weight >= 2.0 || !isfinite(opt.weight)) {
+            res = spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "the WPIA weight must be in (0, 2), got %g",
+                             opt.weight);
+            goto done;
+        }
+        s.weight = opt.weight > 0.0 ? opt.weight : best_weight(L, s.D);
+    }
 
     const double diagonal = bbox_diagonal(s.P, n);
     const double scale = diagonal > 0.0 ? diagonal : 1.0;
     const double threshold = opt.tolerance * scale;
-    double mean, err; /* err: max over rows still solved */
+    double mean, err;
     double err_all = residual(&s, &mean, &err);
     for (int32_t r = 0; r < n; ++r) {
         const double *q = s.R + 3 * (int64_t)r;
         s.initial[r] = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]);
     }
-    const double initial = err;
-    double best = err, prev_norm2 = s.norm2, contraction = 1.0;
-    int32_t it = 0, it_best = 0, stuck_count = 0;
-    int stuck_checked = 0;
-    res = SPIA_OK;
     if (report) {
         report->initial_max_error_relative = err_all / scale;
-        report->method = method;
+        report->method = s.method;
+        report->weight = s.weight;
     }
-    while (!(err <= threshold)) {
-        if (it >= opt.max_iterations) {
-            res = SPIA_MAX_ITERATIONS;
-            break;
+
+    int32_t it = 0, stuck_count = 0;
+    const int staged = opt.staged && L->boundary_count > 0 && L->boundary_count < n;
+    if (staged) {
+        /* Stage 1: the boundary rows, which refer to boundary vertices only. */
+        for (int32_t r = 0; r < n; ++r) s.frozen[r] = !L->boundary[r];
+        res = run_stage(&s, &opt, threshold, scale, &it, &stuck_count, report, status);
+        if (report) report->stage_iterations[0] = it;
+        if (res == SPIA_OK) {
+            for (int32_t r = 0; r < n; ++r) s.frozen[r] = L->boundary[r];
+            res = run_stage(&s, &opt, threshold, scale, &it, &stuck_count, report, status);
+            for (int32_t r = 0; r < n; ++r) s.frozen[r] = 0;
         }
-        if (method == SPIA_METHOD_PIA || (method == SPIA_METHOD_CHEBYSHEV && it < ESTIMATE_STEPS)) {
-            step_pia(&s);
-        } else if (method == SPIA_METHOD_GS_PIA) {
-            step_gs_pia(&s);
-        } else {
-            /* PIA's residual contracts by 1 - lambda_min per step once the
-             * slowest mode dominates; after a few steps it has not yet, and
-             * the contraction seen then overestimates lambda_min by a factor
-             * of three to five on the meshes measured (eigenvalues computed
-             * with numpy), hence the quarter. */
-            if (s.cheb_steps == 0) {
-                double a = (1.0 - contraction) / 3.0;
-                s.cheb_a = a < CHEB_A_MIN ? CHEB_A_MIN : a > CHEB_A_MAX ? CHEB_A_MAX : a;
-            }
-            step_chebyshev(&s);
-        }
-        ++it;
-        err_all = residual(&s, &mean, &err);
-        contraction = prev_norm2 > 0.0 ? sqrt(s.norm2 / prev_norm2) : 0.0;
-        prev_norm2 = s.norm2;
-        if (report && report->history && it <= report->history_capacity) {
-            report->history[it - 1] = err_all / scale;
-            report->history_count = it;
-        }
-        if (!isfinite(err) || err > DIVERGENCE_FACTOR * (initial > threshold ? initial : threshold)) {
-            res = spia__fail(status, SPIA_ERROR_DIVERGED, -1,
-                             "the iteration diverged after %d iterations (max error %g of the diagonal)", (int)it,
-                             err / scale);
-            break;
-        }
-        if (err < best * (1.0 - 1e-3)) {
-            best = err;
-            it_best = it;
-        } else if (it - it_best >= STAGNATION_WINDOW) {
-            if (stuck_checked) {
-                res = SPIA_STAGNATED;
-                break;
-            }
-            stuck_checked = 1;
-            stuck_count = mark_stuck(&s, threshold);
-            if (stuck_count == 0) {
-                res = SPIA_STAGNATED;
-                break;
-            }
-            err_all = residual(&s, &mean, &err);
-            prev_norm2 = s.norm2;
-            s.cheb_steps = 0;
-            best = err;
-            it_best = it;
-        }
-        if (opt.progress && opt.progress(opt.progress_user_data, it, err_all / scale)) {
-            res = spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled after %d iterations", (int)it);
-            break;
-        }
+        if (report) report->stage_iterations[1] = it - report->stage_iterations[0];
+    } else {
+        res = run_stage(&s, &opt, threshold, scale, &it, &stuck_count, report, status);
     }
     if (res >= 0) {
         /* Write the cage, then measure it as stored (in float). */
@@ -346,8 +570,6 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
                        "the error stopped falling after %d iterations at %.3g of the diagonal, above the tolerance %.3g",
                        (int)it, err_all / scale, opt.tolerance);
         if (report) {
-            report->iterations = it;
-            report->diagonal = diagonal;
             report->max_error = err_all;
             report->mean_error = mean;
             report->max_error_relative = err_all / scale;
@@ -356,7 +578,8 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
             report->unreachable_count = stuck_count;
             if (report->unreachable) memcpy(report->unreachable, s.stuck, (size_t)n);
         }
-    } else if (report) {
+    }
+    if (report) {
         report->iterations = it;
         report->diagonal = diagonal;
     }
@@ -367,7 +590,10 @@ done:
     free(s.diag);
     free(s.initial);
     free(s.stuck);
+    free(s.frozen);
     free(s.D);
+    free(s.scale);
+    free(s.T);
     if (report) {
         report->solve_seconds = spia__now() - t0;
         report->result = res;

@@ -12,7 +12,8 @@ spia_stencils *spia__stencils_alloc(int32_t rows, int64_t nnz) {
     s->offsets = (int64_t *)calloc((size_t)rows + 1, sizeof(int64_t));
     s->indices = (int32_t *)malloc(sizeof(int32_t) * (size_t)(nnz > 0 ? nnz : 1));
     s->weights = (double *)malloc(sizeof(double) * (size_t)(nnz > 0 ? nnz : 1));
-    if (!s->offsets || !s->indices || !s->weights) {
+    s->boundary = (unsigned char *)calloc((size_t)rows + 1, 1);
+    if (!s->offsets || !s->indices || !s->weights || !s->boundary) {
         spia_stencils_free(s);
         return NULL;
     }
@@ -24,6 +25,7 @@ void spia_stencils_free(spia_stencils *s) {
     free(s->offsets);
     free(s->indices);
     free(s->weights);
+    free(s->boundary);
     free(s);
 }
 
@@ -87,5 +89,23 @@ spia_result spia_stencils_apply(const spia_stencils *s, const double *cage, doub
         out[3 * (int64_t)r + 1] = y;
         out[3 * (int64_t)r + 2] = z;
     }
+    return SPIA_OK;
+}
+
+spia_result spia__stencils_mark_boundary(spia_stencils *s, const spia_mesh *mesh, const spia_adjacency *adj) {
+    unsigned char *on_boundary = (unsigned char *)calloc((size_t)s->rows, 1);
+    if (!on_boundary) return SPIA_ERROR_OUT_OF_MEMORY;
+    if (spia__boundary_vertices(mesh, adj, on_boundary) != SPIA_OK) {
+        free(on_boundary);
+        return SPIA_ERROR_OUT_OF_MEMORY;
+    }
+    s->boundary_count = 0;
+    for (int32_t r = 0; r < s->rows; ++r) {
+        int closed = on_boundary[r];
+        for (int64_t k = s->offsets[r]; k < s->offsets[r + 1] && closed; ++k) closed = on_boundary[s->indices[k]];
+        s->boundary[r] = (unsigned char)closed;
+        s->boundary_count += closed;
+    }
+    free(on_boundary);
     return SPIA_OK;
 }

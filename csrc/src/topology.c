@@ -142,3 +142,63 @@ oom:
     spia__adjacency_free(a);
     return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory building vertex adjacency");
 }
+
+int32_t spia__vertex_neighbours(const spia_mesh *m, const spia_adjacency *a, int32_t v, int32_t *nb,
+                                int32_t *faces_on_edge, int32_t cap) {
+    int32_t count = 0;
+    for (int64_t i = a->first[v]; i < a->first[v + 1]; ++i) {
+        int64_t c = a->corner_of[i];
+        int32_t ends[2] = {spia__corner_next(m, a, c), spia__corner_prev(m, a, c)};
+        for (int e = 0; e < 2; ++e) {
+            int32_t k = 0;
+            while (k < count && k < cap && nb[k] != ends[e]) ++k;
+            if (k < count && k < cap) {
+                faces_on_edge[k]++;
+            } else {
+                if (count < cap) {
+                    nb[count] = ends[e];
+                    faces_on_edge[count] = 1;
+                }
+                ++count;
+            }
+        }
+    }
+    return count;
+}
+
+int32_t spia__max_corners_per_vertex(const spia_adjacency *a) {
+    int64_t most = 0;
+    for (int32_t v = 0; v < a->vertex_count; ++v)
+        if (a->first[v + 1] - a->first[v] > most) most = a->first[v + 1] - a->first[v];
+    return (int32_t)most;
+}
+
+spia_result spia__boundary_vertices(const spia_mesh *m, const spia_adjacency *a, unsigned char *boundary) {
+    const int32_t cap = 2 * spia__max_corners_per_vertex(a) + 2;
+    int32_t *nb = (int32_t *)malloc(sizeof(int32_t) * 2 * (size_t)cap);
+    if (!nb) return SPIA_ERROR_OUT_OF_MEMORY;
+    int32_t *fe = nb + cap;
+    for (int32_t v = 0; v < m->vertex_count; ++v) {
+        int32_t n = spia__vertex_neighbours(m, a, v, nb, fe, cap);
+        boundary[v] = 0;
+        for (int32_t k = 0; k < n; ++k)
+            if (fe[k] == 1) boundary[v] = 1;
+    }
+    free(nb);
+    return SPIA_OK;
+}
+
+spia_result spia__require_triangles(const spia_mesh *m, spia_status *status) {
+    int64_t other = 0, first = -1;
+    for (int32_t f = 0; f < m->face_count; ++f)
+        if (m->face_sizes[f] != 3) {
+            if (first < 0) first = f;
+            ++other;
+        }
+    if (other)
+        return spia__fail(status, SPIA_ERROR_TOPOLOGY, first,
+                          "Loop subdivision needs triangles: %lld of %d faces are not (first: face %lld); "
+                          "triangulate the mesh first",
+                          (long long)other, (int)m->face_count, (long long)first);
+    return SPIA_OK;
+}

@@ -130,9 +130,20 @@ static Rows reference_rows(const tmesh &m, int quality, bool preserve_corners, b
     lo.generate1stDerivatives = false;
     std::unique_ptr<const Far::LimitStencilTableReal<double>> t(
         Far::LimitStencilTableFactoryReal<double>::Create(*r, locs, nullptr, nullptr, lo));
+    // Vertices no face uses stay put, but one with exactly two (loose) edges
+    // goes to (prev + 4 V + next) / 6, as Blender's modifier puts it.
     Rows rows(m.nv);
-    for (int v = 0; v < m.nv; ++v)
-        if (used[v] < 0) rows[v][v] = 1.0;
+    std::vector<std::vector<int>> loose(m.nv);
+    for (int e = 0; e < m.ne; ++e) {
+        loose[m.edges[2 * e]].push_back(m.edges[2 * e + 1]);
+        loose[m.edges[2 * e + 1]].push_back(m.edges[2 * e]);
+    }
+    for (int v = 0; v < m.nv; ++v) {
+        if (used[v] >= 0) continue;
+        rows[v][v] = loose[v].size() == 2 ? 4.0 / 6.0 : 1.0;
+        if (loose[v].size() == 2)
+            for (int w : loose[v]) rows[v][w] += 1.0 / 6.0;
+    }
     for (size_t o = 0; o < back.size(); ++o) {
         auto st = t->GetLimitStencil((Far::Index)o);
         for (int k = 0; k < st.GetSize(); ++k) rows[back[o]][back[st.GetVertexIndices()[k]]] += st.GetWeights()[k];

@@ -109,6 +109,68 @@ int main(void) {
         tmesh_free(&m);
     }
 
+    /* Loop, both boundary rules, every method, staged or not (the formulas
+     * themselves are checked against numpy in tests/python/test_loop.py). */
+    {
+        tmesh shapes[2] = {make_torus(12, 8, 1), make_grid(6, 5)};
+        /* Triangulate the grid. */
+        tmesh tri;
+        memset(&tri, 0, sizeof tri);
+        for (int32_t v = 0; v < shapes[1].nv; ++v)
+            tmesh_vertex(&tri, shapes[1].pos[3 * v], shapes[1].pos[3 * v + 1], shapes[1].pos[3 * v + 2]);
+        for (int32_t f = 0; f < shapes[1].nf; ++f) {
+            const int32_t *q = shapes[1].fv + 4 * f;
+            tmesh_tri(&tri, q[0], q[1], q[2]);
+            tmesh_tri(&tri, q[0], q[2], q[3]);
+        }
+        tmesh_free(&shapes[1]);
+        shapes[1] = tri;
+        for (int sh = 0; sh < 2; ++sh)
+            for (int rule = 0; rule < 2; ++rule)
+                for (int method = SPIA_METHOD_AUTO; method <= SPIA_METHOD_CG; ++method)
+                    for (int staged = 0; staged < 2; ++staged) {
+                        spia_mesh mesh = tmesh_view(&shapes[sh]);
+                        spia_options o = spia_options_default();
+                        o.scheme = SPIA_SCHEME_LOOP;
+                        o.boundary_rule = (spia_boundary_rule)rule;
+                        o.method = (spia_method)method;
+                        o.staged = staged;
+                        float *cage = (float *)malloc(sizeof(float) * 3 * (size_t)shapes[sh].nv);
+                        spia_report rep;
+                        memset(&rep, 0, sizeof rep);
+                        spia_status st;
+                        spia_result r = spia_interpolate(&mesh, &o, cage, &rep, &st);
+                        if (method == SPIA_METHOD_CG && sh == 1) {
+                            /* open: no symmetric form */
+                            CHECK(r == SPIA_ERROR_INVALID_ARGUMENT, "CG on an open Loop mesh: %s", spia_result_name(r));
+                        } else {
+                            CHECK(r == SPIA_OK, "Loop shape %d rule %d method %d staged %d: %s", sh, rule, method,
+                                  staged, st.message);
+                            CHECK(rep.max_error_relative <= 1e-6 + 4e-7, "Loop error %g", rep.max_error_relative);
+                            if (staged && sh == 1)
+                                CHECK(rep.stage_iterations[0] > 0 && rep.stage_iterations[1] > 0 &&
+                                          rep.stage_iterations[0] + rep.stage_iterations[1] == rep.iterations,
+                                      "stages %d + %d != %d", (int)rep.stage_iterations[0],
+                                      (int)rep.stage_iterations[1], (int)rep.iterations);
+                            if (method == SPIA_METHOD_WPIA)
+                                CHECK(rep.weight > 1.0 && rep.weight < 2.0, "WPIA weight %g", rep.weight);
+                        }
+                        free(cage);
+                    }
+        tmesh_free(&shapes[0]);
+        tmesh_free(&shapes[1]);
+        /* Quads refused, with the count. */
+        m = make_grid(3, 3);
+        spia_mesh mesh = tmesh_view(&m);
+        spia_options o = spia_options_default();
+        o.scheme = SPIA_SCHEME_LOOP;
+        spia_status st;
+        spia_stencils *s = NULL;
+        CHECK(spia_limit_stencils_create(&mesh, &o, &s, &st) == SPIA_ERROR_TOPOLOGY, "quads for Loop");
+        CHECK(strstr(st.message, "9 of 9 faces") != NULL, "message: %s", st.message);
+        tmesh_free(&m);
+    }
+
     /* max_iterations: a usable cage and the code that says so. */
     {
         m = make_torus(12, 8, 0);
