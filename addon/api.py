@@ -26,7 +26,8 @@ DEFAULT_SETTINGS = {
 
 SCHEMES = ('CATMULL_CLARK',)
 BOUNDARY_SMOOTH = ('ALL', 'PRESERVE_CORNERS')
-METHODS = ('AUTO', 'PIA', 'GS_PIA')
+# CG applies to closed Loop meshes only, not to Catmull-Clark.
+METHODS = tuple(m for m in native.METHODS if m != 'CG')
 
 # Settings that a source Subdivision Surface modifier provides.
 MODIFIER_SETTINGS = ("levels", "render_levels", "quality", "boundary_smooth", "use_creases")

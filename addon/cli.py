@@ -25,6 +25,10 @@ def _import_package():
     return importlib.import_module(package)
 
 
+def pkg_methods():
+    return _import_package().api.METHODS
+
+
 def parse_args(argv):
     parser = argparse.ArgumentParser(
         prog="blender -b --python cli.py --",
@@ -40,7 +44,7 @@ def parse_args(argv):
     parser.add_argument("--quality", type=int, help="modifier quality 1..10 (default 3)")
     parser.add_argument("--boundary-smooth", choices=("ALL", "PRESERVE_CORNERS"))
     parser.add_argument("--no-creases", action="store_true", help="ignore edge and vertex creases")
-    parser.add_argument("--method", choices=("AUTO", "PIA", "GS_PIA"))
+    parser.add_argument("--method", choices=pkg_methods())
     parser.add_argument("--tolerance", type=float,
                         help="max error relative to the bounding-box diagonal (default 1e-6)")
     parser.add_argument("--max-iterations", type=int, help="iteration limit (default 1000)")

@@ -15,9 +15,11 @@ BOUNDARY_SMOOTH_ITEMS = (
     ('PRESERVE_CORNERS', "Keep Corners", "Smooth boundaries, but corners are kept sharp (as the modifier)"),
 )
 METHOD_ITEMS = (
-    ('AUTO', "Automatic", "Let the library choose the fastest solver"),
+    ('AUTO', "Automatic", "The fastest solver the library has for this mesh (Chebyshev-accelerated PIA)"),
     ('PIA', "PIA", "Plain progressive iterative approximation (Jacobi-like)"),
     ('GS_PIA', "Gauss-Seidel PIA", "Progressive iterative approximation with Gauss-Seidel updates"),
+    ('CHEBYSHEV', "Chebyshev PIA", "PIA accelerated with Chebyshev polynomials over the estimated spectrum"),
+    ('WPIA', "Weighted PIA", "PIA with the best constant weight, estimated from the spectrum"),
 )
 
 
