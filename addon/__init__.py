@@ -7,6 +7,9 @@ Script use (background or foreground)::
 
     import subdiv_pia
     new_obj, report = subdiv_pia.interpolate(obj, levels=2, quality=3)
+    cage, report = subdiv_pia.interpolate(tri_obj, scheme='LOOP', boundary_rule='HOPPE')
+    limit = subdiv_pia.find_limit_object(cage)   # child "<cage>_limit": the Loop limit surface
+    subdiv_pia.refresh_limit(cage)               # after editing the cage
 
 The numeric core (``native``) imports no ``bpy``; everything else is loaded
 only inside Blender so that ``subdiv_pia.native`` stays importable outside it.
@@ -29,7 +32,8 @@ except ImportError:  # outside Blender: only `native` is usable
 
 if bpy is not None:
     from . import properties, operators, ui
-    from .api import interpolate, settings_from_modifier, DEFAULT_SETTINGS  # noqa: F401
+    from .api import (interpolate, refresh_limit, find_limit_object,  # noqa: F401
+                      settings_from_modifier, DEFAULT_SETTINGS)
 
     _modules = (properties, operators, ui)
 

@@ -4,8 +4,14 @@
 Data makes one trip: Blender mesh -> flat numpy arrays (foreach_get) ->
 native.interpolate -> cage positions -> foreach_set on a copy of the mesh ->
 new object with a Subdivision Surface modifier (use_limit_surface=True).
+
+Blender has no Loop subdivision modifier: for scheme 'LOOP' the new object
+is the cage without a modifier, and a child object ``<cage>_limit`` holds
+the library's Loop limit surface of the cage (native.refine_limit), which
+refresh_limit recomputes after the cage was edited.
 """
 
+import bmesh
 import numpy as np
 import bpy
 
@@ -14,6 +20,8 @@ from . import native
 # Names follow the Subdivision Surface modifier where one exists.
 DEFAULT_SETTINGS = {
     "scheme": 'CATMULL_CLARK',
+    "boundary_rule": 'SMOOTH',
+    "triangulate": False,
     "levels": 2,
     "render_levels": 2,
     "quality": 3,
@@ -24,10 +32,19 @@ DEFAULT_SETTINGS = {
     "max_iterations": 1000,
 }
 
-SCHEMES = ('CATMULL_CLARK',)
+SCHEMES = ('CATMULL_CLARK', 'LOOP')
 BOUNDARY_SMOOTH = ('ALL', 'PRESERVE_CORNERS')
-# CG applies to closed Loop meshes only, not to Catmull-Clark.
-METHODS = tuple(m for m in native.METHODS if m != 'CG')
+BOUNDARY_RULES = ('SMOOTH', 'HOPPE')
+METHODS = tuple(native.METHODS)
+# Conjugate gradients need a symmetrizable limit matrix: closed Loop meshes only.
+LOOP_ONLY_METHODS = ('CG',)
+
+# Custom properties of a Loop cage: what refresh_limit needs to remake its
+# limit surface, and what a re-run needs to repeat it.
+LIMIT_SUFFIX = "_limit"
+LIMIT_MARK = "pia_limit_surface"   # on the child that holds the limit surface
+STORED_SETTINGS = ("scheme", "boundary_rule", "boundary_smooth", "use_creases", "triangulate",
+                   "levels", "render_levels", "quality", "method", "tolerance", "max_iterations")
 
 # Settings that a source Subdivision Surface modifier provides.
 MODIFIER_SETTINGS = ("levels", "render_levels", "quality", "boundary_smooth", "use_creases")
@@ -71,8 +88,16 @@ def check_settings(settings):
     if s["boundary_smooth"] not in BOUNDARY_SMOOTH:
         raise ValueError("boundary_smooth must be one of %s, not %r"
                          % (BOUNDARY_SMOOTH, s["boundary_smooth"]))
+    if s["boundary_rule"] not in BOUNDARY_RULES:
+        raise ValueError("boundary_rule must be one of %s, not %r"
+                         % (BOUNDARY_RULES, s["boundary_rule"]))
     if s["method"] not in METHODS:
         raise ValueError("method must be one of %s, not %r" % (METHODS, s["method"]))
+    if s["method"] in LOOP_ONLY_METHODS and s["scheme"] != 'LOOP':
+        raise ValueError("Method %s (conjugate gradients) works only for the Loop scheme on closed "
+                         "meshes; use Automatic or another method for %s"
+                         % (s["method"], s["scheme"].replace("_", "-").title()))
+    s["triangulate"] = bool(s["triangulate"])
     s["levels"] = int(s["levels"])
     s["render_levels"] = int(s["render_levels"])
     s["quality"] = int(s["quality"])
@@ -199,20 +224,72 @@ def check_source(obj):
         raise ValueError("Mesh '%s' has no faces: subdivision needs faces" % mesh.name)
 
 
-def compute_cage(obj, settings, progress=None):
-    """Run the solver on obj's mesh data (not its modifiers). Returns (cage, report)."""
-    if not native.available():
-        raise RuntimeError("Subdivision PIA library not loaded: %s" % native.load_error())
-    arrays = mesh_arrays(obj.data)
-    mesh = native.Mesh(arrays["positions"], arrays["face_sizes"], arrays["face_vertices"],
+def native_mesh(mesh):
+    """native.Mesh of a Blender mesh's data (positions, faces, edges, creases)."""
+    arrays = mesh_arrays(mesh)
+    return native.Mesh(arrays["positions"], arrays["face_sizes"], arrays["face_vertices"],
                        edges=arrays["edges"],
                        edge_creases=arrays["edge_creases"],
                        vertex_creases=arrays["vertex_creases"])
-    return native.interpolate(
-        mesh, scheme=settings["scheme"], boundary_smooth=settings["boundary_smooth"],
-        use_creases=settings["use_creases"], quality=settings["quality"],
-        method=settings["method"], tolerance=settings["tolerance"],
-        max_iterations=settings["max_iterations"], progress=progress)
+
+
+def _require_library(refine=False):
+    if not native.available():
+        raise RuntimeError("Subdivision PIA library not loaded: %s" % native.load_error())
+    if refine and not hasattr(native, "refine_limit"):
+        raise RuntimeError("This build of the Subdivision PIA library cannot evaluate Loop limit "
+                           "surfaces (no refine_limit): rebuild or update the add-on")
+
+
+def non_triangle_count(mesh):
+    sizes = np.empty(len(mesh.polygons), np.int32)
+    mesh.polygons.foreach_get("loop_total", sizes)
+    return int(np.count_nonzero(sizes != 3))
+
+
+def triangulated_copy(mesh, name=None):
+    """A new mesh: a copy of mesh with every quad and n-gon split into triangles.
+
+    bmesh.ops.triangulate with the 'BEAUTY' method for quads and n-gons; it
+    adds no vertices, so vertex i of the copy is vertex i of mesh. Edge and
+    vertex creases, UVs and materials are kept (new diagonals are uncreased).
+    """
+    copy = mesh.copy()
+    if name:
+        copy.name = name
+    bm = bmesh.new()
+    try:
+        bm.from_mesh(copy)
+        faces = [f for f in bm.faces if len(f.verts) != 3]
+        if faces:
+            bmesh.ops.triangulate(bm, faces=faces, quad_method='BEAUTY', ngon_method='BEAUTY')
+        bm.to_mesh(copy)
+    finally:
+        bm.free()
+    copy.update()
+    return copy
+
+
+def compute_cage(obj, settings, progress=None, mesh=None):
+    """Run the solver on obj's mesh data (not its modifiers), or on mesh if given.
+
+    Returns (cage, report)."""
+    _require_library(refine=settings["scheme"] == 'LOOP')
+    data = mesh if mesh is not None else obj.data
+    try:
+        return native.interpolate(
+            native_mesh(data), scheme=settings["scheme"], boundary_rule=settings["boundary_rule"],
+            boundary_smooth=settings["boundary_smooth"],
+            use_creases=settings["use_creases"], quality=settings["quality"],
+            method=settings["method"], tolerance=settings["tolerance"],
+            max_iterations=settings["max_iterations"], progress=progress)
+    except native.PiaError as error:
+        if (settings["scheme"] == 'LOOP' and not settings["triangulate"]
+                and error.code == 'TOPOLOGY' and non_triangle_count(data)):
+            raise type(error)(error.code, "%s (Loop subdivision needs triangles: turn on "
+                                          "Triangulate to use a triangulated copy)" % error.message,
+                              error.index) from None
+        raise
 
 
 def _link_like(source, new_obj, context):
@@ -232,11 +309,121 @@ def _link_like(source, new_obj, context):
             new_obj.material_slots[i].material = slot.material
 
 
-def build_object(source, cage, report, settings, context=None, name=None):
-    """New object: copy of source's mesh with cage positions and a limit-surface subsurf."""
+def limit_arrays(mesh, settings, positions=None):
+    """(positions (M,3) float32, triangles (K,3) int32): the library's Loop limit
+    surface of the cage mesh, refined settings["levels"] times.
+
+    positions replaces the mesh's vertex positions (the solved cage) if given.
+    """
+    _require_library(refine=True)
+    arrays = mesh_arrays(mesh)
+    if positions is not None:
+        arrays["positions"] = np.ascontiguousarray(positions, np.float32).reshape(-1, 3)
+    cage = native.Mesh(arrays["positions"], arrays["face_sizes"], arrays["face_vertices"],
+                       edges=arrays["edges"], edge_creases=arrays["edge_creases"],
+                       vertex_creases=arrays["vertex_creases"])
+    return native.refine_limit(cage, int(settings["levels"]), scheme='LOOP',
+                               boundary_rule=settings["boundary_rule"],
+                               boundary_smooth=settings["boundary_smooth"],
+                               use_creases=bool(settings["use_creases"]))
+
+
+def limit_mesh(name, points, triangles, materials=()):
+    """A new smooth-shaded triangle mesh from limit_arrays' output."""
+    points = np.ascontiguousarray(points, np.float32).reshape(-1, 3)
+    triangles = np.ascontiguousarray(triangles, np.int32).reshape(-1, 3)
+    mesh = bpy.data.meshes.new(name)
+    mesh.vertices.add(len(points))
+    mesh.vertices.foreach_set("co", points.ravel())
+    count = len(triangles)
+    mesh.loops.add(3 * count)
+    mesh.loops.foreach_set("vertex_index", triangles.ravel())
+    mesh.polygons.add(count)
+    mesh.polygons.foreach_set("loop_start", np.arange(0, 3 * count, 3, dtype=np.int32))
+    try:  # read-only (derived from loop_start) in Blender 4
+        mesh.polygons.foreach_set("loop_total", np.full(count, 3, np.int32))
+    except (AttributeError, TypeError, RuntimeError):
+        pass
+    mesh.update(calc_edges=True)
+    if hasattr(mesh, "shade_smooth"):  # Blender 4.1+
+        mesh.shade_smooth()
+    else:
+        mesh.polygons.foreach_set("use_smooth", np.ones(count, bool))
+    for material in materials:
+        mesh.materials.append(material)
+    mesh.update()
+    return mesh
+
+
+def find_limit_object(cage):
+    """The child of cage that holds its limit surface, or None."""
+    if cage is None:
+        return None
+    for child in cage.children:
+        if child.get(LIMIT_MARK):
+            return child
+    return None
+
+
+def loop_cage_of(obj):
+    """The Loop cage for obj: obj itself, or the cage whose limit surface obj is."""
+    if obj is None:
+        return None
+    if obj.get("pia_scheme") == 'LOOP':
+        return obj
+    if obj.get(LIMIT_MARK) and obj.parent is not None and obj.parent.get("pia_scheme") == 'LOOP':
+        return obj.parent
+    return None
+
+
+def stored_settings(cage):
+    """The settings stored on a cage by build_object (defaults for missing ones)."""
+    s = dict(DEFAULT_SETTINGS)
+    for name in STORED_SETTINGS:
+        key = "pia_" + name
+        if key in cage:
+            value = cage[key]
+            s[name] = bool(value) if isinstance(DEFAULT_SETTINGS[name], bool) else value
+    if "pia_requested_method" in cage:  # pia_method is the method AUTO chose
+        s["method"] = cage["pia_requested_method"]
+    return s
+
+
+def set_limit_object(cage, points, triangles, context=None):
+    """Put the limit surface (points, triangles) on cage's `_limit` child,
+    creating the child if there is none. Returns the child."""
+    context = context or bpy.context
+    child = find_limit_object(cage)
+    name = cage.name + LIMIT_SUFFIX
+    mesh = limit_mesh(name, points, triangles, [m for m in cage.data.materials if m is not None])
+    if child is None:
+        child = bpy.data.objects.new(name, mesh)
+        for collection in list(cage.users_collection) or [context.scene.collection]:
+            collection.objects.link(child)
+        child.parent = cage
+        child[LIMIT_MARK] = True
+    else:
+        old = child.data
+        child.data = mesh
+        if old is not None and old.users == 0:
+            bpy.data.meshes.remove(old)
+        mesh.name = name
+    # Sits exactly on the cage: identity local transform, no parent inverse.
+    child.matrix_parent_inverse.identity()
+    child.matrix_basis.identity()
+    return child
+
+
+def build_object(source, cage, report, settings, context=None, name=None, mesh=None, limit=None):
+    """New object with the cage positions on a copy of source's mesh (or on mesh).
+
+    Catmull-Clark: with a limit-surface Subdivision Surface modifier.
+    Loop: no modifier; limit = (points, triangles) goes to a `_limit` child.
+    """
     context = context or bpy.context
     name = name or source.name + "_pia"
-    mesh = source.data.copy()
+    if mesh is None:
+        mesh = source.data.copy()
     mesh.name = name
     flat = np.ascontiguousarray(cage, dtype=np.float32).reshape(-1)
     mesh.vertices.foreach_set("co", flat)
@@ -248,18 +435,19 @@ def build_object(source, cage, report, settings, context=None, name=None):
     new_obj = bpy.data.objects.new(name, mesh)
     _link_like(source, new_obj, context)
 
-    mod = new_obj.modifiers.new("Subdivision", 'SUBSURF')
-    mod.subdivision_type = 'CATMULL_CLARK'
-    mod.use_limit_surface = True
-    mod.levels = settings["levels"]
-    mod.render_levels = settings["render_levels"]
-    mod.quality = settings["quality"]
-    mod.boundary_smooth = settings["boundary_smooth"]
-    mod.use_creases = settings["use_creases"]
-    src_mod = find_subsurf(source)
-    if src_mod is not None:
-        mod.uv_smooth = src_mod.uv_smooth
-        mod.show_only_control_edges = src_mod.show_only_control_edges
+    if settings["scheme"] == 'CATMULL_CLARK':
+        mod = new_obj.modifiers.new("Subdivision", 'SUBSURF')
+        mod.subdivision_type = 'CATMULL_CLARK'
+        mod.use_limit_surface = True
+        mod.levels = settings["levels"]
+        mod.render_levels = settings["render_levels"]
+        mod.quality = settings["quality"]
+        mod.boundary_smooth = settings["boundary_smooth"]
+        mod.use_creases = settings["use_creases"]
+        src_mod = find_subsurf(source)
+        if src_mod is not None:
+            mod.uv_smooth = src_mod.uv_smooth
+            mod.show_only_control_edges = src_mod.show_only_control_edges
 
     new_obj["pia_iterations"] = int(report.iterations)
     new_obj["pia_max_error"] = float(report.max_error_relative)
@@ -267,6 +455,14 @@ def build_object(source, cage, report, settings, context=None, name=None):
     new_obj["pia_status"] = str(report.status)
     new_obj["pia_method"] = str(report.method)
     new_obj["pia_tolerance"] = float(settings["tolerance"])
+    for key in STORED_SETTINGS:
+        if key not in ("method", "tolerance"):  # pia_method is the method used
+            value = settings[key]
+            new_obj["pia_" + key] = value if isinstance(value, (bool, int, float, str)) else str(value)
+    new_obj["pia_requested_method"] = str(settings["method"])
+
+    if limit is not None:
+        set_limit_object(new_obj, limit[0], limit[1], context=context)
 
     view_layer = context.view_layer
     if view_layer is not None:
@@ -284,10 +480,16 @@ def interpolate(obj, *, context=None, name=None, progress=None, **settings):
     """Make an interpolating cage object for the mesh object obj.
 
     Settings (keywords, defaults in DEFAULT_SETTINGS; names as the modifier's):
-    scheme, levels, render_levels, quality, boundary_smooth, use_creases,
-    method, tolerance (relative to the bounding-box diagonal), max_iterations.
-    Settings not given are taken from obj's Subdivision Surface modifier if it
-    has one, else the defaults.
+    scheme ('CATMULL_CLARK' or 'LOOP'), levels, render_levels, quality,
+    boundary_smooth, use_creases, method, tolerance (relative to the
+    bounding-box diagonal), max_iterations; for Loop also boundary_rule
+    ('SMOOTH' or 'HOPPE') and triangulate (use a triangulated copy of a mesh
+    that has quads or n-gons). Settings not given are taken from obj's
+    Subdivision Surface modifier if it has one, else the defaults.
+
+    Loop: the cage has no modifier; its child ``<cage>_limit`` (find it
+    with find_limit_object) holds the Loop limit surface refined `levels`
+    times, whose first vertices are the limit points of the cage vertices.
 
     progress(iteration, relative_error) -> bool: return True to cancel.
 
@@ -303,9 +505,43 @@ def interpolate(obj, *, context=None, name=None, progress=None, **settings):
     merged = settings_from_modifier(obj)
     merged.update(settings)
     s = check_settings(merged)
-    cage, report = compute_cage(obj, s, progress=progress)
-    new_obj = build_object(obj, cage, report, s, context=context, name=name)
+    loop = s["scheme"] == 'LOOP'
+    mesh = None
+    if loop and s["triangulate"] and non_triangle_count(obj.data):
+        mesh = triangulated_copy(obj.data)
+    try:
+        cage, report = compute_cage(obj, s, progress=progress, mesh=mesh)
+        limit = limit_arrays(mesh if mesh is not None else obj.data, s, cage) if loop else None
+    except BaseException:
+        if mesh is not None:
+            bpy.data.meshes.remove(mesh)
+        raise
+    new_obj = build_object(obj, cage, report, s, context=context, name=name, mesh=mesh, limit=limit)
     return new_obj, report
+
+
+def refresh_limit(obj, context=None):
+    """Recompute the limit surface of a Loop cage from its current mesh.
+
+    obj is the cage (pia_scheme 'LOOP') or its `_limit` child. The child's
+    mesh is replaced (the child is made again if it was deleted); the
+    settings are those stored on the cage. Returns the child. Raises
+    ValueError if obj is not a Loop cage, native.PiaError if the library
+    refuses the edited cage (nothing is changed then).
+    """
+    if obj is None:
+        raise ValueError("No active object: select a Loop cage or its limit surface")
+    cage = loop_cage_of(obj)
+    if cage is None:
+        raise ValueError("'%s' is not a Loop cage: make one with Interpolating Subdivision Cage "
+                         "(scheme Loop), or select its limit surface" % obj.name)
+    if cage.type != 'MESH':
+        raise ValueError("'%s' is not a mesh object (type %s)" % (cage.name, cage.type))
+    if cage.mode == 'EDIT':
+        cage.update_from_editmode()
+    check_source(cage)
+    points, triangles = limit_arrays(cage.data, stored_settings(cage))
+    return set_limit_object(cage, points, triangles, context=context)
 
 
 def format_report(report):

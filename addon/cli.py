@@ -32,14 +32,25 @@ def pkg_methods():
 def parse_args(argv):
     parser = argparse.ArgumentParser(
         prog="blender -b --python cli.py --",
-        description="Make a control cage whose Catmull-Clark limit surface (Blender's "
-                    "Subdivision Surface modifier with Use Limit Surface) passes through "
-                    "the vertices of INPUT; save it with a Subdivision Surface modifier.")
+        description="Make a control cage whose subdivision limit surface passes through the "
+                    "vertices of INPUT. Catmull-Clark (default): the limit surface of Blender's "
+                    "Subdivision Surface modifier with Use Limit Surface; the cage is saved with "
+                    "that modifier. Loop: the cage is saved without a modifier, with its limit "
+                    "surface (refined --levels times) as a child object <cage>_limit.")
     parser.add_argument("input", help="input mesh: .obj, .ply, .stl or .blend")
     parser.add_argument("output", help="output .blend file")
     parser.add_argument("--object", help="object name to use from a .blend input "
                                          "(default: the active mesh object, else the first)")
-    parser.add_argument("--levels", type=int, help="viewport levels of the modifier (default 2)")
+    parser.add_argument("--scheme", choices=("CATMULL_CLARK", "LOOP"),
+                        help="subdivision scheme (default CATMULL_CLARK; LOOP needs triangles)")
+    parser.add_argument("--boundary-rule", choices=("SMOOTH", "HOPPE"),
+                        help="Loop boundary rules: OpenSubdiv's (SMOOTH, default) or Hoppe et al. "
+                             "1994 (HOPPE, manifold meshes only, ignores --boundary-smooth)")
+    parser.add_argument("--triangulate", action="store_true",
+                        help="Loop: split quads and n-gons into triangles (Beauty method) "
+                             "instead of refusing the mesh")
+    parser.add_argument("--levels", type=int, help="viewport levels of the modifier, or the Loop "
+                                                   "limit surface's levels (default 2)")
     parser.add_argument("--render-levels", type=int, help="render levels (default: --levels)")
     parser.add_argument("--quality", type=int, help="modifier quality 1..10 (default 3)")
     parser.add_argument("--boundary-smooth", choices=("ALL", "PRESERVE_CORNERS"))
@@ -120,12 +131,15 @@ def main(argv):
         settings["render_levels"] = args.levels
     if args.render_levels is not None:
         settings["render_levels"] = args.render_levels
-    for name in ("quality", "boundary_smooth", "method", "tolerance", "max_iterations"):
+    for name in ("scheme", "boundary_rule", "quality", "boundary_smooth", "method", "tolerance",
+                 "max_iterations"):
         value = getattr(args, name)
         if value is not None:
             settings[name] = value
     if args.no_creases:
         settings["use_creases"] = False
+    if args.triangulate:
+        settings["triangulate"] = True
 
     progress = None
     if sys.stdout.isatty():
@@ -139,6 +153,10 @@ def main(argv):
         sys.stdout.write("\n")
     print("subdiv_pia: %s: %s" % (new_obj.name, package.api.format_report(report)))
     print("subdiv_pia: stencils %.3f s, solve %.3f s" % (report.stencil_seconds, report.solve_seconds))
+    limit = package.api.find_limit_object(new_obj)
+    if limit is not None:
+        print("subdiv_pia: limit surface %s: %d vertices, %d triangles"
+              % (limit.name, len(limit.data.vertices), len(limit.data.polygons)))
     output = os.path.abspath(args.output)
     os.makedirs(os.path.dirname(output) or ".", exist_ok=True)
     bpy.ops.wm.save_as_mainfile(filepath=output, check_existing=False)

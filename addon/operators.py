@@ -27,6 +27,35 @@ class _Progress:
             self.wm = None
 
 
+def draw_settings(layout, settings, from_modifier=False):
+    """The subdivision settings, shared by the redo panel and the Modifiers-tab panel.
+
+    Settings that do not apply are greyed out: boundary rule and triangulate
+    for Catmull-Clark; render levels and quality for Loop (no modifier);
+    Boundary Smooth for Loop with Hoppe's rules.
+    """
+    loop = settings.scheme == 'LOOP'
+    layout.prop(settings, "scheme")
+    col = layout.column()
+    col.enabled = loop
+    col.prop(settings, "boundary_rule")
+    col.prop(settings, "triangulate")
+    col = layout.column()
+    col.enabled = not from_modifier
+    sub = col.column(align=True)
+    sub.prop(settings, "levels")
+    row = sub.row()
+    row.enabled = not loop
+    row.prop(settings, "render_levels")
+    row = col.row()
+    row.enabled = not loop
+    row.prop(settings, "quality")
+    row = col.row()
+    row.enabled = not (loop and settings.boundary_rule == 'HOPPE')
+    row.prop(settings, "boundary_smooth")
+    col.prop(settings, "use_creases")
+
+
 class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
     """Make a new object whose subdivision limit surface passes through this mesh's vertices"""
     bl_idname = "object.subdiv_pia_interpolate"
@@ -55,13 +84,7 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
         layout = self.layout
         layout.use_property_split = True
         layout.use_property_decorate = False
-        layout.prop(self, "scheme")
-        col = layout.column(align=True)
-        col.prop(self, "levels")
-        col.prop(self, "render_levels")
-        layout.prop(self, "quality")
-        layout.prop(self, "boundary_smooth")
-        layout.prop(self, "use_creases")
+        draw_settings(layout, self)
         layout.separator()
         layout.prop(self, "method")
         layout.prop(self, "tolerance")
@@ -91,11 +114,40 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
         return {'FINISHED'}
 
 
+class OBJECT_OT_subdiv_pia_refresh_limit(bpy.types.Operator):
+    """Recompute the Loop limit surface (the cage's "_limit" child) from the cage's current shape"""
+    bl_idname = "object.subdiv_pia_refresh_limit"
+    bl_label = "Refresh Limit Surface"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    @classmethod
+    def poll(cls, context):
+        # Keep the operator callable so that bad input gets a clear message.
+        return True
+
+    def execute(self, context):
+        obj = context.active_object
+        try:
+            cage = api.loop_cage_of(obj)
+            if cage is not None and cage.mode == 'EDIT':
+                cage.update_from_editmode()
+            child = api.refresh_limit(obj, context=context)
+        except native.PiaError as error:
+            self.report({'ERROR'}, "'%s': %s" % (api.loop_cage_of(obj).name, error))
+            return {'CANCELLED'}
+        except (ValueError, RuntimeError) as error:
+            self.report({'ERROR'}, str(error))
+            return {'CANCELLED'}
+        self.report({'INFO'}, "%s: %d vertices, %d triangles"
+                    % (child.name, len(child.data.vertices), len(child.data.polygons)))
+        return {'FINISHED'}
+
+
 def menu_func(self, context):
     self.layout.operator(OBJECT_OT_subdiv_pia_interpolate.bl_idname, icon='MOD_SUBSURF')
 
 
-classes = (OBJECT_OT_subdiv_pia_interpolate,)
+classes = (OBJECT_OT_subdiv_pia_interpolate, OBJECT_OT_subdiv_pia_refresh_limit)
 _register, _unregister = bpy.utils.register_classes_factory(classes)
 
 

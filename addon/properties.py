@@ -9,17 +9,29 @@ from .api import DEFAULT_SETTINGS
 SCHEME_ITEMS = (
     ('CATMULL_CLARK', "Catmull-Clark",
      "Catmull-Clark limit surface as the Subdivision Surface modifier evaluates it"),
+    ('LOOP', "Loop",
+     "Loop subdivision of triangle meshes, as OpenSubdiv and USD define it (the library's limit "
+     "surface, shown by a child object: Blender's modifier has no Loop scheme)"),
+)
+BOUNDARY_RULE_ITEMS = (
+    ('SMOOTH', "Smooth",
+     "OpenSubdiv's and USD's boundary rules; corners follow Boundary Smooth"),
+    ('HOPPE', "Hoppe",
+     "Boundary rules of Hoppe et al. 1994 (piecewise smooth surface reconstruction), as in the "
+     "open-mesh paper; ignores Boundary Smooth; needs a manifold mesh"),
 )
 BOUNDARY_SMOOTH_ITEMS = (
     ('ALL', "All", "Smooth boundaries, including corners (as the modifier)"),
     ('PRESERVE_CORNERS', "Keep Corners", "Smooth boundaries, but corners are kept sharp (as the modifier)"),
 )
 METHOD_ITEMS = (
-    ('AUTO', "Automatic", "The fastest solver the library has for this mesh (Chebyshev-accelerated PIA)"),
+    ('AUTO', "Automatic", "The fastest solver the library has for this mesh (conjugate gradients for "
+                        "closed Loop meshes, else Chebyshev-accelerated PIA)"),
     ('PIA', "PIA", "Plain progressive iterative approximation (Jacobi-like)"),
     ('GS_PIA', "Gauss-Seidel PIA", "Progressive iterative approximation with Gauss-Seidel updates"),
     ('CHEBYSHEV', "Chebyshev PIA", "PIA accelerated with Chebyshev polynomials over the estimated spectrum"),
     ('WPIA', "Weighted PIA", "PIA with the best constant weight, estimated from the spectrum"),
+    ('CG', "Conjugate Gradients", "Conjugate gradients: Loop scheme on closed meshes only"),
 )
 
 
@@ -29,8 +41,16 @@ def settings_annotations():
     return {
         "scheme": EnumProperty(name="Scheme", items=SCHEME_ITEMS, default=d["scheme"],
                                description="Subdivision scheme whose limit surface must interpolate"),
+        "boundary_rule": EnumProperty(name="Boundary Rule", items=BOUNDARY_RULE_ITEMS,
+                                      default=d["boundary_rule"],
+                                      description="Loop boundary rules (Loop scheme only)"),
+        "triangulate": BoolProperty(name="Triangulate", default=d["triangulate"],
+                                    description="Loop scheme: make the cage from a copy of the mesh "
+                                                "with quads and n-gons split into triangles (Beauty "
+                                                "method); off: such meshes are refused"),
         "levels": IntProperty(name="Levels Viewport", default=d["levels"], min=0, max=11, soft_max=6,
-                              description="Viewport levels of the new Subdivision Surface modifier"),
+                              description="Viewport levels of the new Subdivision Surface modifier "
+                                          "(Loop: subdivision levels of the limit surface object)"),
         "render_levels": IntProperty(name="Render", default=d["render_levels"], min=0, max=11, soft_max=6,
                                      description="Render levels of the new Subdivision Surface modifier"),
         "quality": IntProperty(name="Quality", default=d["quality"], min=1, max=10,

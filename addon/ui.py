@@ -4,7 +4,8 @@
 import bpy
 
 from . import api, native
-from .operators import OBJECT_OT_subdiv_pia_interpolate, menu_func
+from .operators import (OBJECT_OT_subdiv_pia_interpolate, OBJECT_OT_subdiv_pia_refresh_limit,
+                        draw_settings, menu_func)
 from .properties import SETTING_NAMES
 
 RESULT_KEYS = ("pia_status", "pia_method", "pia_iterations", "pia_max_error", "pia_mean_error")
@@ -38,15 +39,7 @@ class DATA_PT_subdiv_pia(bpy.types.Panel):
 
         from_modifier = settings.use_modifier_settings and api.find_subsurf(obj) is not None
         layout.prop(settings, "use_modifier_settings")
-        layout.prop(settings, "scheme")
-        col = layout.column()
-        col.enabled = not from_modifier
-        sub = col.column(align=True)
-        sub.prop(settings, "levels")
-        sub.prop(settings, "render_levels")
-        col.prop(settings, "quality")
-        col.prop(settings, "boundary_smooth")
-        col.prop(settings, "use_creases")
+        draw_settings(layout, settings, from_modifier=from_modifier)
         layout.prop(settings, "method")
         layout.prop(settings, "tolerance")
         layout.prop(settings, "max_iterations")
@@ -56,6 +49,9 @@ class DATA_PT_subdiv_pia(bpy.types.Panel):
         for name in SETTING_NAMES:
             if name not in modifier_names:
                 setattr(op, name, getattr(settings, name))
+
+        if api.loop_cage_of(obj) is not None:
+            layout.operator(OBJECT_OT_subdiv_pia_refresh_limit.bl_idname, icon='FILE_REFRESH')
 
         if "pia_status" in obj:
             box = layout.box()
