@@ -23,7 +23,7 @@ import numpy as np
 
 __all__ = [
     "Mesh", "Report", "Stencils", "PiaError", "PiaCancelled",
-    "available", "load_error", "version", "validate", "limit_stencils", "solve", "interpolate",
+    "available", "load_error", "version", "validate", "limit_stencils", "solve", "interpolate", "refine_limit",
     "SCHEMES", "BOUNDARY_SMOOTH", "BOUNDARY_RULES", "METHODS",
 ]
 
@@ -135,6 +135,10 @@ def _declare(lib):
     fn("spia_stencils_copy_csr", ctypes.c_int, P, _i64p, _i32p, _f64p)
     fn("spia_solve", ctypes.c_int, P, _f32p, ctypes.POINTER(_Options), _f32p, ctypes.POINTER(_Report),
        ctypes.POINTER(_Status))
+    fn("spia_refine_limit_size", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(_Options), ctypes.c_int32,
+       _i32p, _i32p, ctypes.POINTER(_Status))
+    fn("spia_refine_limit", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(_Options), ctypes.c_int32,
+       _f32p, _i32p, ctypes.POINTER(_Status))
     fn("spia_interpolate", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(_Options), _f32p,
        ctypes.POINTER(_Report), ctypes.POINTER(_Status))
 
@@ -467,3 +471,26 @@ def interpolate(mesh, scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases
     if code < 0:
         _raise(code, status)
     return cage, _report(code, rep, history, unreachable, status)
+
+
+def refine_limit(mesh, levels, scheme="LOOP", boundary_rule="SMOOTH", boundary_smooth="ALL", use_creases=True):
+    """The Loop surface of ``mesh`` (a cage) refined ``levels`` times, every
+    vertex at its limit position: ``(positions (M, 3) float32, faces (K, 3)
+    int32)``.  Rows 0..N-1 are the limit points of the N control vertices."""
+    lib = _library()
+    opts, _keep = _options(scheme=scheme, boundary_smooth=boundary_smooth, use_creases=use_creases,
+                           boundary_rule=boundary_rule)
+    cm = mesh._c()
+    status = _Status()
+    nv, nf = ctypes.c_int32(), ctypes.c_int32()
+    code = lib.spia_refine_limit_size(ctypes.byref(cm), ctypes.byref(opts), int(levels), ctypes.byref(nv),
+                                      ctypes.byref(nf), ctypes.byref(status))
+    if code != 0:
+        _raise(code, status)
+    positions = np.empty((nv.value, 3), np.float32)
+    faces = np.empty((nf.value, 3), np.int32)
+    code = lib.spia_refine_limit(ctypes.byref(cm), ctypes.byref(opts), int(levels), _ptr(positions, ctypes.c_float),
+                                 _ptr(faces, ctypes.c_int32), ctypes.byref(status))
+    if code != 0:
+        _raise(code, status)
+    return positions, faces

@@ -338,6 +338,27 @@ SPIA_API spia_result spia_solve(const spia_stencils *stencils, const float *targ
 SPIA_API spia_result spia_interpolate(const spia_mesh *mesh, const spia_options *options, float *cage,
                                       spia_report *report, spia_status *status);
 
+/* ------------------------------------------------------------------------ */
+/* Refinement (previews of surfaces Blender cannot show)                     */
+/* ------------------------------------------------------------------------ */
+
+/*
+ * The Loop surface of `mesh` (a cage) refined `levels` times (0 to 8) with
+ * every vertex moved to its limit position, as triangles.  Loop only
+ * (options->scheme, boundary_rule, boundary_smooth and ignore_creases are
+ * used): Blender's modifier shows Catmull-Clark itself.
+ *
+ * spia_refine_limit_size writes the vertex and triangle counts;
+ * spia_refine_limit then fills caller buffers of vertex_count * 3 floats and
+ * face_count * 3 ints.  Vertices 0 .. mesh->vertex_count - 1 are the limit
+ * points of the control vertices (vertices no face uses stay where they
+ * are); the others follow.
+ */
+SPIA_API spia_result spia_refine_limit_size(const spia_mesh *mesh, const spia_options *options, int32_t levels,
+                                            int32_t *vertex_count, int32_t *face_count, spia_status *status);
+SPIA_API spia_result spia_refine_limit(const spia_mesh *mesh, const spia_options *options, int32_t levels,
+                                       float *positions, int32_t *face_vertices, spia_status *status);
+
 #ifdef __cplusplus
 }
 #endif

@@ -25,6 +25,7 @@
 #include <opensubdiv/bfr/refinerSurfaceFactory.h>
 #include <opensubdiv/bfr/surface.h>
 #include <opensubdiv/far/patchTableFactory.h>
+#include <opensubdiv/far/primvarRefiner.h>
 #include <opensubdiv/far/ptexIndices.h>
 #include <opensubdiv/far/stencilTable.h>
 #include <opensubdiv/far/stencilTableFactory.h>
@@ -80,8 +81,22 @@ Far::TopologyRefiner *create_refiner(int32_t vertex_count, int32_t face_count, c
     return RefinerFactory::Create(desc, RefinerFactory::Options(scheme, sdc));
 }
 
-spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, spia_stencils **out,
-                  spia_status *status) {
+// Steps 1 to 4 below, shared by the stencils and by refinement: the
+// OpenSubdiv topology of a mesh with Blender's (or, for Loop, OpenSubdiv's)
+// sharpness values, and the renumbering that leaves out unused vertices.
+struct Prepared {
+    int32_t osd_n = 0;
+    std::vector<int32_t> osd_of, vertex_of, remapped;
+    std::vector<int32_t> crease_pairs, corner_indices;
+    std::vector<float> crease_weights, corner_weights;
+    bool blender = false;
+    Sdc::SchemeType scheme = Sdc::SCHEME_CATMARK;
+    Sdc::Options sdc;
+    std::unique_ptr<Far::TopologyRefiner> refiner;
+};
+
+spia_result prepare(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, Prepared &p,
+                    spia_status *status) {
     const int32_t n = m->vertex_count;
     const bool use_creases = !opt->ignore_creases;
     // Blender's own rules (loose-edge ends, the two-edge rule, smooth corners
@@ -187,10 +202,38 @@ spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_opti
                                         : Sdc::Options::VTX_BOUNDARY_EDGE_ONLY);
     sdc.SetCreasingMethod(Sdc::Options::CREASE_UNIFORM);
     sdc.SetFVarLinearInterpolation(Sdc::Options::FVAR_LINEAR_ALL);
-    std::unique_ptr<Far::TopologyRefiner> refiner(create_refiner(osd_n, m->face_count, m->face_sizes, fv, crease_pairs,
-                                                                 crease_weights, corner_indices, corner_weights, scheme, sdc));
-    if (!refiner)
-        return spia__fail(status, SPIA_ERROR_TOPOLOGY, -1, "OpenSubdiv rejected the mesh topology");
+    p.refiner.reset(create_refiner(osd_n, m->face_count, m->face_sizes, fv, crease_pairs, crease_weights,
+                                   corner_indices, corner_weights, scheme, sdc));
+    if (!p.refiner) return spia__fail(status, SPIA_ERROR_TOPOLOGY, -1, "OpenSubdiv rejected the mesh topology");
+    p.osd_n = osd_n;
+    p.osd_of.swap(osd_of);
+    p.vertex_of.swap(vertex_of);
+    p.remapped.swap(remapped);
+    p.crease_pairs.swap(crease_pairs);
+    p.crease_weights.swap(crease_weights);
+    p.corner_indices.swap(corner_indices);
+    p.corner_weights.swap(corner_weights);
+    p.blender = blender;
+    p.scheme = scheme;
+    p.sdc = sdc;
+    return SPIA_OK;
+}
+
+spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, spia_stencils **out,
+                  spia_status *status) {
+    Prepared p;
+    spia_result r = prepare(m, adj, opt, p, status);
+    if (r != SPIA_OK) return r;
+    const int32_t n = m->vertex_count;
+    const int32_t osd_n = p.osd_n;
+    const std::vector<int32_t> &osd_of = p.osd_of, &vertex_of = p.vertex_of;
+    const std::vector<int32_t> &crease_pairs = p.crease_pairs, &corner_indices = p.corner_indices;
+    const std::vector<float> &crease_weights = p.crease_weights, &corner_weights = p.corner_weights;
+    const bool blender = p.blender;
+    const Sdc::SchemeType scheme = p.scheme;
+    const Sdc::Options &sdc = p.sdc;
+    std::unique_ptr<Far::TopologyRefiner> &refiner = p.refiner;
+
 
     // 5. Which vertices need Blender's adaptive patches.  Where the limit
     //    point has a closed form (smooth interior and boundary vertices,
@@ -487,6 +530,63 @@ spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_opti
     return SPIA_OK;
 }
 
+// A point for Far::PrimvarRefiner.
+struct Point {
+    double p[3];
+    void Clear(void * = nullptr) { p[0] = p[1] = p[2] = 0.0; }
+    void AddWithWeight(const Point &src, float w) {
+        for (int a = 0; a < 3; ++a) p[a] += (double)w * src.p[a];
+    }
+};
+
+spia_result refine(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, int32_t levels,
+                   int32_t *vertex_count, int32_t *face_count, float *positions, int32_t *faces, spia_status *status) {
+    Prepared p;
+    spia_result r = prepare(m, adj, opt, p, status);
+    if (r != SPIA_OK) return r;
+    Far::TopologyRefiner &refiner = *p.refiner;
+    Far::TopologyRefiner::UniformOptions uniform(levels);
+    uniform.fullTopologyInLastLevel = true;
+    refiner.RefineUniform(uniform);
+    const Far::TopologyLevel &last = refiner.GetLevel(levels);
+    // Child vertices of vertices come first at every level, in their parents'
+    // order, so the first osd_n vertices of the last level are the control
+    // vertices; the output puts them at the caller's indices and appends the
+    // others.
+    const int32_t n = m->vertex_count;
+    const int32_t extra = last.GetNumVertices() - p.osd_n;
+    *vertex_count = n + extra;
+    *face_count = last.GetNumFaces();
+    if (!positions) return SPIA_OK;
+    std::vector<Point> src((size_t)refiner.GetNumVerticesTotal()), limit((size_t)last.GetNumVertices());
+    for (int32_t o = 0; o < p.osd_n; ++o)
+        for (int a = 0; a < 3; ++a) src[o].p[a] = m->positions[3 * (int64_t)p.vertex_of[o] + a];
+    Far::PrimvarRefinerReal<float> primvar(refiner);
+    Point *level_src = src.data();
+    for (int level = 1; level <= levels; ++level) {
+        Point *level_dst = level_src + refiner.GetLevel(level - 1).GetNumVertices();
+        primvar.Interpolate(level, level_src, level_dst);
+        level_src = level_dst;
+    }
+    Point *limit_dst = limit.data();
+    primvar.Limit(level_src, limit_dst);
+    auto out_index = [&](int32_t i) { return i < p.osd_n ? p.vertex_of[i] : n + (i - p.osd_n); };
+    for (int32_t v = 0; v < n; ++v)
+        if (p.osd_of[v] < 0)
+            for (int a = 0; a < 3; ++a) positions[3 * (int64_t)v + a] = m->positions[3 * (int64_t)v + a];
+    for (int32_t i = 0; i < last.GetNumVertices(); ++i)
+        for (int a = 0; a < 3; ++a) positions[3 * (int64_t)out_index(i) + a] = (float)limit[i].p[a];
+    int64_t k = 0;
+    for (int32_t f = 0; f < last.GetNumFaces(); ++f) {
+        Far::ConstIndexArray fv = last.GetFaceVertices(f);
+        if (fv.size() != 3)
+            return spia__fail(status, SPIA_ERROR_INTERNAL, f, "refined face %d has %d vertices", (int)f, fv.size());
+        for (int c = 0; c < 3; ++c) faces[k++] = out_index(fv[c]);
+    }
+    spia__ok(status);
+    return SPIA_OK;
+}
+
 }  // namespace
 
 extern "C" spia_result spia__osd_limit_stencils(const spia_mesh *mesh, const spia_adjacency *adj,
@@ -499,5 +599,18 @@ extern "C" spia_result spia__osd_limit_stencils(const spia_mesh *mesh, const spi
         return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory computing limit stencils");
     } catch (...) {
         return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "unexpected failure computing limit stencils");
+    }
+}
+
+extern "C" spia_result spia__osd_refine_limit(const spia_mesh *mesh, const spia_adjacency *adj,
+                                              const spia_options *options, int32_t levels, int32_t *vertex_count,
+                                              int32_t *face_count, float *positions, int32_t *faces,
+                                              spia_status *status) {
+    try {
+        return refine(mesh, adj, options, levels, vertex_count, face_count, positions, faces, status);
+    } catch (const std::bad_alloc &) {
+        return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory refining the surface");
+    } catch (...) {
+        return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "unexpected failure refining the surface");
     }
 }

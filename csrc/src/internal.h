@@ -94,6 +94,15 @@ spia_result spia__stencils_mark_boundary(spia_stencils *s, const spia_mesh *mesh
 spia_result spia__osd_limit_stencils(const spia_mesh *mesh, const spia_adjacency *adj, const spia_options *options,
                                      spia_stencils **out, spia_status *status);
 
+/* Loop refinement with every vertex at its limit (OpenSubdiv's rules, in
+ * catmark_osd.cpp; Hoppe's, in loop.c).  Counts only when positions is NULL. */
+spia_result spia__osd_refine_limit(const spia_mesh *mesh, const spia_adjacency *adj, const spia_options *options,
+                                   int32_t levels, int32_t *vertex_count, int32_t *face_count, float *positions,
+                                   int32_t *faces, spia_status *status);
+spia_result spia__loop_hoppe_refine_limit(const spia_mesh *mesh, const spia_options *options, int32_t levels,
+                                          int32_t *vertex_count, int32_t *face_count, float *positions,
+                                          int32_t *faces, spia_status *status);
+
 /* Loop limit stencils with Hoppe et al.'s boundary rules (loop.c). */
 spia_result spia__loop_hoppe_limit_stencils(const spia_mesh *mesh, const spia_adjacency *adj,
                                             const spia_options *options, spia_stencils **out, spia_status *status);

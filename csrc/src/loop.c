@@ -170,3 +170,233 @@ spia_result spia__loop_hoppe_limit_stencils(const spia_mesh *m, const spia_adjac
     spia__ok(status);
     return SPIA_OK;
 }
+
+/* ------------------------------------------------------------------------ */
+/* Refinement with Hoppe's rules, for previews of the limit surface.         */
+/* ------------------------------------------------------------------------ */
+
+/* Loop's vertex rule weight on each neighbour of an interior vertex. */
+static double loop_refine_beta(int32_t n) {
+    const double c = 0.375 + 0.25 * cos(2.0 * M_PI / (double)n);
+    return (0.625 - c * c) / (double)n;
+}
+
+typedef struct tri_level {
+    int32_t n, f;
+    double *P;   /* n * 3 */
+    int32_t *F;  /* f * 3 */
+} tri_level;
+
+/* One subdivision step: old vertices keep their indices, edge points follow. */
+static spia_result hoppe_step(const tri_level *in, tri_level *out) {
+    spia_result r = SPIA_ERROR_OUT_OF_MEMORY;
+    int32_t *sizes = (int32_t *)malloc(sizeof(int32_t) * ((size_t)in->f + 1));
+    float *dummy = (float *)calloc(3 * (size_t)in->n + 3, sizeof(float));
+    int64_t *edge_of_corner = (int64_t *)malloc(sizeof(int64_t) * 3 * ((size_t)in->f + 1));
+    spia_adjacency adj;
+    memset(&adj, 0, sizeof adj);
+    int32_t *nb = NULL, *cnt = NULL, *valence = NULL, *bnd = NULL;
+    int64_t *first_edge = NULL, *edge_other = NULL, *edge_opp = NULL, *edge_faces = NULL;
+    memset(out, 0, sizeof *out);
+    if (!sizes || !dummy || !edge_of_corner) goto done;
+    for (int32_t f = 0; f < in->f; ++f) sizes[f] = 3;
+    spia_mesh m = {in->n, dummy, in->f, sizes, in->F, 0, NULL, NULL, NULL};
+    if (spia__adjacency_build(&m, &adj, NULL) != SPIA_OK) goto done;
+    const int32_t cap = 2 * spia__max_corners_per_vertex(&adj) + 2;
+    nb = (int32_t *)malloc(sizeof(int32_t) * (size_t)cap);
+    cnt = (int32_t *)malloc(sizeof(int32_t) * (size_t)cap);
+    valence = (int32_t *)malloc(sizeof(int32_t) * (size_t)in->n);
+    bnd = (int32_t *)malloc(sizeof(int32_t) * 2 * (size_t)in->n);
+    first_edge = (int64_t *)malloc(sizeof(int64_t) * ((size_t)in->n + 1));
+    if (!nb || !cnt || !valence || !bnd || !first_edge) goto done;
+    /* Edges (v, w) with v < w, numbered vertex by vertex. */
+    int64_t edges = 0;
+    for (int32_t v = 0; v < in->n; ++v) {
+        int32_t k = spia__vertex_neighbours(&m, &adj, v, nb, cnt, cap);
+        valence[v] = k;
+        bnd[2 * v] = bnd[2 * v + 1] = -1;
+        first_edge[v] = edges;
+        for (int32_t i = 0; i < k; ++i) {
+            if (cnt[i] == 1) bnd[2 * v + (bnd[2 * v] >= 0)] = nb[i];
+            if (nb[i] > v) ++edges;
+        }
+    }
+    first_edge[in->n] = edges;
+    edge_other = (int64_t *)malloc(sizeof(int64_t) * (size_t)(edges + 1));
+    edge_opp = (int64_t *)malloc(sizeof(int64_t) * 2 * (size_t)(edges + 1));
+    edge_faces = (int64_t *)calloc((size_t)edges + 1, sizeof(int64_t));
+    if (!edge_other || !edge_opp || !edge_faces) goto done;
+    for (int32_t v = 0; v < in->n; ++v) {
+        int32_t k = spia__vertex_neighbours(&m, &adj, v, nb, cnt, cap);
+        int64_t e = first_edge[v];
+        for (int32_t i = 0; i < k; ++i)
+            if (nb[i] > v) edge_other[e++] = nb[i];
+    }
+    for (int32_t f = 0; f < in->f; ++f)
+        for (int c = 0; c < 3; ++c) {
+            int32_t a = in->F[3 * f + c], b = in->F[3 * f + (c + 1) % 3], opp = in->F[3 * f + (c + 2) % 3];
+            int32_t lo = a < b ? a : b, hi = a < b ? b : a;
+            int64_t e = first_edge[lo];
+            while (edge_other[e] != hi) ++e;
+            edge_of_corner[3 * (int64_t)f + c] = e;
+            if (edge_faces[e] < 2) edge_opp[2 * e + edge_faces[e]] = opp;
+            edge_faces[e]++;
+        }
+    out->n = in->n + (int32_t)edges;
+    out->f = 4 * in->f;
+    out->P = (double *)malloc(sizeof(double) * 3 * (size_t)out->n);
+    out->F = (int32_t *)malloc(sizeof(int32_t) * 3 * (size_t)out->f);
+    if (!out->P || !out->F) goto done;
+    for (int32_t v = 0; v < in->n; ++v) {
+        double *q = out->P + 3 * (int64_t)v;
+        const double *p = in->P + 3 * (int64_t)v;
+        if (valence[v] == 0) {
+            for (int a = 0; a < 3; ++a) q[a] = p[a];
+        } else if (bnd[2 * v] >= 0) {
+            const double *x = in->P + 3 * (int64_t)bnd[2 * v], *y = in->P + 3 * (int64_t)bnd[2 * v + 1];
+            for (int a = 0; a < 3; ++a) q[a] = 0.75 * p[a] + 0.125 * (x[a] + y[a]);
+        } else {
+            int32_t k = spia__vertex_neighbours(&m, &adj, v, nb, cnt, cap);
+            const double beta = loop_refine_beta(k);
+            for (int a = 0; a < 3; ++a) q[a] = (1.0 - k * beta) * p[a];
+            for (int32_t i = 0; i < k; ++i)
+                for (int a = 0; a < 3; ++a) q[a] += beta * in->P[3 * (int64_t)nb[i] + a];
+        }
+    }
+    for (int32_t v = 0; v < in->n; ++v)
+        for (int64_t e = first_edge[v]; e < first_edge[v + 1]; ++e) {
+            const int32_t w = (int32_t)edge_other[e];
+            const double *x = in->P + 3 * (int64_t)v, *y = in->P + 3 * (int64_t)w;
+            double *q = out->P + 3 * (int64_t)(in->n + e);
+            if (edge_faces[e] >= 2) {
+                const double *c = in->P + 3 * edge_opp[2 * e], *d = in->P + 3 * edge_opp[2 * e + 1];
+                for (int a = 0; a < 3; ++a) q[a] = 0.375 * (x[a] + y[a]) + 0.125 * (c[a] + d[a]);
+            } else {
+                const int rv = valence[v] == 4, rw = valence[w] == 4;
+                const double wv = rv == rw ? 0.5 : rv ? 0.625 : 0.375;
+                for (int a = 0; a < 3; ++a) q[a] = wv * x[a] + (1.0 - wv) * y[a];
+            }
+        }
+    for (int32_t f = 0; f < in->f; ++f) {
+        const int32_t a = in->F[3 * f], b = in->F[3 * f + 1], c = in->F[3 * f + 2];
+        const int32_t ab = in->n + (int32_t)edge_of_corner[3 * (int64_t)f], bc = in->n + (int32_t)edge_of_corner[3 * (int64_t)f + 1],
+                      ca = in->n + (int32_t)edge_of_corner[3 * (int64_t)f + 2];
+        const int32_t tris[12] = {a, ab, ca, b, bc, ab, c, ca, bc, ab, bc, ca};
+        memcpy(out->F + 12 * (int64_t)f, tris, sizeof tris);
+    }
+    r = SPIA_OK;
+done:
+    if (r != SPIA_OK) {
+        free(out->P);
+        free(out->F);
+        memset(out, 0, sizeof *out);
+    }
+    spia__adjacency_free(&adj);
+    free(sizes);
+    free(dummy);
+    free(edge_of_corner);
+    free(nb);
+    free(cnt);
+    free(valence);
+    free(bnd);
+    free(first_edge);
+    free(edge_other);
+    free(edge_opp);
+    free(edge_faces);
+    return r;
+}
+
+spia_result spia__loop_hoppe_refine_limit(const spia_mesh *m, const spia_options *opt, int32_t levels,
+                                          int32_t *vertex_count, int32_t *face_count, float *positions,
+                                          int32_t *faces, spia_status *status) {
+    /* The manifold test and the limit masks of the control mesh first. */
+    spia_adjacency adj;
+    spia_result r = spia__adjacency_build(m, &adj, status);
+    if (r != SPIA_OK) return r;
+    spia_stencils *check = NULL;
+    r = spia__loop_hoppe_limit_stencils(m, &adj, opt, &check, status);
+    spia_stencils_free(check);
+    if (r != SPIA_OK) {
+        spia__adjacency_free(&adj);
+        return r;
+    }
+    /* Sizes: V' = V + E, E' = 2 E + 3 F, F' = 4 F (closed form, no refinement). */
+    int64_t edges = 0;
+    {
+        const int32_t cap = 2 * spia__max_corners_per_vertex(&adj) + 2;
+        int32_t *nb = (int32_t *)malloc(sizeof(int32_t) * 2 * (size_t)cap);
+        if (!nb) {
+            spia__adjacency_free(&adj);
+            return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory refining the surface");
+        }
+        for (int32_t v = 0; v < m->vertex_count; ++v) {
+            int32_t k = spia__vertex_neighbours(m, &adj, v, nb, nb + cap, cap);
+            for (int32_t i = 0; i < k; ++i) edges += nb[i] > v;
+        }
+        free(nb);
+    }
+    spia__adjacency_free(&adj);
+    int64_t nv = m->vertex_count, ne = edges, nf = m->face_count;
+    for (int32_t l = 0; l < levels; ++l) {
+        nv += ne;
+        ne = 2 * ne + 3 * nf;
+        nf *= 4;
+    }
+    if (nv > INT32_MAX || 3 * nf > INT32_MAX)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "%d levels make %lld faces, too many", (int)levels,
+                          (long long)nf);
+    *vertex_count = (int32_t)nv;
+    *face_count = (int32_t)nf;
+    if (!positions) return SPIA_OK;
+
+    tri_level cur;
+    cur.n = m->vertex_count;
+    cur.f = m->face_count;
+    cur.P = (double *)malloc(sizeof(double) * 3 * (size_t)cur.n);
+    cur.F = (int32_t *)malloc(sizeof(int32_t) * 3 * (size_t)cur.f);
+    if (!cur.P || !cur.F) {
+        free(cur.P);
+        free(cur.F);
+        return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory refining the surface");
+    }
+    for (int64_t k = 0; k < 3 * (int64_t)cur.n; ++k) cur.P[k] = m->positions[k];
+    memcpy(cur.F, m->face_vertices, sizeof(int32_t) * 3 * (size_t)cur.f);
+    for (int32_t l = 0; l < levels; ++l) {
+        tri_level next;
+        r = hoppe_step(&cur, &next);
+        free(cur.P);
+        free(cur.F);
+        if (r != SPIA_OK) return spia__fail(status, r, -1, "out of memory refining the surface");
+        cur = next;
+    }
+    /* Limit positions of the refined mesh: its own Hoppe masks. */
+    int32_t *sizes = (int32_t *)malloc(sizeof(int32_t) * (size_t)cur.f);
+    float *fpos = (float *)malloc(sizeof(float) * 3 * (size_t)cur.n);
+    double *lim = (double *)malloc(sizeof(double) * 3 * (size_t)cur.n);
+    spia_stencils *s = NULL;
+    r = SPIA_ERROR_OUT_OF_MEMORY;
+    if (sizes && fpos && lim) {
+        for (int32_t f = 0; f < cur.f; ++f) sizes[f] = 3;
+        for (int64_t k = 0; k < 3 * (int64_t)cur.n; ++k) fpos[k] = (float)cur.P[k];
+        spia_mesh fine = {cur.n, fpos, cur.f, sizes, cur.F, 0, NULL, NULL, NULL};
+        r = spia__adjacency_build(&fine, &adj, status);
+        if (r == SPIA_OK) {
+            r = spia__loop_hoppe_limit_stencils(&fine, &adj, opt, &s, status);
+            spia__adjacency_free(&adj);
+        }
+        if (r == SPIA_OK) {
+            spia_stencils_apply(s, cur.P, lim);
+            for (int64_t k = 0; k < 3 * (int64_t)cur.n; ++k) positions[k] = (float)lim[k];
+            memcpy(faces, cur.F, sizeof(int32_t) * 3 * (size_t)cur.f);
+            spia__ok(status);
+        }
+    }
+    if (r == SPIA_ERROR_OUT_OF_MEMORY) spia__fail(status, r, -1, "out of memory refining the surface");
+    spia_stencils_free(s);
+    free(sizes);
+    free(fpos);
+    free(lim);
+    free(cur.P);
+    free(cur.F);
+    return r;
+}

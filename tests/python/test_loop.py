@@ -189,3 +189,32 @@ def test_auto_is_never_behind_pia_or_gs_pia(native, name):
     # (bunny: 7 GS-PIA iterations, 15 CG), hence the 10%.
     assert its["AUTO"] <= its["PIA"] + 1, its
     assert its["AUTO"] <= 1.1 * 2 * its["GS_PIA"], its
+
+
+@pytest.mark.parametrize("rule", ["SMOOTH", "HOPPE"])
+@pytest.mark.parametrize("name", ["bunny", "elephant-with-holes", "teapot", "open grid"])
+def test_refined_limit_surface_passes_through_the_points(native, name, rule):
+    """The preview surface: refining with the subdivision rules and then
+    taking limit positions must agree with the limit masks of the cage (for
+    HOPPE that checks the derived masks against the rules once more), and a
+    deeper refinement keeps the vertices of a shallower one in place."""
+    P, F = mesh_named(name)
+    cage, report = native.interpolate(native.Mesh.from_faces(P, F), scheme="LOOP", boundary_rule=rule)
+    cage_mesh = native.Mesh.from_faces(cage, F)
+    d = np.linalg.norm(P.max(0) - P.min(0))
+    previous = None
+    for levels in (0, 1, 2):
+        pos, faces = native.refine_limit(cage_mesh, levels, boundary_rule=rule)
+        assert faces.shape == (len(F) * 4 ** levels, 3) and faces.min() >= 0 and faces.max() < len(pos)
+        assert np.linalg.norm(pos[:len(P)] - P, axis=1).max() / d <= 1e-5
+        if previous is not None:
+            assert np.abs(pos[:len(previous)] - previous).max() / d <= 1e-6
+        previous = pos
+
+
+def test_refine_limit_refuses_catmull_clark_and_quads(native):
+    P, F, _ = load("mushroom")
+    with pytest.raises(native.PiaError):
+        native.refine_limit(native.Mesh.from_faces(P, F), 1)
+    with pytest.raises(native.PiaError):
+        native.refine_limit(native.Mesh.from_faces(P, F), 1, scheme="CATMULL_CLARK")
