@@ -165,32 +165,47 @@ static void step_chebyshev(solver_state *s) {
     ++s->cheb_steps;
 }
 
+/* The weight L_jr (0 if absent), by binary search: columns are sorted. */
+static double entry(const spia_stencils *L, int32_t j, int32_t r) {
+    int64_t lo = L->offsets[j], hi = L->offsets[j + 1];
+    while (lo < hi) {
+        int64_t mid = (lo + hi) / 2;
+        if (L->indices[mid] < r) lo = mid + 1; else hi = mid;
+    }
+    return lo < L->offsets[j + 1] && L->indices[lo] == r ? L->weights[lo] : 0.0;
+}
+
 /* A positive diagonal c with S = c^-1 L symmetric, as the closed Loop limit
- * matrix has one (the papers' B = D S: c_i = (1 - beta_i) / n_i, the weight
- * on each neighbour).  c_i is taken as row i's first off-diagonal weight and
- * the symmetry of S is then checked entry by entry.  Returns 0 if there is
- * no such scaling. */
-static int symmetric_scaling(const spia_stencils *L, double *c) {
-    for (int32_t r = 0; r < L->rows; ++r) {
-        c[r] = 0.0;
-        for (int64_t k = L->offsets[r]; k < L->offsets[r + 1] && c[r] == 0.0; ++k)
-            if (L->indices[k] != r) c[r] = L->weights[k];
-        if (c[r] == 0.0) c[r] = 1.0; /* a row on itself alone */
-        if (!(c[r] > 0.0)) return 0;
+ * matrix (the papers' B = D S, c_i = (1 - beta_i) / n_i) and the two-phase
+ * Doo-Sabin one (c_i = 1 / n_i) have.  Symmetry asks c_j = c_i L_ji / L_ij
+ * along every stencil entry, so c is propagated from 1 at one vertex of
+ * each connected part (breadth first) and then every entry is checked.
+ * work holds rows ints.  Returns 0 if there is no such scaling. */
+static int symmetric_scaling(const spia_stencils *L, double *c, int32_t *queue) {
+    for (int32_t r = 0; r < L->rows; ++r) c[r] = 0.0;
+    for (int32_t root = 0; root < L->rows; ++root) {
+        if (c[root] != 0.0) continue;
+        c[root] = 1.0;
+        int32_t head = 0, tail = 0;
+        queue[tail++] = root;
+        while (head < tail) {
+            const int32_t r = queue[head++];
+            for (int64_t k = L->offsets[r]; k < L->offsets[r + 1]; ++k) {
+                const int32_t j = L->indices[k];
+                if (j == r || c[j] != 0.0) continue;
+                const double ljr = entry(L, j, r);
+                if (!(ljr > 0.0) || !(L->weights[k] > 0.0)) return 0;
+                c[j] = c[r] * ljr / L->weights[k];
+                queue[tail++] = j;
+            }
+        }
     }
     for (int32_t r = 0; r < L->rows; ++r)
         for (int64_t k = L->offsets[r]; k < L->offsets[r + 1]; ++k) {
             const int32_t j = L->indices[k];
             if (j == r) continue;
-            /* L_jr by binary search (columns are sorted). */
-            int64_t lo = L->offsets[j], hi = L->offsets[j + 1];
-            while (lo < hi) {
-                int64_t mid = (lo + hi) / 2;
-                if (L->indices[mid] < r) lo = mid + 1; else hi = mid;
-            }
-            const double ljr = lo < L->offsets[j + 1] && L->indices[lo] == r ? L->weights[lo] : 0.0;
-            const double a = L->weights[k] / c[r], b = ljr / c[j];
-            if (fabs(a - b) > 1e-12 * fabs(a)) return 0;
+            const double a = L->weights[k] / c[r], b = entry(L, j, r) / c[j];
+            if (!(fabs(a - b) <= 1e-12 * fabs(a))) return 0;
         }
     return 1;
 }
@@ -483,7 +498,7 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
     /* AUTO: conjugate gradients where L is a positive diagonal times a
      * symmetric matrix (closed Loop meshes), else Chebyshev. */
     if (s.method == SPIA_METHOD_AUTO || s.method == SPIA_METHOD_CG) {
-        if (symmetric_scaling(L, s.scale)) {
+        if (symmetric_scaling(L, s.scale, (int32_t *)s.T)) {
             s.method = SPIA_METHOD_CG;
         } else if (s.method == SPIA_METHOD_CG) {
             res = spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1,
