@@ -38,6 +38,7 @@ BOUNDARY_RULES = ('SMOOTH', 'HOPPE')
 METHODS = tuple(native.METHODS)
 # Conjugate gradients need a symmetrizable limit matrix: closed Loop meshes only.
 LOOP_ONLY_METHODS = ('CG',)
+LOOP_MAX_LEVELS = 8  # native.refine_limit's limit
 
 # Custom properties of a Loop cage: what refresh_limit needs to remake its
 # limit surface, and what a re-run needs to repeat it.
@@ -106,6 +107,9 @@ def check_settings(settings):
     s["use_creases"] = bool(s["use_creases"])
     if not 0 <= s["levels"] <= 11 or not 0 <= s["render_levels"] <= 11:
         raise ValueError("levels and render_levels must be in 0..11")
+    if s["scheme"] == 'LOOP' and s["levels"] > LOOP_MAX_LEVELS:
+        raise ValueError("levels must be in 0..%d for the Loop limit surface, not %d"
+                         % (LOOP_MAX_LEVELS, s["levels"]))
     if not 1 <= s["quality"] <= 10:
         raise ValueError("quality must be in 1..10, not %d" % s["quality"])
     if s["max_iterations"] < 1:
@@ -286,9 +290,8 @@ def compute_cage(obj, settings, progress=None, mesh=None):
     except native.PiaError as error:
         if (settings["scheme"] == 'LOOP' and not settings["triangulate"]
                 and error.code == 'TOPOLOGY' and non_triangle_count(data)):
-            raise type(error)(error.code, "%s (Loop subdivision needs triangles: turn on "
-                                          "Triangulate to use a triangulated copy)" % error.message,
-                              error.index) from None
+            raise type(error)(error.code, "%s, or turn on Triangulate to use a triangulated copy"
+                              % error.message, error.index) from None
         raise
 
 
