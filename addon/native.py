@@ -23,11 +23,11 @@ import numpy as np
 
 __all__ = [
     "Mesh", "Report", "Stencils", "PiaError", "PiaCancelled",
-    "available", "load_error", "version", "validate", "limit_stencils", "solve", "interpolate", "refine_limit",
+    "available", "load_error", "version", "validate", "limit_stencils", "solve", "interpolate", "refine", "refine_limit",
     "SCHEMES", "BOUNDARY_SMOOTH", "BOUNDARY_RULES", "METHODS",
 ]
 
-SCHEMES = ("CATMULL_CLARK", "LOOP")
+SCHEMES = ("CATMULL_CLARK", "LOOP", "DOO_SABIN")
 BOUNDARY_RULES = ("SMOOTH", "HOPPE")
 BOUNDARY_SMOOTH = ("ALL", "PRESERVE_CORNERS")
 METHODS = ("AUTO", "PIA", "GS_PIA", "CHEBYSHEV", "WPIA", "CG")
@@ -86,6 +86,7 @@ class _Options(ctypes.Structure):
         ("quality", ctypes.c_int32), ("method", ctypes.c_int), ("tolerance", ctypes.c_double),
         ("max_iterations", ctypes.c_int32), ("progress", _PROGRESS), ("progress_user_data", ctypes.c_void_p),
         ("boundary_rule", ctypes.c_int), ("weight", ctypes.c_double), ("staged", ctypes.c_int32),
+        ("shape_parameter", ctypes.c_double), ("face_shape_parameters", _f32p),
     ]
 
 
@@ -135,10 +136,10 @@ def _declare(lib):
     fn("spia_stencils_copy_csr", ctypes.c_int, P, _i64p, _i32p, _f64p)
     fn("spia_solve", ctypes.c_int, P, _f32p, ctypes.POINTER(_Options), _f32p, ctypes.POINTER(_Report),
        ctypes.POINTER(_Status))
-    fn("spia_refine_limit_size", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(_Options), ctypes.c_int32,
-       _i32p, _i32p, ctypes.POINTER(_Status))
-    fn("spia_refine_limit", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(_Options), ctypes.c_int32,
-       _f32p, _i32p, ctypes.POINTER(_Status))
+    fn("spia_refine_size", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(_Options), ctypes.c_int32,
+       _i32p, _i32p, _i64p, ctypes.POINTER(_Status))
+    fn("spia_refine", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(_Options), ctypes.c_int32,
+       _f32p, _i32p, _i32p, ctypes.POINTER(_Status))
     fn("spia_interpolate", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(_Options), _f32p,
        ctypes.POINTER(_Report), ctypes.POINTER(_Status))
 
@@ -257,7 +258,8 @@ def _enum(value, names, what):
 
 
 def _options(scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases=True, quality=3, method="AUTO",
-             tolerance=1e-6, max_iterations=1000, progress=None, boundary_rule="SMOOTH", weight=0.0, staged=False):
+             tolerance=1e-6, max_iterations=1000, progress=None, boundary_rule="SMOOTH", weight=0.0, staged=False,
+             shape_parameter=0.5, face_shape_parameters=None):
     if not (isinstance(quality, (int, np.integer)) and 1 <= quality <= 10):
         raise PiaError("INVALID_ARGUMENT", f"quality must be an integer from 1 to 10, not {quality!r}")
     if not (tolerance > 0 and np.isfinite(tolerance)):
@@ -277,6 +279,11 @@ def _options(scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases=True, qu
         raise PiaError("INVALID_ARGUMENT", f"weight must be in (0, 2), or 0 to estimate it, not {weight!r}")
     opts.weight = float(weight)
     opts.staged = 1 if staged else 0
+    opts.shape_parameter = float(shape_parameter)
+    keep = None
+    if face_shape_parameters is not None:
+        keep = np.ascontiguousarray(face_shape_parameters, dtype=np.float32).ravel()
+        opts.face_shape_parameters = _ptr(keep, ctypes.c_float)
     callback = None
     if progress is not None:
         def callback(_user, iteration, relative_error):
@@ -286,7 +293,7 @@ def _options(scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases=True, qu
                 return 1
         callback = _PROGRESS(callback)
         opts.progress = callback
-    return opts, callback
+    return opts, (callback, keep)
 
 
 def _raise(code, status):
@@ -423,11 +430,12 @@ def validate(mesh):
 
 
 def limit_stencils(mesh, scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases=True, quality=3, progress=None,
-                   boundary_rule="SMOOTH"):
+                   boundary_rule="SMOOTH", shape_parameter=0.5, face_shape_parameters=None):
     """The limit stencils of ``mesh`` (a :class:`Stencils`)."""
     lib = _library()
     opts, _keep = _options(scheme=scheme, boundary_smooth=boundary_smooth, use_creases=use_creases,
-                           quality=quality, progress=progress, boundary_rule=boundary_rule)
+                           quality=quality, progress=progress, boundary_rule=boundary_rule,
+                           shape_parameter=shape_parameter, face_shape_parameters=face_shape_parameters)
     handle = ctypes.c_void_p()
     status = _Status()
     cm = mesh._c()
@@ -445,12 +453,14 @@ def solve(stencils, targets, **options):
 
 def interpolate(mesh, scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases=True, quality=3, method="AUTO",
                 tolerance=1e-6, max_iterations=1000, progress=None, boundary_rule="SMOOTH", weight=0.0,
-                staged=False):
+                staged=False, shape_parameter=0.5, face_shape_parameters=None):
     """A cage whose limit surface passes through the mesh's vertices.
 
     scheme 'LOOP' (triangles only) takes boundary_rule 'SMOOTH' (OpenSubdiv's)
-    or 'HOPPE' (the open-mesh paper's); method 'WPIA' takes weight (0:
-    estimated); staged=True solves the boundary first, then the interior.
+    or 'HOPPE' (the open-mesh paper's); 'DOO_SABIN' (closed meshes) takes
+    shape_parameter in (0, 1) or face_shape_parameters (one per face);
+    method 'WPIA' takes weight (0: estimated); staged=True solves the
+    boundary first, then the interior.
 
     Returns ``(cage, report)``: cage is an (N, 3) float32 array of new
     control positions, report a :class:`Report`.  Stopping at
@@ -461,7 +471,7 @@ def interpolate(mesh, scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases
     """
     lib = _library()
     opts, _keep = _options(scheme, boundary_smooth, use_creases, quality, method, tolerance, max_iterations, progress,
-                           boundary_rule, weight, staged)
+                           boundary_rule, weight, staged, shape_parameter, face_shape_parameters)
     cage = np.empty_like(mesh.positions)
     rep, history, unreachable = _report_buffers(opts.max_iterations, mesh.vertex_count)
     status = _Status()
@@ -473,24 +483,40 @@ def interpolate(mesh, scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases
     return cage, _report(code, rep, history, unreachable, status)
 
 
+def refine(mesh, levels, scheme="LOOP", boundary_rule="SMOOTH", boundary_smooth="ALL", use_creases=True,
+           shape_parameter=0.5, face_shape_parameters=None):
+    """The surface of ``mesh`` (a cage) refined ``levels`` times, for the
+    schemes Blender cannot show: ``(positions (M, 3) float32, face_sizes
+    (K,) int32, face_vertices int32)``.  LOOP: triangles, every vertex at its
+    limit position, rows 0..N-1 the limit points of the N control vertices.
+    DOO_SABIN: the refined control mesh (its face centroids lie on the
+    limit surface)."""
+    lib = _library()
+    opts, _keep = _options(scheme=scheme, boundary_smooth=boundary_smooth, use_creases=use_creases,
+                           boundary_rule=boundary_rule, shape_parameter=shape_parameter,
+                           face_shape_parameters=face_shape_parameters)
+    cm = mesh._c()
+    status = _Status()
+    nv, nf, nc = ctypes.c_int32(), ctypes.c_int32(), ctypes.c_int64()
+    code = lib.spia_refine_size(ctypes.byref(cm), ctypes.byref(opts), int(levels), ctypes.byref(nv),
+                                ctypes.byref(nf), ctypes.byref(nc), ctypes.byref(status))
+    if code != 0:
+        _raise(code, status)
+    positions = np.empty((nv.value, 3), np.float32)
+    sizes = np.empty(nf.value, np.int32)
+    face_vertices = np.empty(nc.value, np.int32)
+    code = lib.spia_refine(ctypes.byref(cm), ctypes.byref(opts), int(levels), _ptr(positions, ctypes.c_float),
+                           _ptr(sizes, ctypes.c_int32), _ptr(face_vertices, ctypes.c_int32), ctypes.byref(status))
+    if code != 0:
+        _raise(code, status)
+    return positions, sizes, face_vertices
+
+
 def refine_limit(mesh, levels, scheme="LOOP", boundary_rule="SMOOTH", boundary_smooth="ALL", use_creases=True):
     """The Loop surface of ``mesh`` (a cage) refined ``levels`` times, every
     vertex at its limit position: ``(positions (M, 3) float32, faces (K, 3)
     int32)``.  Rows 0..N-1 are the limit points of the N control vertices."""
-    lib = _library()
-    opts, _keep = _options(scheme=scheme, boundary_smooth=boundary_smooth, use_creases=use_creases,
-                           boundary_rule=boundary_rule)
-    cm = mesh._c()
-    status = _Status()
-    nv, nf = ctypes.c_int32(), ctypes.c_int32()
-    code = lib.spia_refine_limit_size(ctypes.byref(cm), ctypes.byref(opts), int(levels), ctypes.byref(nv),
-                                      ctypes.byref(nf), ctypes.byref(status))
-    if code != 0:
-        _raise(code, status)
-    positions = np.empty((nv.value, 3), np.float32)
-    faces = np.empty((nf.value, 3), np.int32)
-    code = lib.spia_refine_limit(ctypes.byref(cm), ctypes.byref(opts), int(levels), _ptr(positions, ctypes.c_float),
-                                 _ptr(faces, ctypes.c_int32), ctypes.byref(status))
-    if code != 0:
-        _raise(code, status)
-    return positions, faces
+    if scheme != "LOOP":
+        raise PiaError("INVALID_ARGUMENT", "refine_limit is for Loop; use refine for Doo-Sabin")
+    positions, _sizes, face_vertices = refine(mesh, levels, scheme, boundary_rule, boundary_smooth, use_creases)
+    return positions, face_vertices.reshape(-1, 3)

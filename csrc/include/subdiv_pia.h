@@ -150,7 +150,10 @@ typedef struct spia_mesh {
 
 typedef enum spia_scheme {
     SPIA_SCHEME_CATMULL_CLARK = 0, /* Blender's Subdivision Surface modifier             */
-    SPIA_SCHEME_LOOP = 1           /* Loop, triangle meshes only (OpenSubdiv's, USD's)   */
+    SPIA_SCHEME_LOOP = 1,          /* Loop, triangle meshes only (OpenSubdiv's, USD's)   */
+    /* Two-phase Doo-Sabin (Cheng et al.): a shape parameter per face in the
+     * first step, regular Doo-Sabin after; closed meshes, any face sizes. */
+    SPIA_SCHEME_DOO_SABIN = 2
 } spia_scheme;
 
 /* Boundary rules for Loop (Catmull-Clark always follows Blender). */
@@ -219,6 +222,10 @@ typedef struct spia_options {
      * as the open-mesh Loop paper does.  The report gives each stage's
      * iterations.  Reaches the same cage as solving everything at once. [0] */
     int32_t staged;
+    /* Two-phase Doo-Sabin: the shape parameter of every face, in (0, 1)
+     * [0.5], unless face_shape_parameters (face_count floats) is given. */
+    double shape_parameter;
+    const float *face_shape_parameters;
 } spia_options;
 
 /* The defaults, as a value (the same as an all-zero struct). */
@@ -343,21 +350,27 @@ SPIA_API spia_result spia_interpolate(const spia_mesh *mesh, const spia_options 
 /* ------------------------------------------------------------------------ */
 
 /*
- * The Loop surface of `mesh` (a cage) refined `levels` times (0 to 8) with
- * every vertex moved to its limit position, as triangles.  Loop only
- * (options->scheme, boundary_rule, boundary_smooth and ignore_creases are
- * used): Blender's modifier shows Catmull-Clark itself.
+ * The surface of `mesh` (a cage) refined `levels` times (0 to 8), for the
+ * schemes Blender's modifier cannot show:
+ *   LOOP       triangles, every vertex moved to its limit position (uses
+ *              boundary_rule, boundary_smooth, ignore_creases);
+ *   DOO_SABIN  phase one with the shape parameters, then regular Doo-Sabin:
+ *              the refined control mesh, whose face centroids lie on the
+ *              limit surface (closed, consistently oriented manifold meshes).
+ * Catmull-Clark is refused: Blender's modifier shows it.
  *
- * spia_refine_limit_size writes the vertex and triangle counts;
- * spia_refine_limit then fills caller buffers of vertex_count * 3 floats and
- * face_count * 3 ints.  Vertices 0 .. mesh->vertex_count - 1 are the limit
- * points of the control vertices (vertices no face uses stay where they
- * are); the others follow.
+ * spia_refine_size writes the counts of vertices, faces and face corners;
+ * spia_refine then fills caller buffers of vertex_count * 3 floats,
+ * face_count ints (corners per face) and corner_count ints (face vertices,
+ * faces one after another).  For LOOP, vertices 0 .. mesh->vertex_count - 1
+ * are the limit points of the control vertices (vertices no face uses stay
+ * where they are).
  */
-SPIA_API spia_result spia_refine_limit_size(const spia_mesh *mesh, const spia_options *options, int32_t levels,
-                                            int32_t *vertex_count, int32_t *face_count, spia_status *status);
-SPIA_API spia_result spia_refine_limit(const spia_mesh *mesh, const spia_options *options, int32_t levels,
-                                       float *positions, int32_t *face_vertices, spia_status *status);
+SPIA_API spia_result spia_refine_size(const spia_mesh *mesh, const spia_options *options, int32_t levels,
+                                      int32_t *vertex_count, int32_t *face_count, int64_t *corner_count,
+                                      spia_status *status);
+SPIA_API spia_result spia_refine(const spia_mesh *mesh, const spia_options *options, int32_t levels, float *positions,
+                                 int32_t *face_sizes, int32_t *face_vertices, spia_status *status);
 
 #ifdef __cplusplus
 }

@@ -103,6 +103,15 @@ spia_result spia__loop_hoppe_refine_limit(const spia_mesh *mesh, const spia_opti
                                           int32_t *vertex_count, int32_t *face_count, float *positions,
                                           int32_t *faces, spia_status *status);
 
+/* Two-phase Doo-Sabin (doosabin.c): limit stencils (paper eq. 2) and
+ * refinement (phase one, then regular Doo-Sabin); counts only when
+ * positions is NULL. */
+spia_result spia__doosabin_limit_stencils(const spia_mesh *mesh, const spia_adjacency *adj,
+                                          const spia_options *options, spia_stencils **out, spia_status *status);
+spia_result spia__doosabin_refine(const spia_mesh *mesh, const spia_options *options, int32_t levels,
+                                  int32_t *vertex_count, int32_t *face_count, int64_t *corner_count, float *positions,
+                                  int32_t *face_sizes, int32_t *face_vertices, spia_status *status);
+
 /* Loop limit stencils with Hoppe et al.'s boundary rules (loop.c). */
 spia_result spia__loop_hoppe_limit_stencils(const spia_mesh *mesh, const spia_adjacency *adj,
                                             const spia_options *options, spia_stencils **out, spia_status *status);

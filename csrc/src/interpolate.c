@@ -11,6 +11,7 @@ static stencil_builder builder_for(const spia_options *o) {
     case SPIA_SCHEME_CATMULL_CLARK: return spia__osd_limit_stencils;
     case SPIA_SCHEME_LOOP:
         return o->boundary_rule == SPIA_BOUNDARY_RULE_HOPPE ? spia__loop_hoppe_limit_stencils : spia__osd_limit_stencils;
+    case SPIA_SCHEME_DOO_SABIN: return spia__doosabin_limit_stencils;
     }
     return NULL;
 }
@@ -69,40 +70,51 @@ spia_result spia_interpolate(const spia_mesh *mesh, const spia_options *options,
 }
 
 static spia_result refine_dispatch(const spia_mesh *mesh, const spia_options *options, int32_t levels,
-                                   int32_t *vertex_count, int32_t *face_count, float *positions, int32_t *faces,
-                                   spia_status *status) {
+                                   int32_t *vertex_count, int32_t *face_count, int64_t *corner_count,
+                                   float *positions, int32_t *face_sizes, int32_t *faces, spia_status *status) {
     spia_options opt;
     spia_result r = spia__resolve_options(options, &opt, status);
     if (r != SPIA_OK) return r;
-    if (opt.scheme != SPIA_SCHEME_LOOP)
+    if (opt.scheme == SPIA_SCHEME_CATMULL_CLARK)
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1,
-                          "refinement is for Loop; Blender's modifier shows Catmull-Clark itself");
+                          "refinement is for Loop and Doo-Sabin; Blender's modifier shows Catmull-Clark itself");
     if (levels < 0 || levels > 8)
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "levels must be 0 to 8, got %d", (int)levels);
     r = spia_mesh_validate(mesh, status);
     if (r != SPIA_OK) return r;
+    if (opt.scheme == SPIA_SCHEME_DOO_SABIN)
+        return spia__doosabin_refine(mesh, &opt, levels, vertex_count, face_count, corner_count, positions,
+                                     face_sizes, faces, status);
     if ((r = spia__require_triangles(mesh, status)) != SPIA_OK) return r;
-    if (opt.boundary_rule == SPIA_BOUNDARY_RULE_HOPPE)
-        return spia__loop_hoppe_refine_limit(mesh, &opt, levels, vertex_count, face_count, positions, faces, status);
-    spia_adjacency adj;
-    r = spia__adjacency_build(mesh, &adj, status);
-    if (r != SPIA_OK) return r;
-    r = spia__osd_refine_limit(mesh, &adj, &opt, levels, vertex_count, face_count, positions, faces, status);
-    spia__adjacency_free(&adj);
+    if (opt.boundary_rule == SPIA_BOUNDARY_RULE_HOPPE) {
+        r = spia__loop_hoppe_refine_limit(mesh, &opt, levels, vertex_count, face_count, positions, faces, status);
+    } else {
+        spia_adjacency adj;
+        r = spia__adjacency_build(mesh, &adj, status);
+        if (r != SPIA_OK) return r;
+        r = spia__osd_refine_limit(mesh, &adj, &opt, levels, vertex_count, face_count, positions, faces, status);
+        spia__adjacency_free(&adj);
+    }
+    if (r == SPIA_OK) {
+        *corner_count = 3 * (int64_t)*face_count;
+        if (face_sizes)
+            for (int32_t f = 0; f < *face_count; ++f) face_sizes[f] = 3;
+    }
     return r;
 }
 
-spia_result spia_refine_limit_size(const spia_mesh *mesh, const spia_options *options, int32_t levels,
-                                   int32_t *vertex_count, int32_t *face_count, spia_status *status) {
-    if (!vertex_count || !face_count)
-        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "vertex_count and face_count must not be NULL");
-    return refine_dispatch(mesh, options, levels, vertex_count, face_count, NULL, NULL, status);
+spia_result spia_refine_size(const spia_mesh *mesh, const spia_options *options, int32_t levels, int32_t *vertex_count,
+                             int32_t *face_count, int64_t *corner_count, spia_status *status) {
+    if (!vertex_count || !face_count || !corner_count)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "the count pointers must not be NULL");
+    return refine_dispatch(mesh, options, levels, vertex_count, face_count, corner_count, NULL, NULL, NULL, status);
 }
 
-spia_result spia_refine_limit(const spia_mesh *mesh, const spia_options *options, int32_t levels, float *positions,
-                              int32_t *face_vertices, spia_status *status) {
-    if (!positions || !face_vertices)
-        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "positions and face_vertices must not be NULL");
+spia_result spia_refine(const spia_mesh *mesh, const spia_options *options, int32_t levels, float *positions,
+                        int32_t *face_sizes, int32_t *face_vertices, spia_status *status) {
+    if (!positions || !face_sizes || !face_vertices)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "positions, face_sizes and face_vertices must not be NULL");
     int32_t nv = 0, nf = 0;
-    return refine_dispatch(mesh, options, levels, &nv, &nf, positions, face_vertices, status);
+    int64_t nc = 0;
+    return refine_dispatch(mesh, options, levels, &nv, &nf, &nc, positions, face_sizes, face_vertices, status);
 }

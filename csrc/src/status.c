@@ -60,7 +60,7 @@ spia_options spia_options_default(void) {
 
 spia_result spia__resolve_options(const spia_options *in, spia_options *out, spia_status *status) {
     spia_options o = in ? *in : spia_options_default();
-    if ((int)o.scheme != SPIA_SCHEME_CATMULL_CLARK && (int)o.scheme != SPIA_SCHEME_LOOP)
+    if ((int)o.scheme < SPIA_SCHEME_CATMULL_CLARK || (int)o.scheme > SPIA_SCHEME_DOO_SABIN)
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "unknown subdivision scheme %d", (int)o.scheme);
     if ((int)o.boundary_smooth != SPIA_BOUNDARY_SMOOTH_ALL &&
         (int)o.boundary_smooth != SPIA_BOUNDARY_SMOOTH_PRESERVE_CORNERS)
@@ -70,6 +70,7 @@ spia_result spia__resolve_options(const spia_options *in, spia_options *out, spi
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "unknown solver method %d", (int)o.method);
     if ((int)o.boundary_rule != SPIA_BOUNDARY_RULE_SMOOTH && (int)o.boundary_rule != SPIA_BOUNDARY_RULE_HOPPE)
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "unknown boundary_rule value %d", (int)o.boundary_rule);
+    if (o.shape_parameter == 0.0) o.shape_parameter = 0.5;
     if (o.quality == 0) o.quality = 3;
     if (o.quality < 1 || o.quality > 10)
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "quality must be 1 to 10, got %d", o.quality);

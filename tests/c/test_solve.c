@@ -161,16 +161,19 @@ int main(void) {
                             c.pos = cage;
                             spia_mesh cm = tmesh_view(&c);
                             int32_t nv = 0, nf = 0;
-                            CHECK(spia_refine_limit_size(&cm, &o, 2, &nv, &nf, &st) == SPIA_OK, "%s", st.message);
-                            CHECK(nf == 16 * c.nf, "refined faces %d", (int)nf);
+                            int64_t nc = 0;
+                            CHECK(spia_refine_size(&cm, &o, 2, &nv, &nf, &nc, &st) == SPIA_OK, "%s", st.message);
+                            CHECK(nf == 16 * c.nf && nc == 3 * (int64_t)nf, "refined faces %d", (int)nf);
                             float *pos = (float *)malloc(sizeof(float) * 3 * (size_t)nv);
+                            int32_t *fs = (int32_t *)malloc(sizeof(int32_t) * (size_t)nf);
                             int32_t *fv = (int32_t *)malloc(sizeof(int32_t) * 3 * (size_t)nf);
-                            CHECK(spia_refine_limit(&cm, &o, 2, pos, fv, &st) == SPIA_OK, "%s", st.message);
+                            CHECK(spia_refine(&cm, &o, 2, pos, fs, fv, &st) == SPIA_OK, "%s", st.message);
                             double worst = 0.0;
                             for (int64_t k = 0; k < 3 * (int64_t)c.nv; ++k)
                                 worst = fmax(worst, fabs(pos[k] - shapes[sh].pos[k]));
                             CHECK(worst < 1e-4, "refined limit misses a target by %g", worst);
                             free(pos);
+                            free(fs);
                             free(fv);
                         }
                         free(cage);
