@@ -35,9 +35,9 @@ DEFAULT_SETTINGS = {
 SCHEMES = ('CATMULL_CLARK', 'LOOP')
 BOUNDARY_SMOOTH = ('ALL', 'PRESERVE_CORNERS')
 BOUNDARY_RULES = ('SMOOTH', 'HOPPE')
+# The library decides where CG (conjugate gradients) applies: it needs a
+# symmetrizable limit matrix (closed meshes) and says so otherwise.
 METHODS = tuple(native.METHODS)
-# Conjugate gradients need a symmetrizable limit matrix: closed Loop meshes only.
-LOOP_ONLY_METHODS = ('CG',)
 LOOP_MAX_LEVELS = 8  # native.refine_limit's limit
 
 # Custom properties of a Loop cage: what refresh_limit needs to remake its
@@ -94,10 +94,6 @@ def check_settings(settings):
                          % (BOUNDARY_RULES, s["boundary_rule"]))
     if s["method"] not in METHODS:
         raise ValueError("method must be one of %s, not %r" % (METHODS, s["method"]))
-    if s["method"] in LOOP_ONLY_METHODS and s["scheme"] != 'LOOP':
-        raise ValueError("Method %s (conjugate gradients) works only for the Loop scheme on closed "
-                         "meshes; use Automatic or another method for %s"
-                         % (s["method"], s["scheme"].replace("_", "-").title()))
     s["triangulate"] = bool(s["triangulate"])
     s["levels"] = int(s["levels"])
     s["render_levels"] = int(s["render_levels"])

@@ -26,12 +26,12 @@ BOUNDARY_SMOOTH_ITEMS = (
 )
 METHOD_ITEMS = (
     ('AUTO', "Automatic", "The fastest solver the library has for this mesh (conjugate gradients for "
-                        "closed Loop meshes, else Chebyshev-accelerated PIA)"),
+                        "closed meshes, else Chebyshev-accelerated PIA)"),
     ('PIA', "PIA", "Plain progressive iterative approximation (Jacobi-like)"),
     ('GS_PIA', "Gauss-Seidel PIA", "Progressive iterative approximation with Gauss-Seidel updates"),
     ('CHEBYSHEV', "Chebyshev PIA", "PIA accelerated with Chebyshev polynomials over the estimated spectrum"),
     ('WPIA', "Weighted PIA", "PIA with the best constant weight, estimated from the spectrum"),
-    ('CG', "Conjugate Gradients", "Conjugate gradients: Loop scheme on closed meshes only"),
+    ('CG', "Conjugate Gradients", "Conjugate gradients: closed meshes only (a symmetrizable limit matrix)"),
 )
 
 

@@ -184,9 +184,9 @@ def test_fin_smooth_limit_passes_through():
     check_limit(cage, limit, targets, 1)
 
 
-def test_cg_refused_for_catmull_clark_and_open_loop():
-    shapes.cube()
-    expect_error(r"CG .*only for the Loop scheme", method='CG')
+def test_cg_refused_for_open_meshes():
+    shapes.open_grid()
+    expect_error(r"'Grid': CG needs .*use AUTO", method='CG')
     import_obj(os.path.join(DATA, "teapot.obj"))
     expect_error(r"CG needs .*closed Loop meshes", scheme='LOOP', method='CG')
 
