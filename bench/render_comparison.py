@@ -54,6 +54,48 @@ def point_markers(name, points, radius, mat, offset):
     return holder
 
 
+def render_row(P, shift_x, out_path):
+    """Cycles render, from the front (-Y), of a row of objects: the first
+    spans the world-space points P, the others follow along +X, shift_x
+    apart in all."""
+    scene = bpy.context.scene
+    centre = (P.min(0) + P.max(0) + np.array([shift_x, 0.0, 0.0])) / 2
+    span = float((P.max(0) - P.min(0))[0] + shift_x)
+    cam_data = bpy.data.cameras.new("camera")
+    cam_data.type = 'ORTHO'
+    cam_data.ortho_scale = 1.08 * span
+    cam = bpy.data.objects.new("camera", cam_data)
+    scene.collection.objects.link(cam)
+    height = float((P.max(0) - P.min(0))[2])
+    cam.location = (centre[0], centre[1] - 3 * span, centre[2] + 0.6 * span)
+    direction = np.array(centre) - np.array(cam.location)
+    cam.rotation_euler = (np.arctan2(np.hypot(direction[0], direction[1]), -direction[2]), 0.0, 0.0)
+    scene.camera = cam
+    for loc, energy in (((centre[0] - span, centre[1] - 2 * span, centre[2] + 2 * span), 4.0),
+                        ((centre[0] + span, centre[1] - span, centre[2] + span), 2.0)):
+        light = bpy.data.objects.new("sun", bpy.data.lights.new("sun", 'SUN'))
+        light.data.energy = energy
+        light.location = loc
+        d = np.array(centre) - np.array(loc)
+        light.rotation_euler = (np.arctan2(np.hypot(d[0], d[1]), -d[2]), 0.0, np.arctan2(d[1], d[0]) + np.pi / 2)
+        scene.collection.objects.link(light)
+    world = bpy.data.worlds.new("world")
+    world.use_nodes = True
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.6
+    scene.world = world
+    scene.render.engine = 'CYCLES'
+    scene.cycles.device = 'CPU'
+    scene.cycles.samples = 32
+    scene.cycles.use_denoising = False  # Debian's Blender has no OpenImageDenoise
+    scene.render.resolution_x = 1400
+    scene.render.resolution_y = int(1400 * min(1.0, max(0.3, 1.3 * height / span)))
+    scene.render.film_transparent = False
+    scene.view_settings.view_transform = 'Standard'
+    scene.render.filepath = os.path.abspath(out_path)
+    bpy.ops.render.render(write_still=True)
+
+
 def main(argv):
     src_path, out_path = argv[0], argv[1]
     subdiv_pia.register()
@@ -95,42 +137,7 @@ def main(argv):
     point_markers("points_fitted", W, radius, red, shift)
     P = W
 
-    scene = bpy.context.scene
-    centre = (P.min(0) + P.max(0) + shift) / 2
-    span = float((P.max(0) - P.min(0))[0] + shift[0])
-    cam_data = bpy.data.cameras.new("camera")
-    cam_data.type = 'ORTHO'
-    cam_data.ortho_scale = 1.08 * span
-    cam = bpy.data.objects.new("camera", cam_data)
-    scene.collection.objects.link(cam)
-    height = float((P.max(0) - P.min(0))[2])
-    cam.location = (centre[0], centre[1] - 3 * span, centre[2] + 0.6 * span)
-    direction = np.array(centre) - np.array(cam.location)
-    cam.rotation_euler = (np.arctan2(np.hypot(direction[0], direction[1]), -direction[2]), 0.0, 0.0)
-    scene.camera = cam
-    for loc, energy in (((centre[0] - span, centre[1] - 2 * span, centre[2] + 2 * span), 4.0),
-                        ((centre[0] + span, centre[1] - span, centre[2] + span), 2.0)):
-        light = bpy.data.objects.new("sun", bpy.data.lights.new("sun", 'SUN'))
-        light.data.energy = energy
-        light.location = loc
-        d = np.array(centre) - np.array(loc)
-        light.rotation_euler = (np.arctan2(np.hypot(d[0], d[1]), -d[2]), 0.0, np.arctan2(d[1], d[0]) + np.pi / 2)
-        scene.collection.objects.link(light)
-    world = bpy.data.worlds.new("world")
-    world.use_nodes = True
-    world.node_tree.nodes["Background"].inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
-    world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.6
-    scene.world = world
-    scene.render.engine = 'CYCLES'
-    scene.cycles.device = 'CPU'
-    scene.cycles.samples = 32
-    scene.cycles.use_denoising = False  # Debian's Blender has no OpenImageDenoise
-    scene.render.resolution_x = 1400
-    scene.render.resolution_y = int(1400 * min(1.0, max(0.4, 1.3 * height / span)))
-    scene.render.film_transparent = False
-    scene.view_settings.view_transform = 'Standard'
-    scene.render.filepath = os.path.abspath(out_path)
-    bpy.ops.render.render(write_still=True)
+    render_row(P, float(shift[0]), out_path)
     print("subdiv_pia: wrote %s" % out_path)
 
 

@@ -189,9 +189,10 @@ typedef enum spia_method {
      * iterations (the best weight when the spectrum is real). */
     SPIA_METHOD_WPIA = 4,
     /* Conjugate gradients on S V = D^-1 P where L = D S with D a positive
-     * diagonal and S symmetric positive definite (closed Loop meshes, as the
-     * papers show); refused where L has no such form.  What AUTO uses where
-     * it applies. */
+     * diagonal and S symmetric (closed meshes of every scheme here; for Loop
+     * and Doo-Sabin the papers prove S positive definite; a breakdown falls
+     * back to CHEBYSHEV); refused where L has no such form (boundaries).
+     * What AUTO uses where it applies. */
     SPIA_METHOD_CG = 5
 } spia_method;
 

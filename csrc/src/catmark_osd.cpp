@@ -219,6 +219,63 @@ spia_result prepare(const spia_mesh *m, const spia_adjacency *adj, const spia_op
     return SPIA_OK;
 }
 
+// A sparse stencil for Far::PrimvarRefiner: weights over control vertices.
+struct SparseStencil {
+    std::vector<std::pair<int32_t, double>> w;
+    void Clear(void * = nullptr) { w.clear(); }
+    void AddWithWeight(const SparseStencil &src, float weight) {
+        for (const auto &e : src.w) w.emplace_back(e.first, (double)weight * e.second);
+    }
+    void Compact() {
+        std::sort(w.begin(), w.end());
+        size_t out = 0;
+        for (size_t i = 0; i < w.size();) {
+            int32_t j = w[i].first;
+            double sum = 0.0;
+            while (i < w.size() && w[i].first == j) sum += w[i++].second;
+            w[out++] = std::make_pair(j, sum);
+        }
+        w.resize(out);
+    }
+};
+
+// Rows of the exact limit (uniform refinement `levels` deep, then limit
+// masks) for the flagged vertices of a sub-mesh refiner.
+template <class Begin, class Add, class End>
+bool exact_limit_rows(Far::TopologyRefiner &sub, int levels, int32_t sub_n, const std::vector<char> &feature,
+                      const std::vector<int32_t> &sub_of, const std::vector<int32_t> &osd_of_sub, int32_t osd_n,
+                      Begin begin_row, Add add_weight, End end_row) {
+    Far::TopologyRefiner::UniformOptions uniform(levels);
+    uniform.fullTopologyInLastLevel = true;
+    sub.RefineUniform(uniform);
+    std::vector<SparseStencil> all((size_t)sub.GetNumVerticesTotal());
+    for (int32_t i = 0; i < sub_n; ++i) all[i].w.emplace_back(i, 1.0);
+    Far::PrimvarRefinerReal<float> primvar(sub);
+    SparseStencil *src = all.data();
+    for (int level = 1; level <= levels; ++level) {
+        SparseStencil *dst = src + sub.GetLevel(level - 1).GetNumVertices();
+        primvar.Interpolate(level, src, dst);
+        for (int32_t i = 0; i < sub.GetLevel(level).GetNumVertices(); ++i) dst[i].Compact();
+        src = dst;
+    }
+    std::vector<SparseStencil> limit((size_t)sub.GetLevel(levels).GetNumVertices());
+    SparseStencil *limit_dst = limit.data();
+    primvar.Limit(src, limit_dst);
+    for (int32_t o = 0; o < osd_n; ++o) {
+        if (!feature[o]) continue;
+        // Child vertices of vertices come first at every level, in order.
+        SparseStencil &st = limit[(size_t)sub_of[o]];
+        st.Compact();
+        begin_row(o);
+        for (const auto &e : st.w) {
+            if (e.first < 0 || e.first >= sub_n) return false;
+            add_weight(osd_of_sub[e.first], e.second);
+        }
+        end_row(o);
+    }
+    return true;
+}
+
 spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, spia_stencils **out,
                   spia_status *status) {
     Prepared p;
@@ -410,6 +467,21 @@ spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_opti
         for (Far::Index &f : feature_faces) f = sub_face_of[f];
         std::sort(feature_faces.begin(), feature_faces.end());
         feature_faces.erase(std::unique(feature_faces.begin(), feature_faces.end()), feature_faces.end());
+        std::vector<int32_t> osd_of_sub((size_t)sub_n);
+        for (int32_t o = 0; o < osd_n; ++o)
+            if (sub_of[o] >= 0) osd_of_sub[sub_of[o]] = o;
+        if (!blender) {
+            // Loop is taken at its exact limit, as refine() takes it:
+            // uniform refinement until semi-sharp creases have decayed,
+            // then OpenSubdiv's limit masks, on sparse stencils.
+            float sharpest = 0.0f;
+            for (float w : sub_crease_weights) sharpest = std::max(sharpest, w < kInfiniteSharpness ? w : 0.0f);
+            for (float w : sub_corner_weights) sharpest = std::max(sharpest, w < kInfiniteSharpness ? w : 0.0f);
+            const int levels = std::max(1, std::min(10, (int)std::ceil(sharpest)));
+            if (!exact_limit_rows(*sub, levels, sub_n, feature, sub_of, osd_of_sub, osd_n, begin_row, add_weight,
+                                  end_row))
+                return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "OpenSubdiv's limit masks failed");
+        } else {
         Far::TopologyRefiner::AdaptiveOptions adaptive(opt->quality);
         adaptive.useInfSharpPatch = true;
         adaptive.considerFVarChannels = false;
@@ -449,9 +521,6 @@ spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_opti
             locations.push_back(loc);
             location_vertex.push_back(o);
         }
-        std::vector<int32_t> osd_of_sub((size_t)sub_n);
-        for (int32_t o = 0; o < osd_n; ++o)
-            if (sub_of[o] >= 0) osd_of_sub[sub_of[o]] = o;
         LimitFactory::Options limit_options;
         limit_options.generate1stDerivatives = false;
         limit_options.generate2ndDerivatives = false;
@@ -476,6 +545,7 @@ spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_opti
             }
             row_weights.insert(row_weights.end(), weights.begin() + offsets[i], weights.begin() + offsets[i] + sizes[i]);
         }
+            }
     }
 
     // 8. Vertices no face uses keep their position, except that Blender

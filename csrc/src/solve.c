@@ -17,7 +17,7 @@
  * iterates, and so it converges.
  *
  * CG is conjugate gradients on the symmetrized system where the limit
- * matrix allows it (closed Loop meshes, see step_cg).  AUTO uses CG where it
+ * matrix allows it (closed meshes, see step_cg).  AUTO uses CG where it
  * applies and else Chebyshev-accelerated PIA (see step_chebyshev), after a
  * few PIA steps that estimate the spectrum.
  *
@@ -496,14 +496,14 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
     }
     for (int64_t k = 0; k < 3 * (int64_t)n; ++k) s.P[k] = s.V[k] = (double)targets[k];
     /* AUTO: conjugate gradients where L is a positive diagonal times a
-     * symmetric matrix (closed Loop meshes), else Chebyshev. */
+     * symmetric matrix (closed meshes), else Chebyshev. */
     if (s.method == SPIA_METHOD_AUTO || s.method == SPIA_METHOD_CG) {
         if (symmetric_scaling(L, s.scale, (int32_t *)s.T)) {
             s.method = SPIA_METHOD_CG;
         } else if (s.method == SPIA_METHOD_CG) {
             res = spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1,
-                             "CG needs a limit matrix that is a positive diagonal times a symmetric one "
-                             "(closed Loop meshes); use AUTO");
+                             "CG needs a limit matrix that is a positive diagonal times a symmetric one, as "
+                             "closed meshes have (boundary rules break the symmetry); use AUTO");
             goto done;
         } else {
             s.method = SPIA_METHOD_CHEBYSHEV;
