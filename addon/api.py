@@ -9,6 +9,13 @@ Blender has no Loop subdivision modifier: for scheme 'LOOP' the new object
 is the cage without a modifier, and a child object ``<cage>_limit`` holds
 the library's Loop limit surface of the cage (native.refine_limit), which
 refresh_limit recomputes after the cage was edited.
+
+The two-phase Doo-Sabin scheme ('DOO_SABIN', closed meshes) has no modifier
+either: the cage's child ``<cage>_limit`` holds the refined control mesh
+(native.refine; its face centroids lie on the limit surface). The first
+step uses a shape parameter per face: the float FACE attribute named by
+shape_attribute where the mesh has it (read again from the cage on refresh,
+so it can be repainted there), else shape_parameter.
 """
 
 import bmesh
@@ -30,22 +37,28 @@ DEFAULT_SETTINGS = {
     "method": 'AUTO',
     "tolerance": 1e-6,
     "max_iterations": 1000,
+    "shape_parameter": 0.5,
+    "shape_attribute": "pia_shape",
 }
 
-SCHEMES = ('CATMULL_CLARK', 'LOOP')
+SCHEMES = ('CATMULL_CLARK', 'LOOP', 'DOO_SABIN')
+# Schemes Blender's modifier cannot show: a `_limit` child shows the surface.
+LIMIT_SCHEMES = ('LOOP', 'DOO_SABIN')
 BOUNDARY_SMOOTH = ('ALL', 'PRESERVE_CORNERS')
 BOUNDARY_RULES = ('SMOOTH', 'HOPPE')
 # The library decides where CG (conjugate gradients) applies: it needs a
 # symmetrizable limit matrix (closed meshes) and says so otherwise.
 METHODS = tuple(native.METHODS)
-LOOP_MAX_LEVELS = 8  # native.refine_limit's limit
+LOOP_MAX_LEVELS = 8  # native.refine's (and refine_limit's) limit
+SCHEME_NAMES = {'CATMULL_CLARK': "Catmull-Clark", 'LOOP': "Loop", 'DOO_SABIN': "Doo-Sabin"}
 
-# Custom properties of a Loop cage: what refresh_limit needs to remake its
+# Custom properties of a Loop or Doo-Sabin cage: what refresh_limit needs to remake its
 # limit surface, and what a re-run needs to repeat it.
 LIMIT_SUFFIX = "_limit"
 LIMIT_MARK = "pia_limit_surface"   # on the child that holds the limit surface
 STORED_SETTINGS = ("scheme", "boundary_rule", "boundary_smooth", "use_creases", "triangulate",
-                   "levels", "render_levels", "quality", "method", "tolerance", "max_iterations")
+                   "levels", "render_levels", "quality", "method", "tolerance", "max_iterations",
+                   "shape_parameter", "shape_attribute")
 
 # Settings that a source Subdivision Surface modifier provides.
 MODIFIER_SETTINGS = ("levels", "render_levels", "quality", "boundary_smooth", "use_creases")
@@ -103,9 +116,20 @@ def check_settings(settings):
     s["use_creases"] = bool(s["use_creases"])
     if not 0 <= s["levels"] <= 11 or not 0 <= s["render_levels"] <= 11:
         raise ValueError("levels and render_levels must be in 0..11")
-    if s["scheme"] == 'LOOP' and s["levels"] > LOOP_MAX_LEVELS:
-        raise ValueError("levels must be in 0..%d for the Loop limit surface, not %d"
-                         % (LOOP_MAX_LEVELS, s["levels"]))
+    if s["scheme"] in LIMIT_SCHEMES and s["levels"] > LOOP_MAX_LEVELS:
+        raise ValueError("levels must be in 0..%d for the %s limit surface, not %d"
+                         % (LOOP_MAX_LEVELS, SCHEME_NAMES[s["scheme"]], s["levels"]))
+    try:
+        s["shape_parameter"] = float(s["shape_parameter"])
+    except (TypeError, ValueError):
+        raise ValueError("shape_parameter must be a number in (0, 1), not %r"
+                         % (s["shape_parameter"],)) from None
+    if s["scheme"] == 'DOO_SABIN' and not 0.0 < s["shape_parameter"] < 1.0:
+        raise ValueError("shape_parameter must be in (0, 1) (exclusive), not %g"
+                         % s["shape_parameter"])
+    if not isinstance(s["shape_attribute"], str):
+        raise ValueError("shape_attribute must be an attribute name (a string), not %r"
+                         % (s["shape_attribute"],))
     if not 1 <= s["quality"] <= 10:
         raise ValueError("quality must be in 1..10, not %d" % s["quality"])
     if s["max_iterations"] < 1:
@@ -128,6 +152,44 @@ def _float_attribute(mesh, name, domain):
     values = np.empty(len(attr.data), np.float32)
     attr.data.foreach_get("value", values)
     return values
+
+
+def face_shape_parameters(mesh, settings):
+    """The Doo-Sabin shape parameters of mesh's faces: a float32 array, one
+    value per face, from the float FACE attribute settings["shape_attribute"],
+    or None when the mesh has no such attribute (shape_parameter applies).
+
+    ValueError if an attribute of that name exists on another domain or with
+    another type. The values are not checked here: the library names the
+    faces outside (0, 1).
+    """
+    name = settings.get("shape_attribute") or ""
+    attributes = getattr(mesh, "attributes", None)
+    if not name or attributes is None:
+        return None
+    attr = attributes.get(name)
+    if attr is None:
+        return None
+    if attr.domain != 'FACE' or attr.data_type != 'FLOAT':
+        raise ValueError("Attribute '%s' of mesh '%s' is a %s attribute on the %s domain: the "
+                         "shape attribute must be a Float attribute on the Face domain"
+                         % (name, mesh.name, attr.data_type, attr.domain))
+    values = np.empty(len(mesh.polygons), np.float32)
+    if len(attr.data) != len(values):
+        raise ValueError("Attribute '%s' of mesh '%s' has %d values for %d faces"
+                         % (name, mesh.name, len(attr.data), len(values)))
+    if len(values):
+        attr.data.foreach_get("value", values)
+    return values
+
+
+def _shape_error(error, values, settings):
+    """The library's refusal of shape parameters, with the attribute named."""
+    if (values is not None and error.code == 'INVALID_ARGUMENT'
+            and "shape parameter" in error.message):
+        return type(error)(error.code, "%s (face attribute '%s')"
+                           % (error.message, settings["shape_attribute"]), error.index)
+    return None
 
 
 def _crease_layer(mesh, name):
@@ -233,10 +295,13 @@ def native_mesh(mesh):
                        vertex_creases=arrays["vertex_creases"])
 
 
-def _require_library(refine=False):
+def _require_library(refine=False, scheme='LOOP'):
     if not native.available():
         raise RuntimeError("Subdivision PIA library not loaded: %s" % native.load_error())
-    if refine and not hasattr(native, "refine_limit"):
+    if refine and scheme == 'DOO_SABIN' and not hasattr(native, "refine"):
+        raise RuntimeError("This build of the Subdivision PIA library cannot refine Doo-Sabin "
+                           "cages (no refine): rebuild or update the add-on")
+    if refine and scheme == 'LOOP' and not hasattr(native, "refine_limit"):
         raise RuntimeError("This build of the Subdivision PIA library cannot evaluate Loop limit "
                            "surfaces (no refine_limit): rebuild or update the add-on")
 
@@ -274,16 +339,27 @@ def compute_cage(obj, settings, progress=None, mesh=None):
     """Run the solver on obj's mesh data (not its modifiers), or on mesh if given.
 
     Returns (cage, report)."""
-    _require_library(refine=settings["scheme"] == 'LOOP')
+    scheme = settings["scheme"]
+    _require_library(refine=scheme in LIMIT_SCHEMES, scheme=scheme)
     data = mesh if mesh is not None else obj.data
+    shapes = {}
+    values = None
+    if scheme == 'DOO_SABIN':
+        values = face_shape_parameters(data, settings)
+        # Creases are not part of the Doo-Sabin scheme: ignored, as the panel shows.
+        shapes = {"shape_parameter": settings["shape_parameter"], "face_shape_parameters": values}
     try:
         return native.interpolate(
-            native_mesh(data), scheme=settings["scheme"], boundary_rule=settings["boundary_rule"],
+            native_mesh(data), scheme=scheme, boundary_rule=settings["boundary_rule"],
             boundary_smooth=settings["boundary_smooth"],
-            use_creases=settings["use_creases"], quality=settings["quality"],
-            method=settings["method"], tolerance=settings["tolerance"],
-            max_iterations=settings["max_iterations"], progress=progress)
+            use_creases=settings["use_creases"] and scheme != 'DOO_SABIN',
+            quality=settings["quality"], method=settings["method"],
+            tolerance=settings["tolerance"], max_iterations=settings["max_iterations"],
+            progress=progress, **shapes)
     except native.PiaError as error:
+        named = _shape_error(error, values, settings)
+        if named is not None:
+            raise named from None
         if (settings["scheme"] == 'LOOP' and not settings["triangulate"]
                 and error.code == 'TOPOLOGY' and non_triangle_count(data)):
             raise type(error)(error.code, "%s, or turn on Triangulate to use a triangulated copy"
@@ -309,38 +385,65 @@ def _link_like(source, new_obj, context):
 
 
 def limit_arrays(mesh, settings, positions=None):
-    """(positions (M,3) float32, triangles (K,3) int32): the library's Loop limit
-    surface of the cage mesh, refined settings["levels"] times.
+    """Loop: (positions (M,3) float32, triangles (K,3) int32), the library's
+    limit surface of the cage mesh, refined settings["levels"] times.
+    Doo-Sabin: (positions (M,3) float32, face_vertices int32, face_sizes (K,)
+    int32), the cage refined settings["levels"] times with the per-face shape
+    parameters of the cage mesh (face_shape_parameters) in the first step.
 
     positions replaces the mesh's vertex positions (the solved cage) if given.
     """
-    _require_library(refine=True)
+    doo_sabin = settings["scheme"] == 'DOO_SABIN'
+    _require_library(refine=True, scheme='DOO_SABIN' if doo_sabin else 'LOOP')
     arrays = mesh_arrays(mesh)
     if positions is not None:
         arrays["positions"] = np.ascontiguousarray(positions, np.float32).reshape(-1, 3)
     cage = native.Mesh(arrays["positions"], arrays["face_sizes"], arrays["face_vertices"],
                        edges=arrays["edges"], edge_creases=arrays["edge_creases"],
                        vertex_creases=arrays["vertex_creases"])
+    if doo_sabin:
+        values = face_shape_parameters(mesh, settings)
+        try:
+            points, sizes, face_vertices = native.refine(
+                cage, int(settings["levels"]), scheme='DOO_SABIN', use_creases=False,
+                shape_parameter=float(settings["shape_parameter"]),
+                face_shape_parameters=values)
+        except native.PiaError as error:
+            named = _shape_error(error, values, settings)
+            if named is not None:
+                raise named from None
+            raise
+        return points, face_vertices, sizes
     return native.refine_limit(cage, int(settings["levels"]), scheme='LOOP',
                                boundary_rule=settings["boundary_rule"],
                                boundary_smooth=settings["boundary_smooth"],
                                use_creases=bool(settings["use_creases"]))
 
 
-def limit_mesh(name, points, triangles, materials=()):
-    """A new smooth-shaded triangle mesh from limit_arrays' output."""
+def limit_mesh(name, points, faces, materials=(), face_sizes=None):
+    """A new smooth-shaded mesh from limit_arrays' output: triangles (K,3), or
+    flat face_vertices with face_sizes (K,) for polygons of any size."""
     points = np.ascontiguousarray(points, np.float32).reshape(-1, 3)
-    triangles = np.ascontiguousarray(triangles, np.int32).reshape(-1, 3)
+    faces = np.ascontiguousarray(faces, np.int32).ravel()
+    if face_sizes is None:
+        face_sizes = np.full(len(faces) // 3, 3, np.int32)
+    face_sizes = np.ascontiguousarray(face_sizes, np.int32).ravel()
+    if int(face_sizes.sum()) != len(faces):
+        raise ValueError("limit mesh: %d face corners for face sizes summing to %d"
+                         % (len(faces), int(face_sizes.sum())))
     mesh = bpy.data.meshes.new(name)
     mesh.vertices.add(len(points))
     mesh.vertices.foreach_set("co", points.ravel())
-    count = len(triangles)
-    mesh.loops.add(3 * count)
-    mesh.loops.foreach_set("vertex_index", triangles.ravel())
+    count = len(face_sizes)
+    mesh.loops.add(len(faces))
+    mesh.loops.foreach_set("vertex_index", faces)
     mesh.polygons.add(count)
-    mesh.polygons.foreach_set("loop_start", np.arange(0, 3 * count, 3, dtype=np.int32))
+    starts = np.zeros(count, np.int32)
+    if count > 1:
+        np.cumsum(face_sizes[:-1], out=starts[1:])
+    mesh.polygons.foreach_set("loop_start", starts)
     try:  # read-only (derived from loop_start) in Blender 4
-        mesh.polygons.foreach_set("loop_total", np.full(count, 3, np.int32))
+        mesh.polygons.foreach_set("loop_total", face_sizes)
     except (AttributeError, TypeError, RuntimeError):
         pass
     mesh.update(calc_edges=True)
@@ -364,15 +467,21 @@ def find_limit_object(cage):
     return None
 
 
-def loop_cage_of(obj):
-    """The Loop cage for obj: obj itself, or the cage whose limit surface obj is."""
+def limit_cage_of(obj):
+    """The Loop or Doo-Sabin cage for obj: obj itself, or the cage whose limit
+    surface obj is (None if there is none)."""
     if obj is None:
         return None
-    if obj.get("pia_scheme") == 'LOOP':
+    if obj.get("pia_scheme") in LIMIT_SCHEMES:
         return obj
-    if obj.get(LIMIT_MARK) and obj.parent is not None and obj.parent.get("pia_scheme") == 'LOOP':
+    if (obj.get(LIMIT_MARK) and obj.parent is not None
+            and obj.parent.get("pia_scheme") in LIMIT_SCHEMES):
         return obj.parent
     return None
+
+
+# The name from when Loop was the only scheme with a `_limit` child.
+loop_cage_of = limit_cage_of
 
 
 def stored_settings(cage):
@@ -388,13 +497,14 @@ def stored_settings(cage):
     return s
 
 
-def set_limit_object(cage, points, triangles, context=None):
-    """Put the limit surface (points, triangles) on cage's `_limit` child,
+def set_limit_object(cage, points, faces, context=None, face_sizes=None):
+    """Put the limit surface (points, faces) on cage's `_limit` child,
     creating the child if there is none. Returns the child."""
     context = context or bpy.context
     child = find_limit_object(cage)
     name = cage.name + LIMIT_SUFFIX
-    mesh = limit_mesh(name, points, triangles, [m for m in cage.data.materials if m is not None])
+    mesh = limit_mesh(name, points, faces, [m for m in cage.data.materials if m is not None],
+                      face_sizes=face_sizes)
     if child is None:
         child = bpy.data.objects.new(name, mesh)
         for collection in list(cage.users_collection) or [context.scene.collection]:
@@ -417,7 +527,8 @@ def build_object(source, cage, report, settings, context=None, name=None, mesh=N
     """New object with the cage positions on a copy of source's mesh (or on mesh).
 
     Catmull-Clark: with a limit-surface Subdivision Surface modifier.
-    Loop: no modifier; limit = (points, triangles) goes to a `_limit` child.
+    Loop, Doo-Sabin: no modifier; limit = limit_arrays' output goes to a
+    `_limit` child.
     """
     context = context or bpy.context
     name = name or source.name + "_pia"
@@ -461,7 +572,8 @@ def build_object(source, cage, report, settings, context=None, name=None, mesh=N
     new_obj["pia_requested_method"] = str(settings["method"])
 
     if limit is not None:
-        set_limit_object(new_obj, limit[0], limit[1], context=context)
+        set_limit_object(new_obj, limit[0], limit[1], context=context,
+                         face_sizes=limit[2] if len(limit) > 2 else None)
 
     view_layer = context.view_layer
     if view_layer is not None:
@@ -479,16 +591,21 @@ def interpolate(obj, *, context=None, name=None, progress=None, **settings):
     """Make an interpolating cage object for the mesh object obj.
 
     Settings (keywords, defaults in DEFAULT_SETTINGS; names as the modifier's):
-    scheme ('CATMULL_CLARK' or 'LOOP'), levels, render_levels, quality,
+    scheme ('CATMULL_CLARK', 'LOOP' or 'DOO_SABIN'), levels, render_levels, quality,
     boundary_smooth, use_creases, method, tolerance (relative to the
     bounding-box diagonal), max_iterations; for Loop also boundary_rule
     ('SMOOTH' or 'HOPPE') and triangulate (use a triangulated copy of a mesh
-    that has quads or n-gons). Settings not given are taken from obj's
+    that has quads or n-gons); for Doo-Sabin (closed meshes) shape_parameter
+    in (0, 1) and shape_attribute (a float FACE attribute whose per-face
+    values replace shape_parameter where the mesh has it). Settings not given
+    are taken from obj's
     Subdivision Surface modifier if it has one, else the defaults.
 
     Loop: the cage has no modifier; its child ``<cage>_limit`` (find it
     with find_limit_object) holds the Loop limit surface refined `levels`
     times, whose first vertices are the limit points of the cage vertices.
+    Doo-Sabin: likewise, the child holds the cage refined `levels` times (a
+    control mesh whose face centroids lie on the limit surface).
 
     progress(iteration, relative_error) -> bool: return True to cancel.
 
@@ -505,12 +622,14 @@ def interpolate(obj, *, context=None, name=None, progress=None, **settings):
     merged.update(settings)
     s = check_settings(merged)
     loop = s["scheme"] == 'LOOP'
+    separate_limit = s["scheme"] in LIMIT_SCHEMES
     mesh = None
     if loop and s["triangulate"] and non_triangle_count(obj.data):
         mesh = triangulated_copy(obj.data)
     try:
         cage, report = compute_cage(obj, s, progress=progress, mesh=mesh)
-        limit = limit_arrays(mesh if mesh is not None else obj.data, s, cage) if loop else None
+        limit = (limit_arrays(mesh if mesh is not None else obj.data, s, cage)
+                 if separate_limit else None)
     except BaseException:
         if mesh is not None:
             bpy.data.meshes.remove(mesh)
@@ -520,27 +639,30 @@ def interpolate(obj, *, context=None, name=None, progress=None, **settings):
 
 
 def refresh_limit(obj, context=None):
-    """Recompute the limit surface of a Loop cage from its current mesh.
+    """Recompute the limit surface of a Loop or Doo-Sabin cage from its current mesh.
 
-    obj is the cage (pia_scheme 'LOOP') or its `_limit` child. The child's
-    mesh is replaced (the child is made again if it was deleted); the
-    settings are those stored on the cage. Returns the child. Raises
-    ValueError if obj is not a Loop cage, native.PiaError if the library
-    refuses the edited cage (nothing is changed then).
+    obj is the cage (pia_scheme 'LOOP' or 'DOO_SABIN') or its `_limit` child.
+    The child's mesh is replaced (the child is made again if it was deleted);
+    the settings are those stored on the cage, and a Doo-Sabin cage's shape
+    parameters are read again from its own face attribute. Returns the child.
+    Raises ValueError if obj is not such a cage, native.PiaError if the
+    library refuses the edited cage (nothing is changed then).
     """
     if obj is None:
-        raise ValueError("No active object: select a Loop cage or its limit surface")
-    cage = loop_cage_of(obj)
+        raise ValueError("No active object: select a Loop or Doo-Sabin cage or its limit surface")
+    cage = limit_cage_of(obj)
     if cage is None:
-        raise ValueError("'%s' is not a Loop cage: make one with Interpolating Subdivision Cage "
-                         "(scheme Loop), or select its limit surface" % obj.name)
+        raise ValueError("'%s' is not a Loop cage or a Doo-Sabin cage: make one with "
+                         "Interpolating Subdivision Cage (scheme Loop or Doo-Sabin), or select "
+                         "its limit surface" % obj.name)
     if cage.type != 'MESH':
         raise ValueError("'%s' is not a mesh object (type %s)" % (cage.name, cage.type))
     if cage.mode == 'EDIT':
         cage.update_from_editmode()
     check_source(cage)
-    points, triangles = limit_arrays(cage.data, stored_settings(cage))
-    return set_limit_object(cage, points, triangles, context=context)
+    limit = limit_arrays(cage.data, stored_settings(cage))
+    return set_limit_object(cage, limit[0], limit[1], context=context,
+                            face_sizes=limit[2] if len(limit) > 2 else None)
 
 
 def format_report(report):

@@ -36,13 +36,22 @@ def parse_args(argv):
                     "vertices of INPUT. Catmull-Clark (default): the limit surface of Blender's "
                     "Subdivision Surface modifier with Use Limit Surface; the cage is saved with "
                     "that modifier. Loop: the cage is saved without a modifier, with its limit "
-                    "surface (refined --levels times) as a child object <cage>_limit.")
+                    "surface (refined --levels times) as a child object <cage>_limit. DOO_SABIN "
+                    "(two-phase Doo-Sabin, closed meshes): likewise, the child holds the cage "
+                    "refined --levels times.")
     parser.add_argument("input", help="input mesh: .obj, .ply, .stl or .blend")
     parser.add_argument("output", help="output .blend file")
     parser.add_argument("--object", help="object name to use from a .blend input "
                                          "(default: the active mesh object, else the first)")
-    parser.add_argument("--scheme", choices=("CATMULL_CLARK", "LOOP"),
-                        help="subdivision scheme (default CATMULL_CLARK; LOOP needs triangles)")
+    parser.add_argument("--scheme", choices=("CATMULL_CLARK", "LOOP", "DOO_SABIN"),
+                        help="subdivision scheme (default CATMULL_CLARK; LOOP needs triangles; "
+                             "DOO_SABIN needs a closed mesh)")
+    parser.add_argument("--shape-parameter", type=float,
+                        help="Doo-Sabin: shape parameter in (0, 1) of every face in the first "
+                             "step (default 0.5; close to 1 hugs the mesh)")
+    parser.add_argument("--shape-attribute",
+                        help="Doo-Sabin: float face attribute whose per-face values replace "
+                             "--shape-parameter where the mesh has it (default pia_shape)")
     parser.add_argument("--boundary-rule", choices=("SMOOTH", "HOPPE"),
                         help="Loop boundary rules: OpenSubdiv's (SMOOTH, default) or Hoppe et al. "
                              "1994 (HOPPE, manifold meshes only, ignores --boundary-smooth)")
@@ -132,7 +141,7 @@ def main(argv):
     if args.render_levels is not None:
         settings["render_levels"] = args.render_levels
     for name in ("scheme", "boundary_rule", "quality", "boundary_smooth", "method", "tolerance",
-                 "max_iterations"):
+                 "max_iterations", "shape_parameter", "shape_attribute"):
         value = getattr(args, name)
         if value is not None:
             settings[name] = value
@@ -155,7 +164,7 @@ def main(argv):
     print("subdiv_pia: stencils %.3f s, solve %.3f s" % (report.stencil_seconds, report.solve_seconds))
     limit = package.api.find_limit_object(new_obj)
     if limit is not None:
-        print("subdiv_pia: limit surface %s: %d vertices, %d triangles"
+        print("subdiv_pia: limit surface %s: %d vertices, %d faces"
               % (limit.name, len(limit.data.vertices), len(limit.data.polygons)))
     output = os.path.abspath(args.output)
     os.makedirs(os.path.dirname(output) or ".", exist_ok=True)

@@ -31,29 +31,39 @@ def draw_settings(layout, settings, from_modifier=False):
     """The subdivision settings, shared by the redo panel and the Modifiers-tab panel.
 
     Settings that do not apply are greyed out: boundary rule and triangulate
-    for Catmull-Clark; render levels and quality for Loop (no modifier);
-    Boundary Smooth for Loop with Hoppe's rules.
+    unless Loop; shape parameter and attribute unless Doo-Sabin; render
+    levels and quality for Loop and Doo-Sabin (no modifier); Boundary Smooth
+    for Loop with Hoppe's rules and for Doo-Sabin (closed meshes only), and
+    creases for Doo-Sabin.
     """
     loop = settings.scheme == 'LOOP'
+    doo_sabin = settings.scheme == 'DOO_SABIN'
+    no_modifier = loop or doo_sabin
     layout.prop(settings, "scheme")
     col = layout.column()
     col.enabled = loop
     col.prop(settings, "boundary_rule")
     col.prop(settings, "triangulate")
     col = layout.column()
+    col.enabled = doo_sabin
+    col.prop(settings, "shape_parameter")
+    col.prop(settings, "shape_attribute")
+    col = layout.column()
     col.enabled = not from_modifier
     sub = col.column(align=True)
     sub.prop(settings, "levels")
     row = sub.row()
-    row.enabled = not loop
+    row.enabled = not no_modifier
     row.prop(settings, "render_levels")
     row = col.row()
-    row.enabled = not loop
+    row.enabled = not no_modifier
     row.prop(settings, "quality")
     row = col.row()
-    row.enabled = not (loop and settings.boundary_rule == 'HOPPE')
+    row.enabled = not (doo_sabin or (loop and settings.boundary_rule == 'HOPPE'))
     row.prop(settings, "boundary_smooth")
-    col.prop(settings, "use_creases")
+    row = col.row()
+    row.enabled = not doo_sabin
+    row.prop(settings, "use_creases")
 
 
 class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
@@ -115,7 +125,7 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
 
 
 class OBJECT_OT_subdiv_pia_refresh_limit(bpy.types.Operator):
-    """Recompute the Loop limit surface (the cage's "_limit" child) from the cage's current shape"""
+    """Recompute the Loop or Doo-Sabin limit surface (the cage's "_limit" child) from the cage's current shape and shape attribute"""
     bl_idname = "object.subdiv_pia_refresh_limit"
     bl_label = "Refresh Limit Surface"
     bl_options = {'REGISTER', 'UNDO'}
@@ -128,17 +138,17 @@ class OBJECT_OT_subdiv_pia_refresh_limit(bpy.types.Operator):
     def execute(self, context):
         obj = context.active_object
         try:
-            cage = api.loop_cage_of(obj)
+            cage = api.limit_cage_of(obj)
             if cage is not None and cage.mode == 'EDIT':
                 cage.update_from_editmode()
             child = api.refresh_limit(obj, context=context)
         except native.PiaError as error:
-            self.report({'ERROR'}, "'%s': %s" % (api.loop_cage_of(obj).name, error))
+            self.report({'ERROR'}, "'%s': %s" % (api.limit_cage_of(obj).name, error))
             return {'CANCELLED'}
         except (ValueError, RuntimeError) as error:
             self.report({'ERROR'}, str(error))
             return {'CANCELLED'}
-        self.report({'INFO'}, "%s: %d vertices, %d triangles"
+        self.report({'INFO'}, "%s: %d vertices, %d faces"
                     % (child.name, len(child.data.vertices), len(child.data.polygons)))
         return {'FINISHED'}
 

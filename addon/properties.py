@@ -2,7 +2,7 @@
 """Settings shared by the operator and the panel (scene.subdiv_pia)."""
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
 from .api import DEFAULT_SETTINGS
 
@@ -12,6 +12,8 @@ SCHEME_ITEMS = (
     ('LOOP', "Loop",
      "Loop subdivision of triangle meshes, as OpenSubdiv and USD define it (the library's limit "
      "surface, shown by a child object: Blender's modifier has no Loop scheme)"),
+    ('DOO_SABIN', "Doo-Sabin (two-phase)",
+     "Two-phase Doo-Sabin with a shape parameter per face; closed meshes"),
 )
 BOUNDARY_RULE_ITEMS = (
     ('SMOOTH', "Smooth",
@@ -50,7 +52,8 @@ def settings_annotations():
                                                 "method); off: such meshes are refused"),
         "levels": IntProperty(name="Levels Viewport", default=d["levels"], min=0, max=11, soft_max=6,
                               description="Viewport levels of the new Subdivision Surface modifier "
-                                          "(Loop: subdivision levels of the limit surface object)"),
+                                          "(Loop, Doo-Sabin: subdivision levels of the limit "
+                                          "surface object)"),
         "render_levels": IntProperty(name="Render", default=d["render_levels"], min=0, max=11, soft_max=6,
                                      description="Render levels of the new Subdivision Surface modifier"),
         "quality": IntProperty(name="Quality", default=d["quality"], min=1, max=10,
@@ -61,6 +64,17 @@ def settings_annotations():
                                         description="Boundary rule, as the modifier's"),
         "use_creases": BoolProperty(name="Use Creases", default=d["use_creases"],
                                     description="Use edge and vertex creases, as the modifier"),
+        # No hard range: a value outside (0, 1) is refused with a message
+        # rather than silently clamped.
+        "shape_parameter": FloatProperty(name="Shape Parameter", default=d["shape_parameter"],
+                                         soft_min=0.01, soft_max=0.99, precision=3, step=1,
+                                         description="Shape parameter of every face in the first "
+                                                     "subdivision step: close to 1 hugs the mesh, "
+                                                     "lower relaxes it"),
+        "shape_attribute": StringProperty(name="Shape Attribute", default=d["shape_attribute"],
+                                          description="Name of a float Face attribute: where the "
+                                                      "mesh has it, its per-face values win over "
+                                                      "Shape Parameter (Doo-Sabin)"),
         "method": EnumProperty(name="Method", items=METHOD_ITEMS, default=d["method"],
                                description="Iterative solver"),
         "tolerance": FloatProperty(name="Tolerance", default=d["tolerance"], min=1e-12, max=1.0,

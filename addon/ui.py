@@ -50,7 +50,7 @@ class DATA_PT_subdiv_pia(bpy.types.Panel):
             if name not in modifier_names:
                 setattr(op, name, getattr(settings, name))
 
-        if api.loop_cage_of(obj) is not None:
+        if api.limit_cage_of(obj) is not None:
             layout.operator(OBJECT_OT_subdiv_pia_refresh_limit.bl_idname, icon='FILE_REFRESH')
 
         if "pia_status" in obj:
