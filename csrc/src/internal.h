@@ -22,6 +22,21 @@ struct spia_stencils {
     int32_t boundary_count;
 };
 
+/* out = (row r of s) applied to points x (3 doubles each). */
+static inline void spia__row_product(const spia_stencils *s, int32_t r, const double *x, double out[3]) {
+    double a = 0.0, b = 0.0, c = 0.0;
+    for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k) {
+        const double w = s->weights[k];
+        const double *p = x + 3 * (int64_t)s->indices[k];
+        a += w * p[0];
+        b += w * p[1];
+        c += w * p[2];
+    }
+    out[0] = a;
+    out[1] = b;
+    out[2] = c;
+}
+
 /* Writes code and a printf-style message into status (if not NULL) and
  * returns code, so that failures read `return spia__fail(...)`. */
 spia_result spia__fail(spia_status *status, spia_result code, int64_t index, const char *fmt, ...)

@@ -72,21 +72,6 @@ typedef struct solver_state {
 
 static inline int active(const solver_state *s, int32_t r) { return !s->stuck[r] && !s->frozen[r]; }
 
-/* out = L x for the rows given (all when rows_all), 3 doubles per row. */
-static inline void row_product(const spia_stencils *L, int32_t r, const double *x, double out[3]) {
-    double a = 0.0, b = 0.0, c = 0.0;
-    for (int64_t k = L->offsets[r]; k < L->offsets[r + 1]; ++k) {
-        const double w = L->weights[k];
-        const double *p = x + 3 * (int64_t)L->indices[k];
-        a += w * p[0];
-        b += w * p[1];
-        c += w * p[2];
-    }
-    out[0] = a;
-    out[1] = b;
-    out[2] = c;
-}
-
 /* Statistics of R: returns the max distance over all rows and writes the
  * mean over all rows and the max over active rows. */
 static double residual_stats(solver_state *s, double *mean, double *max_active) {
@@ -111,7 +96,7 @@ static double residual_stats(solver_state *s, double *mean, double *max_active) 
 static double residual(solver_state *s, double *mean, double *max_active) {
     for (int32_t r = 0; r < s->n; ++r) {
         double lv[3];
-        row_product(s->L, r, s->V, lv);
+        spia__row_product(s->L, r, s->V, lv);
         for (int a = 0; a < 3; ++a) s->R[3 * (int64_t)r + a] = s->P[3 * (int64_t)r + a] - lv[a];
     }
     return residual_stats(s, mean, max_active);
@@ -127,7 +112,7 @@ static void step_gs_pia(solver_state *s) {
     for (int32_t r = 0; r < s->n; ++r) {
         if (!active(s, r)) continue;
         double lv[3];
-        row_product(s->L, r, s->V, lv);
+        spia__row_product(s->L, r, s->V, lv);
         const double *t = s->P + 3 * (int64_t)r;
         double *v = s->V + 3 * (int64_t)r;
         const double inv = 1.0 / s->diag[r];
@@ -231,7 +216,7 @@ static int step_cg(solver_state *s) {
     }
     double pq[3] = {0.0, 0.0, 0.0};
     for (int32_t r = 0; r < n; ++r) {
-        row_product(s->L, r, s->D, s->T + 3 * (int64_t)r);
+        spia__row_product(s->L, r, s->D, s->T + 3 * (int64_t)r);
         if (active(s, r))
             for (int a = 0; a < 3; ++a) pq[a] += s->D[3 * (int64_t)r + a] * s->T[3 * (int64_t)r + a] / c[r];
     }

@@ -76,19 +76,7 @@ spia_result spia_stencils_copy_csr(const spia_stencils *s, int64_t *offsets, int
 
 spia_result spia_stencils_apply(const spia_stencils *s, const double *cage, double *out) {
     if (!s || !cage || !out) return SPIA_ERROR_INVALID_ARGUMENT;
-    for (int32_t r = 0; r < s->rows; ++r) {
-        double x = 0.0, y = 0.0, z = 0.0;
-        for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k) {
-            const double w = s->weights[k];
-            const double *p = cage + 3 * (int64_t)s->indices[k];
-            x += w * p[0];
-            y += w * p[1];
-            z += w * p[2];
-        }
-        out[3 * (int64_t)r] = x;
-        out[3 * (int64_t)r + 1] = y;
-        out[3 * (int64_t)r + 2] = z;
-    }
+    for (int32_t r = 0; r < s->rows; ++r) spia__row_product(s, r, cage, out + 3 * (int64_t)r);
     return SPIA_OK;
 }
 

@@ -43,13 +43,7 @@ def object_from_pydata(name, vertices, faces, edges=(), validate=True):
     return link_and_activate(bpy.data.objects.new(name, mesh))
 
 
-def operator_exists(module_name, op_name):
-    """bpy.ops.<module>.<name> exists (hasattr on bpy.ops is always True)."""
-    try:
-        getattr(getattr(bpy.ops, module_name), op_name).get_rna_type()
-        return True
-    except (AttributeError, KeyError):
-        return False
+from subdiv_pia.cli import operator_exists  # noqa: E402  (run.py puts the add-on on sys.path)
 
 
 def import_obj(path):
