@@ -10,6 +10,8 @@ Script use (background or foreground)::
     cage, report = subdiv_pia.interpolate(tri_obj, scheme='LOOP', boundary_rule='HOPPE')
     limit = subdiv_pia.find_limit_object(cage)   # child "<cage>_limit": the Loop limit surface
     subdiv_pia.refresh_limit(cage)               # after editing the cage
+    cage, report = subdiv_pia.interpolate(closed_obj, scheme='DOO_SABIN', shape_parameter=0.8,
+                                          shape_attribute="pia_shape")  # per-face values win
 
 The numeric core (``native``) imports no ``bpy``; everything else is loaded
 only inside Blender so that ``subdiv_pia.native`` stays importable outside it.
