@@ -22,7 +22,7 @@ bl_info = {
     "author": "subdiv_pia contributors",
     "version": (0, 1, 0),
     "blender": (3, 4, 0),
-    "location": "Properties > Modifiers > Subdivision PIA; View3D > Object menu",
+    "location": "Properties > Modifiers > Interpolating Subdivision Cage; View3D > Object menu",
     "description": "New cage whose subdivision limit surface passes through the mesh vertices",
     "category": "Mesh",
 }

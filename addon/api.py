@@ -295,15 +295,9 @@ def native_mesh(mesh):
                        vertex_creases=arrays["vertex_creases"])
 
 
-def _require_library(refine=False, scheme='LOOP'):
+def _require_library():
     if not native.available():
         raise RuntimeError("Subdivision PIA library not loaded: %s" % native.load_error())
-    if refine and scheme == 'DOO_SABIN' and not hasattr(native, "refine"):
-        raise RuntimeError("This build of the Subdivision PIA library cannot refine Doo-Sabin "
-                           "cages (no refine): rebuild or update the add-on")
-    if refine and scheme == 'LOOP' and not hasattr(native, "refine_limit"):
-        raise RuntimeError("This build of the Subdivision PIA library cannot evaluate Loop limit "
-                           "surfaces (no refine_limit): rebuild or update the add-on")
 
 
 def non_triangle_count(mesh):
@@ -340,7 +334,7 @@ def compute_cage(obj, settings, progress=None, mesh=None):
 
     Returns (cage, report)."""
     scheme = settings["scheme"]
-    _require_library(refine=scheme in LIMIT_SCHEMES, scheme=scheme)
+    _require_library()
     data = mesh if mesh is not None else obj.data
     shapes = {}
     values = None
@@ -394,7 +388,7 @@ def limit_arrays(mesh, settings, positions=None):
     positions replaces the mesh's vertex positions (the solved cage) if given.
     """
     doo_sabin = settings["scheme"] == 'DOO_SABIN'
-    _require_library(refine=True, scheme='DOO_SABIN' if doo_sabin else 'LOOP')
+    _require_library()
     arrays = mesh_arrays(mesh)
     if positions is not None:
         arrays["positions"] = np.ascontiguousarray(positions, np.float32).reshape(-1, 3)

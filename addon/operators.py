@@ -69,7 +69,7 @@ def draw_settings(layout, settings, from_modifier=False):
 class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
     """Make a new object whose subdivision limit surface passes through this mesh's vertices"""
     bl_idname = "object.subdiv_pia_interpolate"
-    bl_label = "Interpolating Subdivision Cage"
+    bl_label = "Make Interpolating Cage"
     bl_options = {'REGISTER', 'UNDO'}
     __annotations__ = settings_annotations()
 

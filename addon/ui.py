@@ -59,8 +59,8 @@ class DATA_PT_subdiv_pia(bpy.types.Panel):
             col = box.column(align=True)
             col.label(text="Status: %s (%s)" % (obj.get("pia_status"), obj.get("pia_method", "?")))
             col.label(text="Iterations: %d" % int(obj.get("pia_iterations", 0)))
-            col.label(text="Max error: %.3g of diagonal" % float(obj.get("pia_max_error", 0.0)))
-            col.label(text="Mean error: %.3g of diagonal" % float(obj.get("pia_mean_error", 0.0)))
+            col.label(text="Max error: %.3g of bbox diagonal" % float(obj.get("pia_max_error", 0.0)))
+            col.label(text="Mean error: %.3g of bbox diagonal" % float(obj.get("pia_mean_error", 0.0)))
 
 
 classes = (DATA_PT_subdiv_pia,)
