@@ -117,3 +117,43 @@ def assert_unchanged(obj, before):
 
 def run_operator(**settings):
     return bpy.ops.object.subdiv_pia_interpolate(**settings)
+
+
+def object_counts():
+    return len(bpy.data.objects), len(bpy.data.meshes)
+
+
+def world(obj, points=None):
+    """Positions of obj's vertices (or points in obj's space) in world space."""
+    points = positions(obj.data) if points is None else points
+    m = np.array(obj.matrix_world, dtype=np.float64)
+    return points.astype(np.float64) @ m[:3, :3].T + m[:3, 3]
+
+
+def make_limit_cage(source, scheme, setting_keys, **settings):
+    """Run the operator with a scheme Blender cannot show (LOOP, DOO_SABIN);
+    check the cage (no modifier, settings stored, converged) and its
+    `_limit` child (parented, same collections, sitting on the cage); return
+    (cage, limit, world-space targets)."""
+    from subdiv_pia import api
+    before = snapshot(source)
+    targets = world(source)
+    assert run_operator(scheme=scheme, **settings) == {'FINISHED'}
+    cage = bpy.context.active_object
+    assert cage is not source and cage.name.startswith(source.name + "_pia")
+    assert cage.select_get() and not source.select_get()
+    assert not [m for m in cage.modifiers if m.type == 'SUBSURF']
+    for key in setting_keys:
+        assert key in cage, key
+    assert cage["pia_scheme"] == scheme
+    assert cage["pia_status"] == 'CONVERGED', cage["pia_status"]
+    limit = api.find_limit_object(cage)
+    assert limit is not None and limit.name == cage.name + "_limit"
+    assert limit.parent is cage
+    assert set(limit.users_collection) == set(cage.users_collection)
+    bpy.context.view_layer.update()
+    assert np.array_equal(np.array(limit.matrix_basis), np.eye(4))
+    assert np.array_equal(np.array(limit.matrix_parent_inverse), np.eye(4))
+    assert np.allclose(np.array(limit.matrix_world), np.array(cage.matrix_world), atol=1e-6)
+    assert_unchanged(source, before)
+    return cage, limit, targets

@@ -14,8 +14,8 @@ import pytest
 import shapes
 import subdiv_pia
 from subdiv_pia import api, native
-from conftest import (DATA, MATCH, assert_unchanged, diagonal, import_obj, positions,
-                      run_operator, snapshot)
+from conftest import (DATA, MATCH, assert_unchanged, diagonal, import_obj, make_limit_cage, object_counts,
+                      positions, run_operator, snapshot, world)
 from test_api_cli import run_cli
 from test_ui import draw_panel
 
@@ -24,40 +24,8 @@ SETTING_KEYS = ("pia_scheme", "pia_boundary_rule", "pia_boundary_smooth", "pia_u
                 "pia_max_error", "pia_tolerance")
 
 
-def counts():
-    return len(bpy.data.objects), len(bpy.data.meshes)
-
-
-def world(obj, points=None):
-    """Positions of obj's vertices (or points in obj's space) in world space."""
-    points = positions(obj.data) if points is None else points
-    m = np.array(obj.matrix_world, dtype=np.float64)
-    return points.astype(np.float64) @ m[:3, :3].T + m[:3, 3]
-
-
 def make_loop(source, **settings):
-    """Run the operator with scheme LOOP; check what it made; return (cage, limit, targets)."""
-    before = snapshot(source)
-    targets = world(source)
-    assert run_operator(scheme='LOOP', **settings) == {'FINISHED'}
-    cage = bpy.context.active_object
-    assert cage is not source and cage.name == source.name + "_pia"
-    assert cage.select_get() and not source.select_get()
-    assert not [m for m in cage.modifiers if m.type == 'SUBSURF']
-    for key in SETTING_KEYS:
-        assert key in cage, key
-    assert cage["pia_scheme"] == 'LOOP'
-    assert cage["pia_status"] == 'CONVERGED', cage["pia_status"]
-    limit = api.find_limit_object(cage)
-    assert limit is not None and limit.name == cage.name + "_limit"
-    assert limit.parent is cage
-    assert set(limit.users_collection) == set(cage.users_collection)
-    bpy.context.view_layer.update()
-    assert np.array_equal(np.array(limit.matrix_basis), np.eye(4))
-    assert np.array_equal(np.array(limit.matrix_parent_inverse), np.eye(4))
-    assert np.allclose(np.array(limit.matrix_world), np.array(cage.matrix_world), atol=1e-6)
-    assert_unchanged(source, before)
-    return cage, limit, targets
+    return make_limit_cage(source, 'LOOP', SETTING_KEYS, **settings)
 
 
 def check_limit(cage, limit, targets, levels):
@@ -120,10 +88,10 @@ def test_closed_mesh_uses_cg():
 # --- bad input and triangulate ----------------------------------------------------
 
 def expect_error(pattern, **settings):
-    before = counts()
+    before = object_counts()
     with pytest.raises(RuntimeError, match=pattern) as info:
         run_operator(**settings)
-    assert counts() == before, "nothing may be created on error"
+    assert object_counts() == before, "nothing may be created on error"
     return str(info.value)
 
 

@@ -2,7 +2,6 @@
 """Reading a mesh into flat arrays: face order, loops stored out of order,
 creases from Blender's own storage."""
 
-import bpy
 import numpy as np
 
 import shapes
