@@ -258,9 +258,11 @@ typedef struct spia_stencils spia_stencils;
 
 /*
  * Builds the limit stencils of `mesh` under `options` (scheme,
- * boundary_smooth, ignore_creases and quality are used; the solver fields
- * are ignored; the progress callback may cancel before the work starts and
- * after it ends).  On success *out receives a table to be freed with
+ * boundary_smooth, ignore_creases, quality, boundary_rule and the shape
+ * parameters are used; the solver fields are ignored; the progress callback
+ * may cancel before the work starts and after it ends).  Loop needs
+ * triangles and Doo-Sabin a closed mesh (SPIA_ERROR_TOPOLOGY, with counts,
+ * otherwise).  On success *out receives a table to be freed with
  * spia_stencils_free.  On failure *out is set to NULL.
  */
 SPIA_API spia_result spia_limit_stencils_create(const spia_mesh *mesh, const spia_options *options,
@@ -329,10 +331,10 @@ typedef struct spia_report {
  *             and SPIA_STAGNATED; untouched on failure.  May alias targets.
  *   report    optional; filled in whatever the outcome.
  *
- * Uses options->method, tolerance, max_iterations and the progress callback.
- * Fails with SPIA_ERROR_DIVERGED if the error grows without bound (a stencil
- * table with a zero or negative diagonal entry cannot be solved by these
- * methods either and is rejected as SPIA_ERROR_INVALID_ARGUMENT).
+ * Uses options->method, tolerance, max_iterations, weight, staged and the
+ * progress callback.  Fails with SPIA_ERROR_DIVERGED if the error grows
+ * without bound; GS-PIA refuses a table with a zero or negative diagonal
+ * entry and CG one without the D S form, as SPIA_ERROR_INVALID_ARGUMENT.
  */
 SPIA_API spia_result spia_solve(const spia_stencils *stencils, const float *targets,
                                 const spia_options *options, float *cage, spia_report *report,
