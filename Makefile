@@ -48,6 +48,7 @@ demo: build
 
 bench: build
 	$(PYTHON) bench/bench_interpolate.py
+	$(PYTHON) bench/bench_loop_papers.py
 	$(PYTHON) bench/bench_doosabin.py
 
 clean:
