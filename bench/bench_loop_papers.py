@@ -241,7 +241,7 @@ def main():
               "E10/E0: max error after 10 iterations over the initial one (cage = mesh), from library runs "
               "with tolerance 1e-12.",
               "iterations: library runs with tolerance = target / diagonal of the unit box, at most "
-              f"{MAX_ITERATIONS} iterations; AUTO is the library's Chebyshev-accelerated PIA.",
+              f"{MAX_ITERATIONS} iterations; AUTO is the library's choice (CG on closed meshes, Chebyshev-accelerated PIA on open ones).",
               "Open meshes are solved in one go (not boundary first, then interior)."]
     notes_md = [""] + [f"- {s}" for s in notes]
     print("\n".join(legend))
