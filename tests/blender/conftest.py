@@ -130,6 +130,15 @@ def world(obj, points=None):
     return points.astype(np.float64) @ m[:3, :3].T + m[:3, 3]
 
 
+def expect_error(pattern, **settings):
+    """The operator refuses with a message matching pattern and makes nothing."""
+    before = object_counts()
+    with pytest.raises(RuntimeError, match=pattern) as info:
+        run_operator(**settings)
+    assert object_counts() == before, "nothing may be created on error"
+    return str(info.value)
+
+
 def make_limit_cage(source, scheme, setting_keys, **settings):
     """Run the operator with a scheme Blender cannot show (LOOP, DOO_SABIN);
     check the cage (no modifier, settings stored, converged) and its

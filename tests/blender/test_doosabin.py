@@ -20,7 +20,7 @@ import pytest
 import shapes
 import subdiv_pia
 from subdiv_pia import api, native
-from conftest import (DATA, MATCH, assert_unchanged, diagonal, import_obj, make_limit_cage, object_counts,
+from conftest import (DATA, MATCH, assert_unchanged, diagonal, expect_error, import_obj, make_limit_cage,
                       positions, run_operator, snapshot, world)
 from test_api_cli import run_cli
 from test_ui import Recorder
@@ -180,14 +180,6 @@ def test_other_attribute_name():
     check_limit(cage, limit, targets, 2)
     plain, _ = subdiv_pia.interpolate(source, scheme='DOO_SABIN', levels=1)  # "pia_shape": none
     assert np.abs(positions(plain.data) - positions(cage.data)).max() > 1e-4 * diagonal(targets)
-
-
-def expect_error(pattern, **settings):
-    before = object_counts()
-    with pytest.raises(RuntimeError, match=pattern) as info:
-        run_operator(**settings)
-    assert object_counts() == before, "nothing may be created on error"
-    return str(info.value)
 
 
 def test_attribute_out_of_range_names_face_count():

@@ -14,7 +14,7 @@ import pytest
 import shapes
 import subdiv_pia
 from subdiv_pia import api, native
-from conftest import (DATA, MATCH, assert_unchanged, diagonal, import_obj, make_limit_cage, object_counts,
+from conftest import (DATA, MATCH, assert_unchanged, diagonal, expect_error, import_obj, make_limit_cage,
                       positions, run_operator, snapshot, world)
 from test_api_cli import run_cli
 from test_ui import draw_panel
@@ -86,14 +86,6 @@ def test_closed_mesh_uses_cg():
 
 
 # --- bad input and triangulate ----------------------------------------------------
-
-def expect_error(pattern, **settings):
-    before = object_counts()
-    with pytest.raises(RuntimeError, match=pattern) as info:
-        run_operator(**settings)
-    assert object_counts() == before, "nothing may be created on error"
-    return str(info.value)
-
 
 def test_quads_refused_without_triangulate():
     source = shapes.open_grid()  # 5 x 4 quads
