@@ -29,6 +29,7 @@ DEFAULT_SETTINGS = {
     "scheme": 'CATMULL_CLARK',
     "boundary_rule": 'SMOOTH',
     "triangulate": False,
+    "staged": False,
     "levels": 2,
     "render_levels": 2,
     "quality": 3,
@@ -56,7 +57,7 @@ SCHEME_NAMES = {'CATMULL_CLARK': "Catmull-Clark", 'LOOP': "Loop", 'DOO_SABIN': "
 # limit surface, and what a re-run needs to repeat it.
 LIMIT_SUFFIX = "_limit"
 LIMIT_MARK = "pia_limit_surface"   # on the child that holds the limit surface
-STORED_SETTINGS = ("scheme", "boundary_rule", "boundary_smooth", "use_creases", "triangulate",
+STORED_SETTINGS = ("scheme", "boundary_rule", "boundary_smooth", "use_creases", "triangulate", "staged",
                    "levels", "render_levels", "quality", "method", "tolerance", "max_iterations",
                    "shape_parameter", "shape_attribute")
 
@@ -108,6 +109,7 @@ def check_settings(settings):
     if s["method"] not in METHODS:
         raise ValueError("method must be one of %s, not %r" % (METHODS, s["method"]))
     s["triangulate"] = bool(s["triangulate"])
+    s["staged"] = bool(s["staged"])
     s["levels"] = int(s["levels"])
     s["render_levels"] = int(s["render_levels"])
     s["quality"] = int(s["quality"])
@@ -349,7 +351,7 @@ def compute_cage(obj, settings, progress=None, mesh=None):
             use_creases=settings["use_creases"] and scheme != 'DOO_SABIN',
             quality=settings["quality"], method=settings["method"],
             tolerance=settings["tolerance"], max_iterations=settings["max_iterations"],
-            progress=progress, **shapes)
+            staged=settings["staged"] and scheme == 'LOOP', progress=progress, **shapes)
     except native.PiaError as error:
         named = _shape_error(error, values, settings)
         if named is not None:
@@ -670,6 +672,8 @@ def format_report(report):
     line = ("%s: %d iterations (%s), max error %.3g, mean error %.3g of the bounding-box diagonal"
             % (head, report.iterations, report.method,
                report.max_error_relative, report.mean_error_relative))
+    if report.stage_iterations[0] > 0:
+        line += "; boundary first: %d + %d iterations" % tuple(report.stage_iterations)
     if not report.converged and report.message:
         line += " (%s)" % report.message
     return line

@@ -58,6 +58,8 @@ def parse_args(argv):
     parser.add_argument("--triangulate", action="store_true",
                         help="Loop: split quads and n-gons into triangles (Beauty method) "
                              "instead of refusing the mesh")
+    parser.add_argument("--staged", action="store_true",
+                        help="Loop: solve the boundary first, then the interior (the open-mesh paper's way)")
     parser.add_argument("--levels", type=int, help="viewport levels of the modifier, or the Loop "
                                                    "limit surface's levels (default 2)")
     parser.add_argument("--render-levels", type=int, help="render levels (default: --levels)")
@@ -149,6 +151,8 @@ def main(argv):
         settings["use_creases"] = False
     if args.triangulate:
         settings["triangulate"] = True
+    if args.staged:
+        settings["staged"] = True
 
     progress = None
     if sys.stdout.isatty():

@@ -44,6 +44,7 @@ def draw_settings(layout, settings, from_modifier=False):
     col.enabled = loop
     col.prop(settings, "boundary_rule")
     col.prop(settings, "triangulate")
+    col.prop(settings, "staged")
     col = layout.column()
     col.enabled = doo_sabin
     col.prop(settings, "shape_parameter")

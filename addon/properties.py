@@ -50,6 +50,10 @@ def settings_annotations():
                                     description="Loop scheme: make the cage from a copy of the mesh "
                                                 "with quads and n-gons split into triangles (Beauty "
                                                 "method); off: such meshes are refused"),
+        "staged": BoolProperty(name="Boundary First", default=d["staged"],
+                               description="Loop scheme: solve the boundary vertices first, then the "
+                                           "interior with the boundary fixed, as the open-mesh paper "
+                                           "does (same cage; the report gives both stages' iterations)"),
         "levels": IntProperty(name="Levels Viewport", default=d["levels"], min=0, max=11, soft_max=6,
                               description="Viewport levels of the new Subdivision Surface modifier "
                                           "(Loop, Doo-Sabin: subdivision levels of the limit "

@@ -78,6 +78,22 @@ def test_placement_follows_source():
     check_limit(cage, limit, targets, 1)
 
 
+def test_boundary_first_reaches_the_same_cage():
+    """The open-mesh paper's staged solve, from the operator: the same cage
+    as solving everything at once, and both stages reported."""
+    source = import_obj(os.path.join(DATA, "teapot.obj"))
+    together, _, targets = make_loop(source, levels=1, boundary_rule='HOPPE', tolerance=1e-7)
+    bpy.context.view_layer.objects.active = source
+    source.select_set(True)
+    staged, limit, _ = make_loop(source, levels=1, boundary_rule='HOPPE', tolerance=1e-7, staged=True)
+    assert staged["pia_staged"] and not together["pia_staged"]
+    check_limit(staged, limit, targets, 1)
+    assert np.abs(positions(staged.data) - positions(together.data)).max() < 1e-5 * diagonal(targets)
+    _, report = subdiv_pia.interpolate(source, scheme='LOOP', boundary_rule='HOPPE', staged=True, levels=1)
+    assert report.stage_iterations[0] > 0 and report.stage_iterations[1] > 0
+    assert "boundary first" in api.format_report(report)
+
+
 def test_closed_mesh_uses_cg():
     source = shapes.ico_sphere()
     cage, limit, targets = make_loop(source, levels=2, method='CG')
