@@ -7,7 +7,7 @@ new object with a Subdivision Surface modifier (use_limit_surface=True).
 
 Blender has no Loop subdivision modifier: for scheme 'LOOP' the new object
 is the cage without a modifier, and a child object ``<cage>_limit`` holds
-the library's Loop limit surface of the cage (native.refine_limit), which
+the library's Loop limit surface of the cage (native.refine), which
 refresh_limit recomputes after the cage was edited.
 
 The two-phase Doo-Sabin scheme ('DOO_SABIN', closed meshes) has no modifier
@@ -50,7 +50,7 @@ BOUNDARY_RULES = ('SMOOTH', 'HOPPE')
 # The library decides where CG (conjugate gradients) applies: it needs a
 # symmetrizable limit matrix (closed meshes) and says so otherwise.
 METHODS = tuple(native.METHODS)
-LOOP_MAX_LEVELS = 8  # native.refine's (and refine_limit's) limit
+LOOP_MAX_LEVELS = 8  # native.refine's limit
 SCHEME_NAMES = {'CATMULL_CLARK': "Catmull-Clark", 'LOOP': "Loop", 'DOO_SABIN': "Doo-Sabin"}
 
 # Custom properties of a Loop or Doo-Sabin cage: what refresh_limit needs to remake its
@@ -381,11 +381,11 @@ def _link_like(source, new_obj, context):
 
 
 def limit_arrays(mesh, settings, positions=None):
-    """Loop: (positions (M,3) float32, triangles (K,3) int32), the library's
-    limit surface of the cage mesh, refined settings["levels"] times.
-    Doo-Sabin: (positions (M,3) float32, face_vertices int32, face_sizes (K,)
-    int32), the cage refined settings["levels"] times with the per-face shape
-    parameters of the cage mesh (face_shape_parameters) in the first step.
+    """(positions (M,3) float32, face_sizes (K,) int32, face_vertices int32):
+    the surface the library shows for a Loop or Doo-Sabin cage mesh, refined
+    settings["levels"] times. Loop: triangles, every vertex at its limit
+    position. Doo-Sabin: the refined mesh, with the per-face shape parameters
+    of the cage mesh (face_shape_parameters) in the first step.
 
     positions replaces the mesh's vertex positions (the solved cage) if given.
     """
@@ -397,36 +397,28 @@ def limit_arrays(mesh, settings, positions=None):
     cage = native.Mesh(arrays["positions"], arrays["face_sizes"], arrays["face_vertices"],
                        edges=arrays["edges"], edge_creases=arrays["edge_creases"],
                        vertex_creases=arrays["vertex_creases"])
-    if doo_sabin:
-        values = face_shape_parameters(mesh, settings)
-        try:
-            points, sizes, face_vertices = native.refine(
-                cage, int(settings["levels"]), scheme='DOO_SABIN', use_creases=False,
-                shape_parameter=float(settings["shape_parameter"]),
-                face_shape_parameters=values)
-        except native.PiaError as error:
-            named = _shape_error(error, values, settings)
-            if named is not None:
-                raise named from None
-            raise
-        return points, face_vertices, sizes
-    return native.refine_limit(cage, int(settings["levels"]), scheme='LOOP',
-                               boundary_rule=settings["boundary_rule"],
-                               boundary_smooth=settings["boundary_smooth"],
-                               use_creases=bool(settings["use_creases"]))
+    if not doo_sabin:
+        return native.refine(cage, int(settings["levels"]), scheme='LOOP',
+                             boundary_rule=settings["boundary_rule"],
+                             boundary_smooth=settings["boundary_smooth"],
+                             use_creases=bool(settings["use_creases"]))
+    values = face_shape_parameters(mesh, settings)
+    try:
+        return native.refine(cage, int(settings["levels"]), scheme='DOO_SABIN', use_creases=False,
+                             shape_parameter=float(settings["shape_parameter"]),
+                             face_shape_parameters=values)
+    except native.PiaError as error:
+        named = _shape_error(error, values, settings)
+        if named is not None:
+            raise named from None
+        raise
 
 
-def limit_mesh(name, points, faces, materials=(), face_sizes=None):
-    """A new smooth-shaded mesh from limit_arrays' output: triangles (K,3), or
-    flat face_vertices with face_sizes (K,) for polygons of any size."""
+def limit_mesh(name, points, face_sizes, face_vertices, materials=()):
+    """A new smooth-shaded mesh from limit_arrays' output."""
     points = np.ascontiguousarray(points, np.float32).reshape(-1, 3)
-    faces = np.ascontiguousarray(faces, np.int32).ravel()
-    if face_sizes is None:
-        face_sizes = np.full(len(faces) // 3, 3, np.int32)
+    faces = np.ascontiguousarray(face_vertices, np.int32).ravel()
     face_sizes = np.ascontiguousarray(face_sizes, np.int32).ravel()
-    if int(face_sizes.sum()) != len(faces):
-        raise ValueError("limit mesh: %d face corners for face sizes summing to %d"
-                         % (len(faces), int(face_sizes.sum())))
     mesh = bpy.data.meshes.new(name)
     mesh.vertices.add(len(points))
     mesh.vertices.foreach_set("co", points.ravel())
@@ -493,14 +485,13 @@ def stored_settings(cage):
     return s
 
 
-def set_limit_object(cage, points, faces, context=None, face_sizes=None):
-    """Put the limit surface (points, faces) on cage's `_limit` child,
+def set_limit_object(cage, limit, context=None):
+    """Put the limit surface (limit_arrays' output) on cage's `_limit` child,
     creating the child if there is none. Returns the child."""
     context = context or bpy.context
     child = find_limit_object(cage)
     name = cage.name + LIMIT_SUFFIX
-    mesh = limit_mesh(name, points, faces, [m for m in cage.data.materials if m is not None],
-                      face_sizes=face_sizes)
+    mesh = limit_mesh(name, *limit, materials=[m for m in cage.data.materials if m is not None])
     if child is None:
         child = bpy.data.objects.new(name, mesh)
         for collection in list(cage.users_collection) or [context.scene.collection]:
@@ -568,8 +559,7 @@ def build_object(source, cage, report, settings, context=None, name=None, mesh=N
     new_obj["pia_requested_method"] = str(settings["method"])
 
     if limit is not None:
-        set_limit_object(new_obj, limit[0], limit[1], context=context,
-                         face_sizes=limit[2] if len(limit) > 2 else None)
+        set_limit_object(new_obj, limit, context=context)
 
     view_layer = context.view_layer
     if view_layer is not None:
@@ -649,16 +639,14 @@ def refresh_limit(obj, context=None):
     cage = limit_cage_of(obj)
     if cage is None:
         raise ValueError("'%s' is not a Loop cage or a Doo-Sabin cage: make one with "
-                         "Interpolating Subdivision Cage (scheme Loop or Doo-Sabin), or select "
+                         "Make Interpolating Cage (scheme Loop or Doo-Sabin), or select "
                          "its limit surface" % obj.name)
     if cage.type != 'MESH':
         raise ValueError("'%s' is not a mesh object (type %s)" % (cage.name, cage.type))
     if cage.mode == 'EDIT':
         cage.update_from_editmode()
     check_source(cage)
-    limit = limit_arrays(cage.data, stored_settings(cage))
-    return set_limit_object(cage, limit[0], limit[1], context=context,
-                            face_sizes=limit[2] if len(limit) > 2 else None)
+    return set_limit_object(cage, limit_arrays(cage.data, stored_settings(cage)), context=context)
 
 
 def format_report(report):

@@ -23,7 +23,7 @@ import numpy as np
 
 __all__ = [
     "Mesh", "Report", "Stencils", "PiaError", "PiaCancelled",
-    "available", "load_error", "version", "validate", "limit_stencils", "solve", "interpolate", "refine", "refine_limit",
+    "available", "load_error", "version", "validate", "limit_stencils", "solve", "interpolate", "refine",
     "SCHEMES", "BOUNDARY_SMOOTH", "BOUNDARY_RULES", "METHODS",
 ]
 
@@ -190,7 +190,7 @@ def version():
 # Mesh and options
 # --------------------------------------------------------------------------
 
-def _as(array, dtype, shape_tail=None, name="array"):
+def _as(array, dtype, shape_tail=None):
     a = np.ascontiguousarray(array, dtype=dtype)
     if shape_tail is not None:
         a = a.reshape((-1,) + shape_tail) if a.size else a.reshape((0,) + shape_tail)
@@ -511,12 +511,3 @@ def refine(mesh, levels, scheme="LOOP", boundary_rule="SMOOTH", boundary_smooth=
         _raise(code, status)
     return positions, sizes, face_vertices
 
-
-def refine_limit(mesh, levels, scheme="LOOP", boundary_rule="SMOOTH", boundary_smooth="ALL", use_creases=True):
-    """The Loop surface of ``mesh`` (a cage) refined ``levels`` times, every
-    vertex at its limit position: ``(positions (M, 3) float32, faces (K, 3)
-    int32)``.  Rows 0..N-1 are the limit points of the N control vertices."""
-    if scheme != "LOOP":
-        raise PiaError("INVALID_ARGUMENT", "refine_limit is for Loop; use refine for Doo-Sabin")
-    positions, _sizes, face_vertices = refine(mesh, levels, scheme, boundary_rule, boundary_smooth, use_creases)
-    return positions, face_vertices.reshape(-1, 3)

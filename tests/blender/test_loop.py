@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: GPL-2.0-or-later
 """Loop scheme: Blender has no Loop modifier, so the operator makes the cage
 (no modifier) and a child `<cage>_limit` holding the library's Loop limit
-surface (native.refine_limit). Its first N vertices are the limit points of
+surface (native.refine). Its first N vertices are the limit points of
 the N cage vertices: they must be the original vertices, as Blender stores
 them (positions read back from the objects, in world space)."""
 
@@ -60,7 +60,7 @@ def test_real_mesh(name, rule, levels):
     assert cage["pia_boundary_rule"] == rule and cage["pia_levels"] == levels
     check_limit(cage, limit, targets, levels)
     # The cage differs from the mesh: the plain Loop surface of the mesh misses.
-    plain, _ = api.limit_arrays(source.data, api.stored_settings(cage))
+    plain = api.limit_arrays(source.data, api.stored_settings(cage))[0]
     assert np.abs(world(source, plain[:len(targets)]) - targets).max() > 1e-4 * diagonal(targets)
 
 
@@ -193,7 +193,7 @@ def test_refresh_after_editing_cage():
     assert api.find_limit_object(cage) is limit
     assert limit.data.name == old_mesh_name  # replaced, old one removed
     new = limit_positions(limit)
-    expected, faces = native.refine_limit(native.Mesh(**_arrays(cage)), 1, boundary_rule='HOPPE')
+    expected = native.refine(native.Mesh(**_arrays(cage)), 1, boundary_rule='HOPPE')[0]
     np.testing.assert_allclose(new, expected, atol=1e-6 * diagonal(targets))
     # the limit point of the moved vertex rose (not by the full step: it is an average)
     rise = new[moved, 2] - old[moved, 2]

@@ -241,9 +241,7 @@ static void drop_degenerate_faces(tmesh *m) {
 }
 
 /* Dense row i of a stencil table, into w (vertex_count doubles). */
-static void stencil_row(const spia_stencils *s, const int64_t *off, const int32_t *idx, const double *wt, int32_t i,
-                        double *w, int32_t n) {
-    (void)s;
+static void stencil_row(const int64_t *off, const int32_t *idx, const double *wt, int32_t i, double *w, int32_t n) {
     for (int32_t j = 0; j < n; ++j) w[j] = 0.0;
     for (int64_t k = off[i]; k < off[i + 1]; ++k) w[idx[k]] += wt[k];
 }

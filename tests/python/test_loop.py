@@ -204,17 +204,18 @@ def test_refined_limit_surface_passes_through_the_points(native, name, rule):
     d = np.linalg.norm(P.max(0) - P.min(0))
     previous = None
     for levels in (0, 1, 2):
-        pos, faces = native.refine_limit(cage_mesh, levels, boundary_rule=rule)
-        assert faces.shape == (len(F) * 4 ** levels, 3) and faces.min() >= 0 and faces.max() < len(pos)
+        pos, sizes, faces = native.refine(cage_mesh, levels, boundary_rule=rule)
+        assert np.all(sizes == 3) and len(sizes) == len(F) * 4 ** levels
+        assert len(faces) == 3 * len(sizes) and faces.min() >= 0 and faces.max() < len(pos)
         assert np.linalg.norm(pos[:len(P)] - P, axis=1).max() / d <= 1e-5
         if previous is not None:
             assert np.abs(pos[:len(previous)] - previous).max() / d <= 1e-6
         previous = pos
 
 
-def test_refine_limit_refuses_catmull_clark_and_quads(native):
+def test_refine_refuses_catmull_clark_and_loop_quads(native):
     P, F, _ = load("mushroom")
-    with pytest.raises(native.PiaError):
-        native.refine_limit(native.Mesh.from_faces(P, F), 1)
-    with pytest.raises(native.PiaError):
-        native.refine_limit(native.Mesh.from_faces(P, F), 1, scheme="CATMULL_CLARK")
+    with pytest.raises(native.PiaError, match="not triangles|are not"):
+        native.refine(native.Mesh.from_faces(P, F), 1)
+    with pytest.raises(native.PiaError, match="Catmull-Clark itself"):
+        native.refine(native.Mesh.from_faces(P, F), 1, scheme="CATMULL_CLARK")
