@@ -5,7 +5,7 @@
 PYTHON  ?= /usr/bin/python3
 BLENDER ?= blender
 BLENDER_RUN = $(BLENDER) -b --factory-startup --python-exit-code 1
-DEBIAN_PACKAGES = blender libosd-dev cmake g++ make python3-numpy python3-scipy python3-pytest python3-matplotlib
+DEBIAN_PACKAGES = blender libosd-dev libembree-dev cmake g++ make python3-numpy python3-scipy python3-pytest python3-matplotlib
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
 .PHONY: all deps build test test-c test-asan test-python test-blender demo bench clean

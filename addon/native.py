@@ -104,6 +104,32 @@ class _Report(ctypes.Structure):
     ]
 
 
+class _FitOptions(ctypes.Structure):
+    _fields_ = [
+        ("mode", ctypes.c_int), ("samples_per_edge", ctypes.c_int32), ("cutoff", ctypes.c_double),
+        ("smoothing", ctypes.c_double), ("point_weight", ctypes.c_double), ("max_rounds", ctypes.c_int32),
+        ("round_tolerance", ctypes.c_double), ("solver_iterations", ctypes.c_int32),
+    ]
+
+
+class _FitDistances(ctypes.Structure):
+    _fields_ = [("mean", ctypes.c_double), ("p95", ctypes.c_double), ("max", ctypes.c_double),
+                ("ignored", ctypes.c_int64)]
+
+
+class _FitReport(ctypes.Structure):
+    _fields_ = [
+        ("result", ctypes.c_int), ("mode", ctypes.c_int), ("rounds", ctypes.c_int32),
+        ("sample_count", ctypes.c_int64), ("diagonal", ctypes.c_double),
+        ("before", _FitDistances), ("after", _FitDistances),
+        ("iterations", ctypes.c_int32), ("max_error_relative", ctypes.c_double),
+        ("stencil_seconds", ctypes.c_double), ("query_seconds", ctypes.c_double),
+        ("solve_seconds", ctypes.c_double),
+        ("vertex_distances", _f32p), ("history", _f64p), ("history_capacity", ctypes.c_int32),
+        ("history_count", ctypes.c_int32),
+    ]
+
+
 _lib = None
 _load_error = None
 
@@ -142,6 +168,16 @@ def _declare(lib):
        _f32p, _i32p, _i32p, ctypes.POINTER(_Status))
     fn("spia_interpolate", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(_Options), _f32p,
        ctypes.POINTER(_Report), ctypes.POINTER(_Status))
+    fn("spia_surface_stencils_create", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(_Options),
+       ctypes.c_int32, ctypes.POINTER(P), ctypes.POINTER(_Status))
+    fn("spia_surface_sample_count", ctypes.c_int64, ctypes.POINTER(_Mesh), ctypes.c_int32)
+    fn("spia_scan_create", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(P), ctypes.POINTER(_Status))
+    fn("spia_scan_free", None, P)
+    fn("spia_scan_diagonal", ctypes.c_double, P)
+    fn("spia_scan_closest_points", ctypes.c_int, P, ctypes.c_int64, _f32p, _f32p, _f32p, _f32p, _i32p,
+       ctypes.POINTER(_Status))
+    fn("spia_fit", ctypes.c_int, ctypes.POINTER(_Mesh), P, ctypes.POINTER(_Options), ctypes.POINTER(_FitOptions),
+       _f32p, ctypes.POINTER(_FitReport), ctypes.POINTER(_Status))
 
 
 def _library():
@@ -365,10 +401,11 @@ class Stencils:
     """A limit stencil table: row i gives the limit point of vertex i as
     ``sum(weights[k] * cage[indices[k]] for k in range(offsets[i], offsets[i+1]))``."""
 
-    def __init__(self, handle, lib):
+    def __init__(self, handle, lib, columns=None):
         self._handle = ctypes.c_void_p(handle)
         self._lib = lib
         rows = lib.spia_stencils_row_count(self._handle)
+        self.column_count = rows if columns is None else int(columns)
         nnz = lib.spia_stencils_weight_count(self._handle)
         self.offsets = np.empty(rows + 1, dtype=np.int64)
         self.indices = np.empty(nnz, dtype=np.int32)
@@ -388,8 +425,8 @@ class Stencils:
     def to_scipy(self):
         """The table as a scipy.sparse.csr_matrix (needs scipy)."""
         import scipy.sparse
-        n = self.row_count
-        return scipy.sparse.csr_matrix((self.weights, self.indices, self.offsets), shape=(n, n))
+        return scipy.sparse.csr_matrix((self.weights, self.indices, self.offsets),
+                                       shape=(self.row_count, self.column_count))
 
     def apply(self, cage):
         """Limit points (N, 3) of a cage (N, 3), computed in numpy."""
@@ -511,3 +548,155 @@ def refine(mesh, levels, scheme="LOOP", boundary_rule="SMOOTH", boundary_smooth=
         _raise(code, status)
     return positions, sizes, face_vertices
 
+
+
+# --------------------------------------------------------------------------
+# Surface samples, scans and fitting
+# --------------------------------------------------------------------------
+
+FIT_MODES = ["SURFACE", "VERTICES"]
+
+
+def surface_stencils(mesh, samples_per_edge=4, boundary_smooth="ALL", use_creases=True, quality=3):
+    """Catmull-Clark limit stencils at samples_per_edge**2 points inside each
+    ptex face (a quad, or each corner's sub-quad of another polygon), at the
+    centres of a regular (s, t) grid: row ``(ptex * k + j) * k + i`` is at
+    ``((i + 0.5) / k, (j + 0.5) / k)``.  A :class:`Stencils` with
+    ``mesh.vertex_count`` columns."""
+    lib = _library()
+    opts, _keep = _options(boundary_smooth=boundary_smooth, use_creases=use_creases, quality=quality)
+    handle = ctypes.c_void_p()
+    status = _Status()
+    cm = mesh._c()
+    code = lib.spia_surface_stencils_create(ctypes.byref(cm), ctypes.byref(opts), int(samples_per_edge),
+                                            ctypes.byref(handle), ctypes.byref(status))
+    if code != 0:
+        _raise(code, status)
+    return Stencils(handle.value, lib, columns=mesh.vertex_count)
+
+
+class Scan:
+    """A mesh prepared for closest-point queries (Embree)."""
+
+    def __init__(self, mesh):
+        lib = _library()
+        self._lib = lib
+        self._handle = None
+        handle = ctypes.c_void_p()
+        status = _Status()
+        cm = mesh._c()
+        code = lib.spia_scan_create(ctypes.byref(cm), ctypes.byref(handle), ctypes.byref(status))
+        if code != 0:
+            _raise(code, status)
+        self._handle = handle
+
+    def __del__(self):
+        handle, self._handle = getattr(self, "_handle", None), None
+        if handle:
+            self._lib.spia_scan_free(handle)
+
+    @property
+    def diagonal(self):
+        """Bounding-box diagonal of the scan's faces."""
+        return self._lib.spia_scan_diagonal(self._handle)
+
+    def closest_points(self, points):
+        """For points (N, 3): (closest (N, 3), normals (N, 3), distances (N,), faces (N,))."""
+        points = _as(points, np.float32, (3,))
+        n = len(points)
+        closest = np.empty((n, 3), np.float32)
+        normals = np.empty((n, 3), np.float32)
+        distances = np.empty(n, np.float32)
+        faces = np.empty(n, np.int32)
+        status = _Status()
+        code = self._lib.spia_scan_closest_points(
+            self._handle, n, _ptr(points, ctypes.c_float), _ptr(closest, ctypes.c_float),
+            _ptr(normals, ctypes.c_float), _ptr(distances, ctypes.c_float), _ptr(faces, ctypes.c_int32),
+            ctypes.byref(status))
+        if code != 0:
+            _raise(code, status)
+        return closest, normals, distances, faces
+
+
+@dataclass
+class FitDistances:
+    """Distances of the limit surface's samples to the scan, relative to the scan's diagonal."""
+    mean: float
+    p95: float
+    max: float
+    ignored: int                # samples beyond the cut-off (over holes)
+
+
+@dataclass
+class FitReport:
+    status: str                 # 'CONVERGED', 'MAX_ITERATIONS' or 'STAGNATED' (from the VERTICES solve)
+    message: str
+    mode: str
+    rounds: int
+    sample_count: int
+    diagonal: float
+    before: FitDistances
+    after: FitDistances
+    iterations: int             # VERTICES: the interpolation's iterations
+    max_error_relative: float   # VERTICES: the interpolation's error
+    stencil_seconds: float
+    query_seconds: float
+    solve_seconds: float
+    vertex_distances: np.ndarray = field(repr=False)   # per cage vertex, relative
+    history: np.ndarray = field(repr=False)            # mean relative distance per round
+
+    def summary(self):
+        b, a = self.before, self.after
+        return (f"{self.mode.lower()} fit, {self.rounds} rounds: mean distance {a.mean:.3g} (was {b.mean:.3g}), "
+                f"95th percentile {a.p95:.3g} (was {b.p95:.3g}), max {a.max:.3g} of the scan's diagonal")
+
+
+def fit(cage, scan, mode="SURFACE", samples_per_edge=4, cutoff=0.02, smoothing=1e-5, point_weight=1e-3,
+        max_rounds=20, round_tolerance=0.002, solver_iterations=30, **options):
+    """Moves the vertices of ``cage`` (a :class:`Mesh`) so that its limit
+    surface lies on ``scan`` (a :class:`Scan`).  mode 'SURFACE' fits the
+    whole surface (Catmull-Clark); 'VERTICES' interpolates the closest scan
+    points of the cage's limit points (any scheme).  ``options`` are those of
+    :func:`interpolate` (scheme, quality, creases, solver, progress, ...).
+    Returns ``(cage positions (N, 3) float32, FitReport)``."""
+    lib = _library()
+    opts, _keep = _options(**options)
+    fo = _FitOptions()
+    fo.mode = _enum(mode, FIT_MODES, "fit")
+    for name, value in (("cutoff", cutoff), ("round_tolerance", round_tolerance)):
+        if not (value > 0 and np.isfinite(value)):
+            raise PiaError("INVALID_ARGUMENT", f"{name} must be a positive number, not {value!r}")
+    for name, value in (("smoothing", smoothing), ("point_weight", point_weight)):
+        if not (value >= 0 and np.isfinite(value)):
+            raise PiaError("INVALID_ARGUMENT", f"{name} must be zero or positive, not {value!r}")
+    fo.samples_per_edge = int(samples_per_edge)
+    fo.cutoff = float(cutoff)
+    # 0 means "the default" in C; a weight the caller sets to 0 means none.
+    fo.smoothing = float(smoothing) if smoothing > 0 else -1.0
+    fo.point_weight = float(point_weight) if point_weight > 0 else -1.0
+    fo.max_rounds = int(max_rounds)
+    fo.round_tolerance = float(round_tolerance)
+    fo.solver_iterations = int(solver_iterations)
+    if fo.max_rounds < 1 or fo.solver_iterations < 1:
+        raise PiaError("INVALID_ARGUMENT", "max_rounds and solver_iterations must be at least 1")
+    out = np.empty_like(cage.positions)
+    vertex_distances = np.zeros(cage.vertex_count, np.float32)
+    history = np.zeros(fo.max_rounds + 1, np.float64)
+    rep = _FitReport(vertex_distances=_ptr(vertex_distances, ctypes.c_float),
+                     history=_ptr(history, ctypes.c_double), history_capacity=len(history))
+    status = _Status()
+    cm = cage._c()
+    code = lib.spia_fit(ctypes.byref(cm), scan._handle, ctypes.byref(opts), ctypes.byref(fo),
+                        _ptr(out, ctypes.c_float), ctypes.byref(rep), ctypes.byref(status))
+    if code < 0:
+        _raise(code, status)
+
+    def dist(d):
+        return FitDistances(mean=d.mean, p95=d.p95, max=d.max, ignored=d.ignored)
+    return out, FitReport(
+        status=_STATUS_OF_RESULT[code], message=status.message.decode("utf-8", "replace"),
+        mode=FIT_MODES[rep.mode], rounds=rep.rounds, sample_count=rep.sample_count, diagonal=rep.diagonal,
+        before=dist(rep.before), after=dist(rep.after), iterations=rep.iterations,
+        max_error_relative=rep.max_error_relative, stencil_seconds=rep.stencil_seconds,
+        query_seconds=rep.query_seconds, solve_seconds=rep.solve_seconds,
+        vertex_distances=vertex_distances, history=history[: rep.history_count].copy())

@@ -375,6 +375,146 @@ SPIA_API spia_result spia_refine_size(const spia_mesh *mesh, const spia_options 
 SPIA_API spia_result spia_refine(const spia_mesh *mesh, const spia_options *options, int32_t levels, float *positions,
                                  int32_t *face_sizes, int32_t *face_vertices, spia_status *status);
 
+
+/* ------------------------------------------------------------------------ */
+/* Limit surface samples                                                     */
+/* ------------------------------------------------------------------------ */
+
+/*
+ * Limit stencils at points inside the faces of `mesh`, Catmull-Clark only,
+ * on the patches Blender's modifier builds (same quality, creases and
+ * boundary settings as spia_limit_stencils_create).  Every ptex face (a
+ * quad, or the sub-quad at each corner of a triangle or n-gon, corners in
+ * face order) gets samples_per_edge^2 samples (1 to 64) at the centres of a
+ * regular grid: sample  (ptex * k + j) * k + i  (k = samples_per_edge) lies
+ * at (s, t) = ((i + 0.5) / k, (j + 0.5) / k).  spia_surface_sample_count
+ * gives the number of rows without building them.  Row r of the table
+ * holds the weights over control vertices whose sum is sample r; free the
+ * table with spia_stencils_free.
+ */
+SPIA_API spia_result spia_surface_stencils_create(const spia_mesh *mesh, const spia_options *options,
+                                                  int32_t samples_per_edge, spia_stencils **out,
+                                                  spia_status *status);
+SPIA_API int64_t spia_surface_sample_count(const spia_mesh *mesh, int32_t samples_per_edge);
+
+/* ------------------------------------------------------------------------ */
+/* Scans: closest points                                                     */
+/* ------------------------------------------------------------------------ */
+
+/*
+ * A scan (any polygon mesh, usually a dense triangle mesh) prepared for
+ * closest-point queries: an Embree bounding volume hierarchy over its
+ * triangles (polygons are cut into fans; faces that repeat a vertex are left
+ * out) and smooth vertex normals (area-weighted).  The positions are copied;
+ * `mesh` need not outlive the call.  Only vertex_count, positions,
+ * face_count, face_sizes and face_vertices are read.  Fails with
+ * SPIA_ERROR_EMPTY_MESH for a scan without faces.  Free with spia_scan_free.
+ */
+typedef struct spia_scan spia_scan;
+SPIA_API spia_result spia_scan_create(const spia_mesh *mesh, spia_scan **out, spia_status *status);
+SPIA_API void spia_scan_free(spia_scan *scan);
+/* The bounding-box diagonal of the scan's faces, the unit of every relative
+ * distance the fitting reports. */
+SPIA_API double spia_scan_diagonal(const spia_scan *scan);
+
+/*
+ * For each of `count` points (3 floats each), the closest point on the scan
+ * and, into whichever of these caller buffers are not NULL: closest
+ * (count * 3 floats), normals (count * 3 floats: the scan's smooth unit
+ * normal there), distances (count floats) and faces (count ints: the scan
+ * polygon it lies on).  Safe to call from several threads on one scan.
+ */
+SPIA_API spia_result spia_scan_closest_points(const spia_scan *scan, int64_t count, const float *points,
+                                              float *closest, float *normals, float *distances, int32_t *faces,
+                                              spia_status *status);
+
+/* ------------------------------------------------------------------------ */
+/* Fitting a cage to a scan                                                  */
+/* ------------------------------------------------------------------------ */
+
+typedef enum spia_fit_mode {
+    /* The limit surface as a whole: samples of it (spia_surface_stencils)
+     * are pulled to their closest points on the scan, by point-to-plane
+     * least squares along the scan's normals with a small point-to-point
+     * term, a fairness term on the cage, and closest points found again
+     * after every round.  Catmull-Clark only. */
+    SPIA_FIT_SURFACE = 0,
+    /* The cage's limit points only: each is moved to its closest point on
+     * the scan, and the cage is solved to interpolate them (spia_solve with
+     * the spia_options given).  One projection is enough: the solved limit
+     * points lie on the scan, so projecting again changes nothing.  Any
+     * scheme. */
+    SPIA_FIT_VERTICES = 1
+} spia_fit_mode;
+
+/* All zeros means the defaults given in brackets. */
+typedef struct spia_fit_options {
+    spia_fit_mode mode;        /* [SURFACE] */
+    int32_t samples_per_edge;  /* samples per ptex face edge, 1 to 64 [4] (16 per quad)              */
+    /* A sample (or, for VERTICES, a limit point) whose closest scan point is
+     * farther than cutoff * scan diagonal is over a hole or off the scan: it
+     * does not pull.  [0.02] */
+    double cutoff;
+    /* Fairness: weight of |Laplacian(cage - initial cage)|^2 per cage vertex
+     * against the squared distances of the samples, per sample.  Keeps the
+     * cage's shape where samples say nothing (holes) and stops ripples;
+     * larger is smoother and farther from the scan.  Negative for none.
+     * [1e-5] */
+    double smoothing;
+    /* Weight of the point-to-point distance next to the point-to-plane one
+     * (1 = both alike); it lets samples slide along the scan less.
+     * Negative for none.  [1e-3] */
+    double point_weight;
+    int32_t max_rounds;        /* projection + least-squares rounds [20]                             */
+    /* Stop when a round lowers the mean distance by less than this fraction. [0.002] */
+    double round_tolerance;
+    int32_t solver_iterations; /* conjugate gradient steps per round [30]                            */
+} spia_fit_options;
+
+typedef struct spia_fit_distances {
+    double mean, p95, max;     /* over the samples within the cutoff, relative to the scan diagonal  */
+    int64_t ignored;           /* samples beyond the cutoff                                          */
+} spia_fit_distances;
+
+typedef struct spia_fit_report {
+    spia_result result;
+    spia_fit_mode mode;
+    int32_t rounds;            /* rounds carried out (VERTICES: 1)                                   */
+    int64_t sample_count;
+    double diagonal;           /* of the scan                                                        */
+    /* Distances of the limit surface (the samples) to the scan, for the
+     * cage given and for the cage written. */
+    spia_fit_distances before, after;
+    /* VERTICES: the interpolation's report (iterations, errors). */
+    int32_t iterations;
+    double max_error_relative;
+    double stencil_seconds, query_seconds, solve_seconds;
+    /* Optional caller-owned buffer of cage vertex_count floats: for each
+     * vertex, the largest relative distance to the scan of the samples on
+     * the faces around it (after the fit; 0 where no sample counts). */
+    float *vertex_distances;
+    /* Optional caller-owned buffer: the mean relative distance after each
+     * round, history[0] being the cage given. */
+    double *history;
+    int32_t history_capacity;
+    int32_t history_count;
+} spia_fit_report;
+
+/*
+ * Moves the vertices of `cage` so that its limit surface lies on `scan`.
+ * `options` gives the subdivision settings (scheme, quality, creases,
+ * boundary) and, for VERTICES, the solver settings; its progress callback
+ * is called after every round with the round and the mean relative
+ * distance, and cancels as elsewhere.  `cage_out` (vertex_count * 3 floats)
+ * is written on success and on SPIA_MAX_ITERATIONS / SPIA_STAGNATED from
+ * the VERTICES solve; untouched on failure.  It may alias cage->positions
+ * only if the caller accepts that a failure leaves it untouched.  Vertices
+ * no face uses keep their positions.
+ */
+SPIA_API spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_options *options,
+                              const spia_fit_options *fit, float *cage_out, spia_fit_report *report,
+                              spia_status *status);
+
 #ifdef __cplusplus
 }
 #endif

@@ -657,6 +657,76 @@ spia_result refine(const spia_mesh *m, const spia_adjacency *adj, const spia_opt
     return SPIA_OK;
 }
 
+// Limit stencils at samples inside the faces: per ptex face (a quad, or each
+// corner's sub-quad of another polygon), samples_per_edge^2 points at the
+// centres of a regular grid over (s, t), rows in ptex order, then t, then s.
+// Blender's patches at quality (the same adaptive refinement and patch
+// options as its evaluator), so the samples lie on the surface the modifier
+// shows.
+spia_result surface(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, int32_t per_edge,
+                    spia_stencils **out, spia_status *status) {
+    Prepared p;
+    spia_result r = prepare(m, adj, opt, p, status);
+    if (r != SPIA_OK) return r;
+    Far::TopologyRefiner &refiner = *p.refiner;
+    Far::TopologyRefiner::AdaptiveOptions adaptive(opt->quality);
+    adaptive.useInfSharpPatch = true;
+    adaptive.considerFVarChannels = false;
+    refiner.RefineAdaptive(adaptive);
+    Far::PtexIndices ptex(refiner);
+    const int ptex_count = ptex.GetNumFaces();
+    const int per_face = per_edge * per_edge;
+    const int64_t rows = (int64_t)ptex_count * per_face;
+    if (rows > INT32_MAX)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "%lld samples are too many", (long long)rows);
+    std::vector<double> grid_s((size_t)per_face), grid_t((size_t)per_face);
+    for (int j = 0; j < per_edge; ++j)
+        for (int i = 0; i < per_edge; ++i) {
+            grid_s[(size_t)(j * per_edge + i)] = (i + 0.5) / per_edge;
+            grid_t[(size_t)(j * per_edge + i)] = (j + 0.5) / per_edge;
+        }
+    LimitFactory::LocationArrayVec locations((size_t)ptex_count);
+    for (int f = 0; f < ptex_count; ++f) {
+        locations[(size_t)f].ptexIdx = f;
+        locations[(size_t)f].numLocations = per_face;
+        locations[(size_t)f].s = grid_s.data();
+        locations[(size_t)f].t = grid_t.data();
+    }
+    LimitFactory::Options limit_options;
+    limit_options.generate1stDerivatives = false;
+    limit_options.generate2ndDerivatives = false;
+    std::unique_ptr<const LimitTable> table(LimitFactory::Create(refiner, locations, nullptr, nullptr, limit_options));
+    if (!table || (int64_t)table->GetNumStencils() != rows)
+        return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "OpenSubdiv returned %d limit stencils for %lld samples",
+                          table ? table->GetNumStencils() : -1, (long long)rows);
+    const std::vector<int> &sizes = table->GetSizes();
+    const std::vector<Far::Index> &offsets = table->GetOffsets();
+    const std::vector<Far::Index> &indices = table->GetControlIndices();
+    const std::vector<double> &weights = table->GetWeights();
+    spia_stencils *s = spia__stencils_alloc((int32_t)rows, (int64_t)weights.size());
+    if (!s) return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the sample stencils");
+    int64_t k = 0;
+    for (int64_t i = 0; i < rows; ++i) {
+        s->offsets[i] = k;
+        for (int q = 0; q < sizes[(size_t)i]; ++q) {
+            const Far::Index j = indices[(size_t)offsets[(size_t)i] + q];
+            if (j < 0 || j >= p.osd_n) {
+                spia_stencils_free(s);
+                return spia__fail(status, SPIA_ERROR_INTERNAL, i,
+                                  "OpenSubdiv sample stencil refers to point %d, not a control vertex", (int)j);
+            }
+            s->indices[k] = p.vertex_of[(size_t)j];
+            s->weights[k++] = weights[(size_t)offsets[(size_t)i] + q];
+        }
+    }
+    s->offsets[rows] = k;
+    s->nnz = k;
+    spia__stencils_canonicalize(s);
+    *out = s;
+    spia__ok(status);
+    return SPIA_OK;
+}
+
 }  // namespace
 
 extern "C" spia_result spia__osd_limit_stencils(const spia_mesh *mesh, const spia_adjacency *adj,
@@ -682,5 +752,18 @@ extern "C" spia_result spia__osd_refine_limit(const spia_mesh *mesh, const spia_
         return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory refining the surface");
     } catch (...) {
         return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "unexpected failure refining the surface");
+    }
+}
+
+extern "C" spia_result spia__osd_surface_stencils(const spia_mesh *mesh, const spia_adjacency *adj,
+                                                  const spia_options *options, int32_t samples_per_edge,
+                                                  spia_stencils **out, spia_status *status) {
+    *out = nullptr;
+    try {
+        return surface(mesh, adj, options, samples_per_edge, out, status);
+    } catch (const std::bad_alloc &) {
+        return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory computing sample stencils");
+    } catch (...) {
+        return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "unexpected failure computing sample stencils");
     }
 }

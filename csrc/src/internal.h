@@ -134,6 +134,14 @@ spia_result spia__loop_hoppe_limit_stencils(const spia_mesh *mesh, const spia_ad
 /* Rejects Loop input that is not all triangles, naming how many faces are not. */
 spia_result spia__require_triangles(const spia_mesh *mesh, spia_status *status);
 
+/* Catmull-Clark limit stencils at samples inside faces (catmark_osd.cpp). */
+spia_result spia__osd_surface_stencils(const spia_mesh *mesh, const spia_adjacency *adj, const spia_options *options,
+                                       int32_t samples_per_edge, spia_stencils **out, spia_status *status);
+
+/* Closest points for points in double (scan.c); no argument checks. */
+void spia__scan_closest_points_double(const spia_scan *scan, int64_t count, const double *points, float *closest,
+                                      float *normals, float *distances, int32_t *faces);
+
 #ifdef __cplusplus
 }
 #endif

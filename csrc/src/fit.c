@@ -1,0 +1,616 @@
+/* Fitting a cage's limit surface to a scan.
+ *
+ * SURFACE: samples X = M V of the limit surface (M: the sample stencils) are
+ * matched to their closest scan points T with the scan's normals N.  Each
+ * round minimises, over the cage V,
+ *
+ *   sum_s w_s [ (N_s . (M_s V - T_s))^2 + a |M_s V - T_s|^2 ]
+ *     + l sum_i |(Lap (V - V0))_i|^2
+ *
+ * (w_s = 0 beyond the cut-off, a the point-to-point weight, Lap the cage's
+ * umbrella Laplacian, V0 the cage given, l the smoothing weight times the
+ * number of counted samples per vertex), by conjugate gradients on the
+ * normal equations with a 3x3 block-Jacobi preconditioner, warm started
+ * from the previous round; then the closest points are found again.  The
+ * point-to-plane term lets samples slide along the scan, which is why it
+ * converges in a few rounds where plain closest-point least squares (LSPIA)
+ * creeps; the Laplacian term keeps the cage fair and holds it in place over
+ * holes.
+ *
+ * VERTICES: the cage's limit points go to their closest scan points and the
+ * cage is solved to interpolate them. */
+#include "internal.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+static spia_result resolve_fit(const spia_fit_options *in, spia_fit_options *out, spia_status *status) {
+    spia_fit_options o;
+    if (in)
+        o = *in;
+    else
+        memset(&o, 0, sizeof o);
+    if ((int)o.mode != SPIA_FIT_SURFACE && (int)o.mode != SPIA_FIT_VERTICES)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "unknown fit mode %d", (int)o.mode);
+    if (o.samples_per_edge == 0) o.samples_per_edge = 4;
+    if (o.samples_per_edge < 1 || o.samples_per_edge > 64)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "samples_per_edge must be 1 to 64, got %d",
+                          o.samples_per_edge);
+    if (o.cutoff == 0.0) o.cutoff = 0.02;
+    if (o.smoothing == 0.0) o.smoothing = 1e-5;
+    if (o.point_weight == 0.0) o.point_weight = 1e-3;
+    if (o.max_rounds == 0) o.max_rounds = 20;
+    if (o.round_tolerance == 0.0) o.round_tolerance = 0.002;
+    if (o.solver_iterations == 0) o.solver_iterations = 30;
+    if (!(o.cutoff > 0.0) || !isfinite(o.cutoff))
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "cutoff must be a positive number");
+    if (!isfinite(o.smoothing) || !isfinite(o.point_weight) || !isfinite(o.round_tolerance) ||
+        o.round_tolerance < 0.0)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "fit weights and tolerance must be finite");
+    if (o.max_rounds < 0 || o.solver_iterations < 0)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "max_rounds and solver_iterations must be positive");
+    if (o.smoothing < 0.0) o.smoothing = 0.0;
+    if (o.point_weight < 0.0) o.point_weight = 0.0;
+    *out = o;
+    return SPIA_OK;
+}
+
+/* Ptex faces of a face: 1 for a quad, else one per corner. */
+static inline int32_t ptex_of_face(int32_t size) { return size == 4 ? 1 : size; }
+
+int64_t spia_surface_sample_count(const spia_mesh *mesh, int32_t samples_per_edge) {
+    if (!mesh || !mesh->face_sizes || mesh->face_count <= 0 || samples_per_edge < 1 || samples_per_edge > 64) return 0;
+    int64_t ptex = 0;
+    for (int32_t f = 0; f < mesh->face_count; ++f) ptex += ptex_of_face(mesh->face_sizes[f]);
+    return ptex * samples_per_edge * samples_per_edge;
+}
+
+spia_result spia_surface_stencils_create(const spia_mesh *mesh, const spia_options *options,
+                                         int32_t samples_per_edge, spia_stencils **out, spia_status *status) {
+    if (!out) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "out must not be NULL");
+    *out = NULL;
+    spia_options opt;
+    spia_result r = spia__resolve_options(options, &opt, status);
+    if (r != SPIA_OK) return r;
+    if (opt.scheme != SPIA_SCHEME_CATMULL_CLARK)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1,
+                          "surface samples are available for Catmull-Clark only");
+    if (samples_per_edge < 1 || samples_per_edge > 64)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "samples_per_edge must be 1 to 64, got %d",
+                          samples_per_edge);
+    if ((r = spia_mesh_validate(mesh, status)) != SPIA_OK) return r;
+    spia_adjacency adj;
+    if ((r = spia__adjacency_build(mesh, &adj, status)) != SPIA_OK) return r;
+    r = spia__osd_surface_stencils(mesh, &adj, &opt, samples_per_edge, out, status);
+    spia__adjacency_free(&adj);
+    return r;
+}
+
+/* ---- sparse products ---------------------------------------------------- */
+
+/* y = M x, 3 doubles per point. */
+static void rows_apply(const spia_stencils *M, const double *x, double *y) {
+#pragma omp parallel for schedule(static)
+    for (int32_t r = 0; r < M->rows; ++r) spia__row_product(M, r, x, y + 3 * (int64_t)r);
+}
+
+/* The transpose of a stencil table (columns become rows), as a table. */
+static spia_stencils *transpose(const spia_stencils *M, int32_t columns) {
+    spia_stencils *T = spia__stencils_alloc(columns, M->nnz);
+    if (!T) return NULL;
+    for (int64_t k = 0; k < M->nnz; ++k) T->offsets[M->indices[k] + 1]++;
+    for (int32_t c = 0; c < columns; ++c) T->offsets[c + 1] += T->offsets[c];
+    int64_t *fill = malloc(sizeof(int64_t) * ((size_t)columns + 1));
+    if (!fill) {
+        spia_stencils_free(T);
+        return NULL;
+    }
+    memcpy(fill, T->offsets, sizeof(int64_t) * ((size_t)columns + 1));
+    for (int32_t r = 0; r < M->rows; ++r)
+        for (int64_t k = M->offsets[r]; k < M->offsets[r + 1]; ++k) {
+            const int64_t at = fill[M->indices[k]]++;
+            T->indices[at] = r;
+            T->weights[at] = M->weights[k];
+        }
+    free(fill);
+    return T;
+}
+
+/* ---- distances ------------------------------------------------------------ */
+
+static int compare_float(const void *a, const void *b) {
+    const float x = *(const float *)a, y = *(const float *)b;
+    return (x > y) - (x < y);
+}
+
+/* Mean, 95th percentile and max of the distances within the cut-off,
+ * relative to the diagonal; `scratch` holds count floats. */
+static spia_fit_distances distance_stats(const float *d, int64_t count, double cutoff_abs, double diagonal,
+                                         float *scratch) {
+    spia_fit_distances s = {0.0, 0.0, 0.0, 0};
+    int64_t n = 0;
+    double sum = 0.0;
+    for (int64_t i = 0; i < count; ++i) {
+        if (d[i] > cutoff_abs) {
+            s.ignored++;
+            continue;
+        }
+        scratch[n++] = d[i];
+        sum += d[i];
+        if (d[i] > s.max) s.max = d[i];
+    }
+    if (n > 0) {
+        qsort(scratch, (size_t)n, sizeof(float), compare_float);
+        /* The nearest-rank percentile. */
+        int64_t rank = (int64_t)ceil(0.95 * (double)n);
+        if (rank < 1) rank = 1;
+        s.p95 = scratch[rank - 1];
+        s.mean = sum / (double)n;
+    }
+    const double unit = diagonal > 0.0 ? diagonal : 1.0;
+    s.mean /= unit;
+    s.p95 /= unit;
+    s.max /= unit;
+    return s;
+}
+
+static double mean_within(const float *d, int64_t count, double cutoff_abs) {
+    double sum = 0.0;
+    int64_t n = 0;
+    for (int64_t i = 0; i < count; ++i)
+        if (d[i] <= cutoff_abs) sum += d[i], ++n;
+    return n ? sum / (double)n : 0.0;
+}
+
+/* Sample weights: 1 within the cut-off, else 0. */
+static void cutoff_weights(const float *d, int64_t count, double cutoff_abs, float *w) {
+    for (int64_t i = 0; i < count; ++i) w[i] = d[i] <= cutoff_abs ? 1.0f : 0.0f;
+}
+
+/* ---- the least-squares rounds --------------------------------------------- */
+
+typedef struct fit_system {
+    const spia_stencils *M, *Mt;
+    int32_t n;              /* cage vertices */
+    int64_t S;              /* samples */
+    const float *normals;   /* S * 3 */
+    const float *dist;      /* S */
+    const float *weight;    /* S: per-sample weights (0 beyond the cut-off) */
+    double cutoff_abs, alpha, lambda, damping;
+    /* Umbrella Laplacian: neighbours of v are nb[nb_start[v] .. nb_start[v+1]-1]. */
+    const int64_t *nb_start;
+    const int32_t *nb;
+    const unsigned char *free_vertex;
+    double *tmp_s;          /* S * 3 */
+    double *tmp_n;          /* n * 3 */
+} fit_system;
+
+/* g = B_s u with B_s = w_s (n n^T + alpha I). */
+static inline void apply_b(const fit_system *f, int64_t s, const double u[3], double g[3]) {
+    const double w = f->weight[s];
+    if (w == 0.0) {
+        g[0] = g[1] = g[2] = 0.0;
+        return;
+    }
+    const float *nn = f->normals + 3 * s;
+    const double dot = nn[0] * u[0] + nn[1] * u[1] + nn[2] * u[2];
+    for (int c = 0; c < 3; ++c) g[c] = w * (nn[c] * dot + f->alpha * u[c]);
+}
+
+static void laplacian(const fit_system *f, const double *x, double *y) {
+#pragma omp parallel for schedule(static)
+    for (int32_t v = 0; v < f->n; ++v) {
+        const int64_t a = f->nb_start[v], b = f->nb_start[v + 1];
+        double *out = y + 3 * (int64_t)v;
+        if (a == b) {
+            out[0] = out[1] = out[2] = 0.0;
+            continue;
+        }
+        double m[3] = {0.0, 0.0, 0.0};
+        for (int64_t k = a; k < b; ++k)
+            for (int c = 0; c < 3; ++c) m[c] += x[3 * (int64_t)f->nb[k] + c];
+        for (int c = 0; c < 3; ++c) out[c] = x[3 * (int64_t)v + c] - m[c] / (double)(b - a);
+    }
+}
+
+/* z += scale * Lap^T y (the neighbour relation is symmetric). */
+static void laplacian_transpose_add(const fit_system *f, const double *y, double scale, double *z) {
+#pragma omp parallel for schedule(static)
+    for (int32_t v = 0; v < f->n; ++v) {
+        const int64_t a = f->nb_start[v], b = f->nb_start[v + 1];
+        if (a == b) continue;
+        double acc[3] = {y[3 * (int64_t)v], y[3 * (int64_t)v + 1], y[3 * (int64_t)v + 2]};
+        for (int64_t k = a; k < b; ++k) {
+            const int32_t j = f->nb[k];
+            const double inv = 1.0 / (double)(f->nb_start[j + 1] - f->nb_start[j]);
+            for (int c = 0; c < 3; ++c) acc[c] -= y[3 * (int64_t)j + c] * inv;
+        }
+        for (int c = 0; c < 3; ++c) z[3 * (int64_t)v + c] += scale * acc[c];
+    }
+}
+
+/* out = M^T g for per-sample vectors g. */
+static void gather(const fit_system *f, const double *g, double *out) {
+    const spia_stencils *T = f->Mt;
+#pragma omp parallel for schedule(static)
+    for (int32_t v = 0; v < f->n; ++v) spia__row_product(T, v, g, out + 3 * (int64_t)v);
+}
+
+/* y = A x, the normal-equation matrix. */
+static void system_apply(const fit_system *f, const double *x, double *y) {
+    double *t = f->tmp_s;
+    rows_apply(f->M, x, t);
+#pragma omp parallel for schedule(static)
+    for (int64_t s = 0; s < f->S; ++s) {
+        double u[3] = {t[3 * s], t[3 * s + 1], t[3 * s + 2]};
+        apply_b(f, s, u, t + 3 * s);
+    }
+    gather(f, t, y);
+    if (f->lambda > 0.0) {
+        laplacian(f, x, f->tmp_n);
+        laplacian_transpose_add(f, f->tmp_n, f->lambda, y);
+    }
+    for (int32_t v = 0; v < f->n; ++v)
+        for (int c = 0; c < 3; ++c) {
+            const int64_t i = 3 * (int64_t)v + c;
+            y[i] = f->free_vertex[v] ? y[i] + f->damping * x[i] : 0.0;
+        }
+}
+
+/* Inverse of a symmetric 3x3 matrix (xx, xy, xz, yy, yz, zz), as 9 entries;
+ * falls back to the inverse diagonal when it is near singular. */
+static void invert_sym3(const double a[6], double inv[9]) {
+    const double c00 = a[3] * a[5] - a[4] * a[4], c01 = a[2] * a[4] - a[1] * a[5], c02 = a[1] * a[4] - a[2] * a[3];
+    const double det = a[0] * c00 + a[1] * c01 + a[2] * c02;
+    const double scale = fabs(a[0]) + fabs(a[3]) + fabs(a[5]);
+    memset(inv, 0, 9 * sizeof(double));
+    if (!(fabs(det) > 1e-12 * scale * scale * scale)) {
+        if (a[0] > 0.0) inv[0] = 1.0 / a[0];
+        if (a[3] > 0.0) inv[4] = 1.0 / a[3];
+        if (a[5] > 0.0) inv[8] = 1.0 / a[5];
+        return;
+    }
+    const double c11 = a[0] * a[5] - a[2] * a[2], c12 = a[1] * a[2] - a[0] * a[4], c22 = a[0] * a[3] - a[1] * a[1];
+    inv[0] = c00 / det, inv[1] = c01 / det, inv[2] = c02 / det;
+    inv[3] = c01 / det, inv[4] = c11 / det, inv[5] = c12 / det;
+    inv[6] = c02 / det, inv[7] = c12 / det, inv[8] = c22 / det;
+}
+
+/* One round: conjugate gradients on A V = b from the current V, with targets
+ * T (S * 3 floats).  `work` holds 5 * 3n doubles, `precond` 9n. */
+static void least_squares_round(fit_system *f, const float *T, const double *V0, double *V, int iterations,
+                                double *work, double *precond) {
+    const int64_t N3 = 3 * (int64_t)f->n;
+    double *b = work, *r = work + N3, *z = work + 2 * N3, *p = work + 3 * N3, *Ap = work + 4 * N3;
+    /* b = M^T B T + lambda Lap^T Lap V0 + damping V (the damping anchors the
+     * current iterate, so it does not bias the fit). */
+    double *t = f->tmp_s;
+#pragma omp parallel for schedule(static)
+    for (int64_t s = 0; s < f->S; ++s) {
+        const double u[3] = {T[3 * s], T[3 * s + 1], T[3 * s + 2]};
+        apply_b(f, s, u, t + 3 * s);
+    }
+    gather(f, t, b);
+    if (f->lambda > 0.0) {
+        laplacian(f, V0, f->tmp_n);
+        laplacian_transpose_add(f, f->tmp_n, f->lambda, b);
+    }
+    for (int64_t i = 0; i < N3; ++i) b[i] += f->damping * V[i];
+
+    /* Block-Jacobi preconditioner: sum_s m_si^2 B_s + lambda (Lap^T Lap)_ii + damping. */
+    const spia_stencils *Mt = f->Mt;
+#pragma omp parallel for schedule(static)
+    for (int32_t v = 0; v < f->n; ++v) {
+        double a[6] = {0, 0, 0, 0, 0, 0};
+        for (int64_t k = Mt->offsets[v]; k < Mt->offsets[v + 1]; ++k) {
+            const int64_t s = Mt->indices[k];
+            if (f->weight[s] == 0.0) continue;
+            const double w2 = Mt->weights[k] * Mt->weights[k] * f->weight[s];
+            const float *nn = f->normals + 3 * s;
+            a[0] += w2 * (nn[0] * nn[0] + f->alpha), a[1] += w2 * nn[0] * nn[1], a[2] += w2 * nn[0] * nn[2];
+            a[3] += w2 * (nn[1] * nn[1] + f->alpha), a[4] += w2 * nn[1] * nn[2], a[5] += w2 * (nn[2] * nn[2] + f->alpha);
+        }
+        const int64_t na = f->nb_start[v], nb = f->nb_start[v + 1];
+        double lap = 0.0;
+        if (nb > na) {
+            lap = 1.0;
+            for (int64_t k = na; k < nb; ++k) {
+                const int32_t j = f->nb[k];
+                const double deg = (double)(f->nb_start[j + 1] - f->nb_start[j]);
+                lap += 1.0 / (deg * deg);
+            }
+        }
+        const double d = f->lambda * lap + f->damping;
+        a[0] += d, a[3] += d, a[5] += d;
+        if (f->free_vertex[v])
+            invert_sym3(a, precond + 9 * (int64_t)v);
+        else
+            memset(precond + 9 * (int64_t)v, 0, 9 * sizeof(double));
+    }
+
+    system_apply(f, V, Ap);
+    for (int64_t i = 0; i < N3; ++i) r[i] = f->free_vertex[i / 3] ? b[i] - Ap[i] : 0.0;
+    double rz = 0.0;
+    for (int32_t v = 0; v < f->n; ++v) {
+        const double *P = precond + 9 * (int64_t)v, *rv = r + 3 * (int64_t)v;
+        double *zv = z + 3 * (int64_t)v;
+        for (int c = 0; c < 3; ++c) zv[c] = P[3 * c] * rv[0] + P[3 * c + 1] * rv[1] + P[3 * c + 2] * rv[2];
+        rz += zv[0] * rv[0] + zv[1] * rv[1] + zv[2] * rv[2];
+    }
+    memcpy(p, z, sizeof(double) * (size_t)N3);
+    const double rz0 = rz;
+    for (int it = 0; it < iterations && rz > 1e-20 * rz0 && rz > 0.0; ++it) {
+        system_apply(f, p, Ap);
+        double pAp = 0.0;
+        for (int64_t i = 0; i < N3; ++i) pAp += p[i] * Ap[i];
+        if (!(pAp > 0.0)) break;
+        const double alpha = rz / pAp;
+        for (int64_t i = 0; i < N3; ++i) {
+            V[i] += alpha * p[i];
+            r[i] -= alpha * Ap[i];
+        }
+        double rz_new = 0.0;
+        for (int32_t v = 0; v < f->n; ++v) {
+            const double *P = precond + 9 * (int64_t)v, *rv = r + 3 * (int64_t)v;
+            double *zv = z + 3 * (int64_t)v;
+            for (int c = 0; c < 3; ++c) zv[c] = P[3 * c] * rv[0] + P[3 * c + 1] * rv[1] + P[3 * c + 2] * rv[2];
+            rz_new += zv[0] * rv[0] + zv[1] * rv[1] + zv[2] * rv[2];
+        }
+        const double beta = rz_new / rz;
+        rz = rz_new;
+        for (int64_t i = 0; i < N3; ++i) p[i] = z[i] + beta * p[i];
+    }
+}
+
+/* ---- the entry point -------------------------------------------------------- */
+
+typedef struct fit_buffers {
+    spia_stencils *M, *Mt, *L;
+    double *V0, *V, *best, *X, *work, *precond, *tmp_s, *tmp_n;
+    float *T, *N, *d, *scratch, *targets, *solved, *wts;
+    int64_t *nb_start;
+    int32_t *nb;
+    unsigned char *free_vertex;
+    int32_t *sample_face;
+} fit_buffers;
+
+static void buffers_free(fit_buffers *b) {
+    spia_stencils_free(b->M);
+    spia_stencils_free(b->Mt);
+    spia_stencils_free(b->L);
+    free(b->V0), free(b->V), free(b->best), free(b->X), free(b->work), free(b->precond), free(b->tmp_s);
+    free(b->tmp_n), free(b->T), free(b->N), free(b->d), free(b->scratch), free(b->targets), free(b->solved);
+    free(b->wts);
+    free(b->nb_start), free(b->nb), free(b->free_vertex), free(b->sample_face);
+}
+
+/* The umbrella neighbours of every vertex, from the faces. */
+static spia_result build_neighbours(const spia_mesh *mesh, const spia_adjacency *adj, fit_buffers *b) {
+    const int32_t n = mesh->vertex_count;
+    const int32_t cap = 2 * spia__max_corners_per_vertex(adj) + 2;
+    int32_t *nb = malloc(sizeof(int32_t) * (size_t)cap), *faces_on = malloc(sizeof(int32_t) * (size_t)cap);
+    b->nb_start = malloc(sizeof(int64_t) * ((size_t)n + 1));
+    b->nb = malloc(sizeof(int32_t) * (size_t)(2 * adj->corner_count + 1));
+    b->free_vertex = malloc((size_t)n + 1);
+    if (!nb || !faces_on || !b->nb_start || !b->nb || !b->free_vertex) {
+        free(nb), free(faces_on);
+        return SPIA_ERROR_OUT_OF_MEMORY;
+    }
+    int64_t k = 0;
+    for (int32_t v = 0; v < n; ++v) {
+        b->nb_start[v] = k;
+        b->free_vertex[v] = adj->first[v + 1] > adj->first[v];
+        const int32_t count = spia__vertex_neighbours(mesh, adj, v, nb, faces_on, cap);
+        for (int32_t i = 0; i < count && i < cap; ++i) b->nb[k++] = nb[i];
+    }
+    b->nb_start[n] = k;
+    free(nb), free(faces_on);
+    return SPIA_OK;
+}
+
+/* Sample -> face, from the ptex layout. */
+static spia_result build_sample_faces(const spia_mesh *mesh, int32_t per_edge, int64_t S, fit_buffers *b) {
+    b->sample_face = malloc(sizeof(int32_t) * (size_t)(S > 0 ? S : 1));
+    if (!b->sample_face) return SPIA_ERROR_OUT_OF_MEMORY;
+    int64_t s = 0;
+    const int64_t per_ptex = (int64_t)per_edge * per_edge;
+    for (int32_t f = 0; f < mesh->face_count; ++f)
+        for (int64_t k = 0; k < ptex_of_face(mesh->face_sizes[f]) * per_ptex && s < S; ++k) b->sample_face[s++] = f;
+    return s == S ? SPIA_OK : SPIA_ERROR_INTERNAL;
+}
+
+static void evaluate(const spia_scan *scan, const fit_buffers *b, const double *V, int64_t S, double *query_seconds) {
+    const double t0 = spia__now();
+    rows_apply(b->M, V, b->X);
+    spia__scan_closest_points_double(scan, S, b->X, b->T, b->N, b->d, NULL);
+    *query_seconds += spia__now() - t0;
+}
+
+spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_options *options,
+                     const spia_fit_options *fit_options, float *cage_out, spia_fit_report *report,
+                     spia_status *status) {
+    spia_fit_report local;
+    if (!report) {
+        memset(&local, 0, sizeof local);
+        report = &local;
+    }
+    report->result = SPIA_ERROR_INVALID_ARGUMENT;
+    report->rounds = 0;
+    report->history_count = 0;
+    if (!scan) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "the scan must not be NULL");
+    if (!cage_out) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "cage_out must not be NULL");
+    spia_options opt;
+    spia_fit_options fo = {0};
+    spia_result r = spia__resolve_options(options, &opt, status);
+    if (r != SPIA_OK) return r;
+    if ((r = resolve_fit(fit_options, &fo, status)) != SPIA_OK) return report->result = r;
+    report->mode = fo.mode;
+    if (fo.mode == SPIA_FIT_SURFACE && opt.scheme != SPIA_SCHEME_CATMULL_CLARK)
+        return report->result = spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1,
+                                           "fitting the surface is available for Catmull-Clark only; "
+                                           "use the VERTICES fit for Loop and Doo-Sabin");
+    if ((r = spia_mesh_validate(cage, status)) != SPIA_OK) return report->result = r;
+    if (opt.scheme == SPIA_SCHEME_LOOP && (r = spia__require_triangles(cage, status)) != SPIA_OK)
+        return report->result = r;
+
+    const int32_t n = cage->vertex_count;
+    const double diagonal = spia_scan_diagonal(scan);
+    const double cutoff_abs = fo.cutoff * diagonal;
+    report->diagonal = diagonal;
+    report->stencil_seconds = report->query_seconds = report->solve_seconds = 0.0;
+    fit_buffers b;
+    memset(&b, 0, sizeof b);
+    spia_adjacency adj;
+    if ((r = spia__adjacency_build(cage, &adj, status)) != SPIA_OK) return report->result = r;
+
+    double t0 = spia__now();
+    spia_options surface_opt = opt;
+    surface_opt.scheme = SPIA_SCHEME_CATMULL_CLARK;
+    int64_t S = 0;
+    /* The samples serve the report in both modes; for Loop and Doo-Sabin
+     * (VERTICES only) there are none, and the distances stay 0. */
+    const int surface_samples = opt.scheme == SPIA_SCHEME_CATMULL_CLARK;
+    if (surface_samples) {
+        r = spia__osd_surface_stencils(cage, &adj, &surface_opt, fo.samples_per_edge, &b.M, status);
+        if (r != SPIA_OK) goto done;
+        S = b.M->rows;
+    }
+    report->sample_count = S;
+    report->stencil_seconds += spia__now() - t0;
+
+    const int64_t N3 = 3 * (int64_t)n;
+    b.V0 = malloc(sizeof(double) * (size_t)N3);
+    b.V = malloc(sizeof(double) * (size_t)N3);
+    b.best = malloc(sizeof(double) * (size_t)N3);
+    if (!b.V0 || !b.V || !b.best) goto oom;
+    for (int64_t i = 0; i < N3; ++i) b.V0[i] = b.V[i] = b.best[i] = cage->positions[i];
+    if (S > 0) {
+        b.X = malloc(sizeof(double) * 3 * (size_t)S);
+        b.tmp_s = malloc(sizeof(double) * 3 * (size_t)S);
+        b.T = malloc(sizeof(float) * 3 * (size_t)S);
+        b.N = malloc(sizeof(float) * 3 * (size_t)S);
+        b.d = malloc(sizeof(float) * (size_t)S);
+        b.scratch = malloc(sizeof(float) * (size_t)S);
+        if (!b.X || !b.tmp_s || !b.T || !b.N || !b.d || !b.scratch) goto oom;
+        if (build_sample_faces(cage, fo.samples_per_edge, S, &b) != SPIA_OK) goto oom;
+        evaluate(scan, &b, b.V, S, &report->query_seconds);
+        report->before = distance_stats(b.d, S, cutoff_abs, diagonal, b.scratch);
+    }
+
+    if (fo.mode == SPIA_FIT_VERTICES) {
+        t0 = spia__now();
+        r = spia_limit_stencils_create(cage, &opt, &b.L, status);
+        report->stencil_seconds += spia__now() - t0;
+        if (r != SPIA_OK) goto done;
+        double *Y = malloc(sizeof(double) * (size_t)N3);
+        b.targets = malloc(sizeof(float) * (size_t)N3);
+        b.solved = malloc(sizeof(float) * (size_t)N3);
+        float *closest = malloc(sizeof(float) * (size_t)N3), *dist = malloc(sizeof(float) * (size_t)(n + 1));
+        if (!Y || !b.targets || !b.solved || !closest || !dist) {
+            free(Y), free(closest), free(dist);
+            goto oom;
+        }
+        t0 = spia__now();
+        spia_stencils_apply(b.L, b.V0, Y);
+        spia__scan_closest_points_double(scan, n, Y, closest, NULL, dist, NULL);
+        report->query_seconds += spia__now() - t0;
+        for (int32_t v = 0; v < n; ++v)
+            for (int c = 0; c < 3; ++c) {
+                const int64_t i = 3 * (int64_t)v + c;
+                const int keep = adj.first[v + 1] == adj.first[v] || dist[v] > cutoff_abs;
+                b.targets[i] = keep ? (float)Y[i] : closest[i];
+            }
+        free(Y), free(closest), free(dist);
+        spia_report rep;
+        memset(&rep, 0, sizeof rep);
+        t0 = spia__now();
+        r = spia_solve(b.L, b.targets, &opt, b.solved, &rep, status);
+        report->solve_seconds += spia__now() - t0;
+        report->iterations = rep.iterations;
+        report->max_error_relative = rep.max_error_relative;
+        if (r < 0) goto done;
+        for (int64_t i = 0; i < N3; ++i) b.best[i] = b.solved[i];
+        report->rounds = 1;
+    } else {
+        b.Mt = transpose(b.M, n);
+        b.work = malloc(sizeof(double) * 5 * (size_t)N3);
+        b.precond = malloc(sizeof(double) * 9 * (size_t)n);
+        b.tmp_n = malloc(sizeof(double) * (size_t)N3);
+        b.wts = malloc(sizeof(float) * (size_t)S);
+        if (!b.Mt || !b.work || !b.precond || !b.tmp_n || !b.wts) goto oom;
+        if (build_neighbours(cage, &adj, &b) != SPIA_OK) goto oom;
+        int64_t counted = S - report->before.ignored;
+        int32_t free_count = 0;
+        for (int32_t v = 0; v < n; ++v) free_count += b.free_vertex[v];
+        fit_system f;
+        f.M = b.M, f.Mt = b.Mt, f.n = n, f.S = S, f.normals = b.N, f.dist = b.d, f.weight = b.wts, f.cutoff_abs = cutoff_abs;
+        f.alpha = fo.point_weight;
+        f.lambda = fo.smoothing * (double)(counted > 0 ? counted : S) / (double)(free_count > 0 ? free_count : 1);
+        /* A whisper of damping towards the current iterate keeps vertices no
+         * sample reaches (and global drift) determined. */
+        f.damping = 1e-6 * (1.0 + f.lambda) * (double)S / (double)(free_count > 0 ? free_count : 1);
+        f.nb_start = b.nb_start, f.nb = b.nb, f.free_vertex = b.free_vertex;
+        f.tmp_s = b.tmp_s, f.tmp_n = b.tmp_n;
+        double best_mean = mean_within(b.d, S, cutoff_abs);
+        if (report->history && report->history_capacity > 0) {
+            report->history[0] = best_mean / (diagonal > 0.0 ? diagonal : 1.0);
+            report->history_count = 1;
+        }
+        for (int round = 1; round <= fo.max_rounds; ++round) {
+            t0 = spia__now();
+            cutoff_weights(b.d, S, cutoff_abs, b.wts);
+            least_squares_round(&f, b.T, b.V0, b.V, fo.solver_iterations, b.work, b.precond);
+            report->solve_seconds += spia__now() - t0;
+            evaluate(scan, &b, b.V, S, &report->query_seconds);
+            const double mean = mean_within(b.d, S, cutoff_abs);
+            report->rounds = round;
+            if (report->history && round < report->history_capacity) {
+                report->history[round] = mean / (diagonal > 0.0 ? diagonal : 1.0);
+                report->history_count = round + 1;
+            }
+            if (opt.progress && opt.progress(opt.progress_user_data, round, mean / (diagonal > 0.0 ? diagonal : 1.0))) {
+                r = spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled after fitting round %d", round);
+                goto done;
+            }
+            if (!(mean < best_mean)) break; /* no better: keep the best cage */
+            const double gain = (best_mean - mean) / best_mean;
+            best_mean = mean;
+            memcpy(b.best, b.V, sizeof(double) * (size_t)N3);
+            if (gain < fo.round_tolerance) break;
+        }
+    }
+
+    /* Distances of the cage written. */
+    if (S > 0) {
+        evaluate(scan, &b, b.best, S, &report->query_seconds);
+        report->after = distance_stats(b.d, S, cutoff_abs, diagonal, b.scratch);
+        if (report->vertex_distances) {
+            float *vd = report->vertex_distances;
+            memset(vd, 0, sizeof(float) * (size_t)n);
+            const double unit = diagonal > 0.0 ? diagonal : 1.0;
+            for (int64_t s = 0; s < S; ++s) {
+                if (b.d[s] > cutoff_abs) continue;
+                const int32_t face = b.sample_face[s];
+                const float rel = (float)(b.d[s] / unit);
+                for (int64_t c = adj.corner_start[face]; c < adj.corner_start[face + 1]; ++c) {
+                    const int32_t v = cage->face_vertices[c];
+                    if (rel > vd[v]) vd[v] = rel;
+                }
+            }
+        }
+    } else if (report->vertex_distances) {
+        memset(report->vertex_distances, 0, sizeof(float) * (size_t)n);
+    }
+    for (int64_t i = 0; i < N3; ++i) cage_out[i] = (float)b.best[i];
+    if (r >= 0 && fo.mode == SPIA_FIT_SURFACE) r = SPIA_OK;
+    if (r == SPIA_OK) spia__ok(status);
+    goto done;
+oom:
+    r = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory fitting the cage");
+done:
+    buffers_free(&b);
+    spia__adjacency_free(&adj);
+    report->result = r;
+    return r;
+}

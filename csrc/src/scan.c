@@ -1,0 +1,354 @@
+/* Closest points on a scan: Embree 3's point queries over the scan's
+ * triangles, the exact point-triangle distance computed here in double, and
+ * a smooth normal (area-weighted vertex normals interpolated at the closest
+ * point) for point-to-plane fitting. */
+#include "internal.h"
+
+#include <embree3/rtcore.h>
+#include <float.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+struct spia_scan {
+    RTCDevice device;
+    RTCScene scene;
+    int32_t vertex_count;
+    int64_t triangle_count;
+    float *positions;      /* vertex_count * 3 (our copy; Embree keeps its own) */
+    float *normals;        /* vertex_count * 3, unit or zero                     */
+    int32_t *triangles;    /* triangle_count * 3                                 */
+    int32_t *polygon_of;   /* triangle -> the scan polygon it was cut from        */
+    double diagonal;
+    int64_t skipped_faces; /* faces that repeat a vertex: left out              */
+};
+
+static void scan_release(spia_scan *s) {
+    if (!s) return;
+    if (s->scene) rtcReleaseScene(s->scene);
+    if (s->device) rtcReleaseDevice(s->device);
+    free(s->positions);
+    free(s->normals);
+    free(s->triangles);
+    free(s->polygon_of);
+    free(s);
+}
+
+void spia_scan_free(spia_scan *scan) { scan_release(scan); }
+
+double spia_scan_diagonal(const spia_scan *scan) { return scan ? scan->diagonal : 0.0; }
+int64_t spia_scan_triangle_count(const spia_scan *scan) { return scan ? scan->triangle_count : 0; }
+
+static int face_repeats_vertex(const int32_t *fv, int32_t size) {
+    for (int32_t a = 0; a < size; ++a)
+        for (int32_t b = a + 1; b < size; ++b)
+            if (fv[a] == fv[b]) return 1;
+    return 0;
+}
+
+spia_result spia_scan_create(const spia_mesh *mesh, spia_scan **out, spia_status *status) {
+    if (!out) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "out must not be NULL");
+    *out = NULL;
+    if (!mesh) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "the scan mesh must not be NULL");
+    if (mesh->vertex_count < 0 || mesh->face_count < 0)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "negative vertex or face count in the scan");
+    if (mesh->vertex_count == 0 || mesh->face_count == 0)
+        return spia__fail(status, SPIA_ERROR_EMPTY_MESH, -1, "the scan has no %s",
+                          mesh->vertex_count == 0 ? "vertices" : "faces");
+    if (!mesh->positions || !mesh->face_sizes || !mesh->face_vertices)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "the scan's positions and faces must not be NULL");
+    const int32_t n = mesh->vertex_count;
+    for (int64_t i = 0; i < 3 * (int64_t)n; ++i)
+        if (!isfinite(mesh->positions[i]))
+            return spia__fail(status, SPIA_ERROR_NONFINITE, i / 3, "scan vertex %lld has a non-finite coordinate",
+                              (long long)(i / 3));
+    /* Count triangles (fans), checking sizes and indices. */
+    int64_t tris = 0, corner = 0, skipped = 0;
+    for (int32_t f = 0; f < mesh->face_count; ++f) {
+        const int32_t size = mesh->face_sizes[f];
+        if (size < 3)
+            return spia__fail(status, SPIA_ERROR_FACE_SIZE, f, "scan face %d has %d corners (at least 3 needed)", f,
+                              size);
+        for (int32_t k = 0; k < size; ++k) {
+            const int32_t v = mesh->face_vertices[corner + k];
+            if (v < 0 || v >= n)
+                return spia__fail(status, SPIA_ERROR_INDEX_RANGE, f, "scan face %d refers to vertex %d of %d", f, v, n);
+        }
+        if (face_repeats_vertex(mesh->face_vertices + corner, size))
+            ++skipped;
+        else
+            tris += size - 2;
+        corner += size;
+    }
+    if (tris == 0)
+        return spia__fail(status, SPIA_ERROR_EMPTY_MESH, -1, "the scan has no usable faces (%lld degenerate)",
+                          (long long)skipped);
+    if (tris > UINT32_MAX / 3)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "the scan has too many triangles (%lld)",
+                          (long long)tris);
+
+    spia_scan *s = calloc(1, sizeof *s);
+    if (!s) return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the scan");
+    s->vertex_count = n;
+    s->triangle_count = tris;
+    s->skipped_faces = skipped;
+    s->positions = malloc(sizeof(float) * 3 * (size_t)n);
+    s->normals = calloc(3 * (size_t)n, sizeof(float));
+    s->triangles = malloc(sizeof(int32_t) * 3 * (size_t)tris);
+    s->polygon_of = malloc(sizeof(int32_t) * (size_t)tris);
+    double *acc = calloc(3 * (size_t)n, sizeof(double));
+    if (!s->positions || !s->normals || !s->triangles || !s->polygon_of || !acc) {
+        free(acc);
+        scan_release(s);
+        return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the scan");
+    }
+    memcpy(s->positions, mesh->positions, sizeof(float) * 3 * (size_t)n);
+
+    /* Bounding box of the vertices faces use. */
+    double lo[3] = {DBL_MAX, DBL_MAX, DBL_MAX}, hi[3] = {-DBL_MAX, -DBL_MAX, -DBL_MAX};
+    int64_t t = 0;
+    corner = 0;
+    for (int32_t f = 0; f < mesh->face_count; ++f) {
+        const int32_t size = mesh->face_sizes[f];
+        const int32_t *fv = mesh->face_vertices + corner;
+        corner += size;
+        for (int32_t k = 0; k < size; ++k)
+            for (int c = 0; c < 3; ++c) {
+                const double x = mesh->positions[3 * (int64_t)fv[k] + c];
+                lo[c] = x < lo[c] ? x : lo[c];
+                hi[c] = x > hi[c] ? x : hi[c];
+            }
+        if (face_repeats_vertex(fv, size)) continue;
+        for (int32_t k = 1; k + 1 < size; ++k) {
+            int32_t *tri = s->triangles + 3 * t;
+            tri[0] = fv[0];
+            tri[1] = fv[k];
+            tri[2] = fv[k + 1];
+            s->polygon_of[t++] = f;
+            /* Area-weighted normal: the cross product, added to each corner. */
+            const float *a = s->positions + 3 * (int64_t)tri[0], *b = s->positions + 3 * (int64_t)tri[1],
+                        *c = s->positions + 3 * (int64_t)tri[2];
+            const double e1[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+            const double e2[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+            const double cr[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                                  e1[0] * e2[1] - e1[1] * e2[0]};
+            for (int j = 0; j < 3; ++j)
+                for (int q = 0; q < 3; ++q) acc[3 * (int64_t)tri[j] + q] += cr[q];
+        }
+    }
+    s->diagonal = sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
+                       (hi[2] - lo[2]) * (hi[2] - lo[2]));
+    for (int32_t v = 0; v < n; ++v) {
+        const double *a = acc + 3 * (int64_t)v;
+        const double len = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+        if (len > 0.0)
+            for (int q = 0; q < 3; ++q) s->normals[3 * (int64_t)v + q] = (float)(a[q] / len);
+    }
+    free(acc);
+
+    /* Embree: one triangle geometry, a static scene. */
+    s->device = rtcNewDevice(NULL);
+    if (!s->device) {
+        scan_release(s);
+        return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "Embree could not create a device");
+    }
+    s->scene = rtcNewScene(s->device);
+    RTCGeometry geom = rtcNewGeometry(s->device, RTC_GEOMETRY_TYPE_TRIANGLE);
+    float *vb = rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float),
+                                        (size_t)n);
+    unsigned *ib = rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned),
+                                           (size_t)tris);
+    if (!s->scene || !vb || !ib) {
+        if (geom) rtcReleaseGeometry(geom);
+        scan_release(s);
+        return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "Embree could not allocate the scan's buffers");
+    }
+    memcpy(vb, s->positions, sizeof(float) * 3 * (size_t)n);
+    for (int64_t i = 0; i < 3 * tris; ++i) ib[i] = (unsigned)s->triangles[i];
+    rtcCommitGeometry(geom);
+    rtcAttachGeometry(s->scene, geom);
+    rtcReleaseGeometry(geom);
+    rtcCommitScene(s->scene);
+    const enum RTCError err = rtcGetDeviceError(s->device);
+    if (err != RTC_ERROR_NONE) {
+        scan_release(s);
+        return spia__fail(status, err == RTC_ERROR_OUT_OF_MEMORY ? SPIA_ERROR_OUT_OF_MEMORY : SPIA_ERROR_INTERNAL, -1,
+                          "Embree failed to build the scan's hierarchy (error %d)", (int)err);
+    }
+    *out = s;
+    spia__ok(status);
+    return SPIA_OK;
+}
+
+/* The closest point to p on triangle (a, b, c), as barycentric weights
+ * (u, v, w) of a, b, c; by the Voronoi regions of vertices, edges and face. */
+static void closest_on_triangle(const double p[3], const double a[3], const double b[3], const double c[3],
+                                double bary[3]) {
+    double ab[3], ac[3], ap[3];
+    for (int i = 0; i < 3; ++i) {
+        ab[i] = b[i] - a[i];
+        ac[i] = c[i] - a[i];
+        ap[i] = p[i] - a[i];
+    }
+#define DOT(x, y) ((x)[0] * (y)[0] + (x)[1] * (y)[1] + (x)[2] * (y)[2])
+    const double d1 = DOT(ab, ap), d2 = DOT(ac, ap);
+    if (d1 <= 0.0 && d2 <= 0.0) {
+        bary[0] = 1.0, bary[1] = 0.0, bary[2] = 0.0;
+        return;
+    }
+    double bp[3], cp[3];
+    for (int i = 0; i < 3; ++i) {
+        bp[i] = p[i] - b[i];
+        cp[i] = p[i] - c[i];
+    }
+    const double d3 = DOT(ab, bp), d4 = DOT(ac, bp);
+    if (d3 >= 0.0 && d4 <= d3) {
+        bary[0] = 0.0, bary[1] = 1.0, bary[2] = 0.0;
+        return;
+    }
+    const double vc = d1 * d4 - d3 * d2;
+    if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) {
+        const double v = d1 / (d1 - d3);
+        bary[0] = 1.0 - v, bary[1] = v, bary[2] = 0.0;
+        return;
+    }
+    const double d5 = DOT(ab, cp), d6 = DOT(ac, cp);
+    if (d6 >= 0.0 && d5 <= d6) {
+        bary[0] = 0.0, bary[1] = 0.0, bary[2] = 1.0;
+        return;
+    }
+    const double vb = d5 * d2 - d1 * d6;
+    if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) {
+        const double w = d2 / (d2 - d6);
+        bary[0] = 1.0 - w, bary[1] = 0.0, bary[2] = w;
+        return;
+    }
+    const double va = d3 * d6 - d5 * d4;
+    if (va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0) {
+        const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        bary[0] = 0.0, bary[1] = 1.0 - w, bary[2] = w;
+        return;
+    }
+    const double denom = va + vb + vc;
+    if (!(denom > 0.0)) { /* a degenerate triangle: the nearest of its corners */
+        const double da = DOT(ap, ap), db = DOT(bp, bp), dc = DOT(cp, cp);
+        const int k = da <= db && da <= dc ? 0 : (db <= dc ? 1 : 2);
+        bary[0] = k == 0, bary[1] = k == 1, bary[2] = k == 2;
+        return;
+    }
+    const double v = vb / denom, w = vc / denom;
+    bary[0] = 1.0 - v - w, bary[1] = v, bary[2] = w;
+#undef DOT
+}
+
+typedef struct query_state {
+    const spia_scan *scan;
+    double p[3];
+    double best_d2;
+    int64_t best_tri;
+    double best_bary[3];
+    double best_point[3];
+} query_state;
+
+static bool query_triangle(struct RTCPointQueryFunctionArguments *args) {
+    query_state *q = (query_state *)args->userPtr;
+    const spia_scan *s = q->scan;
+    const int32_t *tri = s->triangles + 3 * (int64_t)args->primID;
+    double v[3][3];
+    for (int k = 0; k < 3; ++k)
+        for (int c = 0; c < 3; ++c) v[k][c] = s->positions[3 * (int64_t)tri[k] + c];
+    double bary[3];
+    closest_on_triangle(q->p, v[0], v[1], v[2], bary);
+    double x[3], d2 = 0.0;
+    for (int c = 0; c < 3; ++c) {
+        x[c] = bary[0] * v[0][c] + bary[1] * v[1][c] + bary[2] * v[2][c];
+        d2 += (x[c] - q->p[c]) * (x[c] - q->p[c]);
+    }
+    if (d2 < q->best_d2 || (d2 == q->best_d2 && (int64_t)args->primID < q->best_tri)) {
+        q->best_d2 = d2;
+        q->best_tri = (int64_t)args->primID;
+        memcpy(q->best_bary, bary, sizeof bary);
+        memcpy(q->best_point, x, sizeof x);
+        /* Shrink the search; a hair wider than sqrt(d2) so that float
+         * rounding never culls a triangle at the same distance. */
+        const float r = (float)(sqrt(d2) * (1.0 + 1e-6)) + FLT_MIN;
+        if (r < args->query->radius) {
+            args->query->radius = r;
+            return true;
+        }
+    }
+    return false;
+}
+
+/* One query; writes the outputs for point i. */
+static void closest_one(const spia_scan *s, const double p[3], int64_t i, float *closest, float *normals,
+                        float *distances, int32_t *faces) {
+    query_state q;
+    q.scan = s;
+    memcpy(q.p, p, sizeof q.p);
+    q.best_d2 = INFINITY;
+    q.best_tri = -1;
+    struct RTCPointQuery query;
+    query.x = (float)p[0];
+    query.y = (float)p[1];
+    query.z = (float)p[2];
+    query.time = 0.0f;
+    query.radius = INFINITY;
+    struct RTCPointQueryContext context;
+    rtcInitPointQueryContext(&context);
+    rtcPointQuery(s->scene, &query, &context, query_triangle, &q);
+    if (q.best_tri < 0) { /* cannot happen with a non-empty scene; be safe */
+        q.best_tri = 0;
+        const int32_t *tri = s->triangles;
+        for (int c = 0; c < 3; ++c) q.best_point[c] = s->positions[3 * (int64_t)tri[0] + c];
+        q.best_bary[0] = 1.0, q.best_bary[1] = 0.0, q.best_bary[2] = 0.0;
+        q.best_d2 = 0.0;
+        for (int c = 0; c < 3; ++c) q.best_d2 += (q.best_point[c] - p[c]) * (q.best_point[c] - p[c]);
+    }
+    if (closest)
+        for (int c = 0; c < 3; ++c) closest[3 * i + c] = (float)q.best_point[c];
+    if (distances) distances[i] = (float)sqrt(q.best_d2);
+    if (faces) faces[i] = s->polygon_of[q.best_tri];
+    if (normals) {
+        const int32_t *tri = s->triangles + 3 * q.best_tri;
+        double nrm[3] = {0.0, 0.0, 0.0};
+        for (int k = 0; k < 3; ++k)
+            for (int c = 0; c < 3; ++c) nrm[c] += q.best_bary[k] * s->normals[3 * (int64_t)tri[k] + c];
+        double len = sqrt(nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2]);
+        if (!(len > 1e-12)) { /* opposite vertex normals cancel: the face's own normal */
+            const float *a = s->positions + 3 * (int64_t)tri[0], *b = s->positions + 3 * (int64_t)tri[1],
+                        *c = s->positions + 3 * (int64_t)tri[2];
+            const double e1[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+            const double e2[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+            nrm[0] = e1[1] * e2[2] - e1[2] * e2[1];
+            nrm[1] = e1[2] * e2[0] - e1[0] * e2[2];
+            nrm[2] = e1[0] * e2[1] - e1[1] * e2[0];
+            len = sqrt(nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2]);
+        }
+        for (int c = 0; c < 3; ++c) normals[3 * i + c] = len > 0.0 ? (float)(nrm[c] / len) : 0.0f;
+    }
+}
+
+void spia__scan_closest_points_double(const spia_scan *s, int64_t count, const double *points, float *closest,
+                                      float *normals, float *distances, int32_t *faces) {
+#pragma omp parallel for schedule(dynamic, 256)
+    for (int64_t i = 0; i < count; ++i) closest_one(s, points + 3 * i, i, closest, normals, distances, faces);
+}
+
+spia_result spia_scan_closest_points(const spia_scan *scan, int64_t count, const float *points, float *closest,
+                                     float *normals, float *distances, int32_t *faces, spia_status *status) {
+    if (!scan) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "scan must not be NULL");
+    if (count < 0) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "negative point count");
+    if (count > 0 && !points) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "points must not be NULL");
+    for (int64_t i = 0; i < 3 * count; ++i)
+        if (!isfinite(points[i]))
+            return spia__fail(status, SPIA_ERROR_NONFINITE, i / 3, "query point %lld is not finite",
+                              (long long)(i / 3));
+#pragma omp parallel for schedule(dynamic, 256)
+    for (int64_t i = 0; i < count; ++i) {
+        const double p[3] = {points[3 * i], points[3 * i + 1], points[3 * i + 2]};
+        closest_one(scan, p, i, closest, normals, distances, faces);
+    }
+    spia__ok(status);
+    return SPIA_OK;
+}
