@@ -175,7 +175,7 @@ def _declare(lib):
     fn("spia_scan_free", None, P)
     fn("spia_scan_diagonal", ctypes.c_double, P)
     fn("spia_scan_closest_points", ctypes.c_int, P, ctypes.c_int64, _f32p, _f32p, _f32p, _f32p, _i32p,
-       ctypes.POINTER(_Status))
+       ctypes.POINTER(ctypes.c_uint8), ctypes.POINTER(_Status))
     fn("spia_fit", ctypes.c_int, ctypes.POINTER(_Mesh), P, ctypes.POINTER(_Options), ctypes.POINTER(_FitOptions),
        _f32p, ctypes.POINTER(_FitReport), ctypes.POINTER(_Status))
 
@@ -600,21 +600,26 @@ class Scan:
         """Bounding-box diagonal of the scan's faces."""
         return self._lib.spia_scan_diagonal(self._handle)
 
-    def closest_points(self, points):
-        """For points (N, 3): (closest (N, 3), normals (N, 3), distances (N,), faces (N,))."""
+    def closest_points(self, points, with_boundary=False):
+        """For points (N, 3): (closest (N, 3), normals (N, 3), distances (N,), faces (N,)), and with
+        with_boundary=True also on_boundary (N,) bool: the closest point is on the scan's boundary
+        (the point is beyond the scan's edge, over a hole)."""
         points = _as(points, np.float32, (3,))
         n = len(points)
         closest = np.empty((n, 3), np.float32)
         normals = np.empty((n, 3), np.float32)
         distances = np.empty(n, np.float32)
         faces = np.empty(n, np.int32)
+        boundary = np.empty(n, np.uint8)
         status = _Status()
         code = self._lib.spia_scan_closest_points(
             self._handle, n, _ptr(points, ctypes.c_float), _ptr(closest, ctypes.c_float),
             _ptr(normals, ctypes.c_float), _ptr(distances, ctypes.c_float), _ptr(faces, ctypes.c_int32),
-            ctypes.byref(status))
+            _ptr(boundary, ctypes.c_uint8), ctypes.byref(status))
         if code != 0:
             _raise(code, status)
+        if with_boundary:
+            return closest, normals, distances, faces, boundary.astype(bool)
         return closest, normals, distances, faces
 
 

@@ -421,12 +421,15 @@ SPIA_API double spia_scan_diagonal(const spia_scan *scan);
  * For each of `count` points (3 floats each), the closest point on the scan
  * and, into whichever of these caller buffers are not NULL: closest
  * (count * 3 floats), normals (count * 3 floats: the scan's smooth unit
- * normal there), distances (count floats) and faces (count ints: the scan
- * polygon it lies on).  Safe to call from several threads on one scan.
+ * normal there), distances (count floats), faces (count ints: the scan
+ * polygon it lies on) and on_boundary (count bytes: 1 when the closest point
+ * is on the scan's boundary, an edge only one triangle uses or one of its
+ * vertices: the query point is then beyond the scan's edge, over a hole).
+ * Safe to call from several threads on one scan.
  */
 SPIA_API spia_result spia_scan_closest_points(const spia_scan *scan, int64_t count, const float *points,
                                               float *closest, float *normals, float *distances, int32_t *faces,
-                                              spia_status *status);
+                                              uint8_t *on_boundary, spia_status *status);
 
 /* ------------------------------------------------------------------------ */
 /* Fitting a cage to a scan                                                  */
@@ -453,7 +456,8 @@ typedef struct spia_fit_options {
     int32_t samples_per_edge;  /* samples per ptex face edge, 1 to 64 [4] (16 per quad)              */
     /* A sample (or, for VERTICES, a limit point) whose closest scan point is
      * farther than cutoff * scan diagonal is over a hole or off the scan: it
-     * does not pull.  [0.02] */
+     * does not pull.  Nor does one whose closest point is on the scan's
+     * boundary (over a hole however near).  [0.02] */
     double cutoff;
     /* Fairness: weight of |Laplacian(cage - initial cage)|^2 per cage vertex
      * against the squared distances of the samples, per sample.  Keeps the

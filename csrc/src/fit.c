@@ -163,9 +163,12 @@ static double mean_within(const float *d, int64_t count, double cutoff_abs) {
     return n ? sum / (double)n : 0.0;
 }
 
-/* Sample weights: 1 within the cut-off, else 0. */
-static void cutoff_weights(const float *d, int64_t count, double cutoff_abs, float *w) {
-    for (int64_t i = 0; i < count; ++i) w[i] = d[i] <= cutoff_abs ? 1.0f : 0.0f;
+/* Sample weights: 1 within the cut-off, else 0; and 0 where the closest
+ * point is on the scan's boundary: such a sample lies beyond the scan's
+ * edge, over a hole, and pulling it (even only along the normal) drags or
+ * flattens the surface there, which smoothness fills in better. */
+static void cutoff_weights(const float *d, const uint8_t *on_boundary, int64_t count, double cutoff_abs, float *w) {
+    for (int64_t i = 0; i < count; ++i) w[i] = d[i] <= cutoff_abs && !on_boundary[i] ? 1.0f : 0.0f;
 }
 
 /* ---- the least-squares rounds --------------------------------------------- */
@@ -177,6 +180,7 @@ typedef struct fit_system {
     const float *normals;   /* S * 3 */
     const float *dist;      /* S */
     const float *weight;    /* S: per-sample weights (0 beyond the cut-off) */
+    const uint8_t *on_boundary; /* S */
     double cutoff_abs, alpha, lambda, damping;
     /* Umbrella Laplacian: neighbours of v are nb[nb_start[v] .. nb_start[v+1]-1]. */
     const int64_t *nb_start;
@@ -308,8 +312,9 @@ static void least_squares_round(fit_system *f, const float *T, const double *V0,
             if (f->weight[s] == 0.0) continue;
             const double w2 = Mt->weights[k] * Mt->weights[k] * f->weight[s];
             const float *nn = f->normals + 3 * s;
-            a[0] += w2 * (nn[0] * nn[0] + f->alpha), a[1] += w2 * nn[0] * nn[1], a[2] += w2 * nn[0] * nn[2];
-            a[3] += w2 * (nn[1] * nn[1] + f->alpha), a[4] += w2 * nn[1] * nn[2], a[5] += w2 * (nn[2] * nn[2] + f->alpha);
+            const double al = f->alpha;
+            a[0] += w2 * (nn[0] * nn[0] + al), a[1] += w2 * nn[0] * nn[1], a[2] += w2 * nn[0] * nn[2];
+            a[3] += w2 * (nn[1] * nn[1] + al), a[4] += w2 * nn[1] * nn[2], a[5] += w2 * (nn[2] * nn[2] + al);
         }
         const int64_t na = f->nb_start[v], nb = f->nb_start[v + 1];
         double lap = 0.0;
@@ -369,6 +374,7 @@ typedef struct fit_buffers {
     spia_stencils *M, *Mt, *L;
     double *V0, *V, *best, *X, *work, *precond, *tmp_s, *tmp_n;
     float *T, *N, *d, *scratch, *targets, *solved, *wts;
+    uint8_t *on_boundary;
     int64_t *nb_start;
     int32_t *nb;
     unsigned char *free_vertex;
@@ -381,7 +387,7 @@ static void buffers_free(fit_buffers *b) {
     spia_stencils_free(b->L);
     free(b->V0), free(b->V), free(b->best), free(b->X), free(b->work), free(b->precond), free(b->tmp_s);
     free(b->tmp_n), free(b->T), free(b->N), free(b->d), free(b->scratch), free(b->targets), free(b->solved);
-    free(b->wts);
+    free(b->wts), free(b->on_boundary);
     free(b->nb_start), free(b->nb), free(b->free_vertex), free(b->sample_face);
 }
 
@@ -423,7 +429,7 @@ static spia_result build_sample_faces(const spia_mesh *mesh, int32_t per_edge, i
 static void evaluate(const spia_scan *scan, const fit_buffers *b, const double *V, int64_t S, double *query_seconds) {
     const double t0 = spia__now();
     rows_apply(b->M, V, b->X);
-    spia__scan_closest_points_double(scan, S, b->X, b->T, b->N, b->d, NULL);
+    spia__scan_closest_points_double(scan, S, b->X, b->T, b->N, b->d, NULL, b->on_boundary);
     *query_seconds += spia__now() - t0;
 }
 
@@ -492,7 +498,8 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         b.N = malloc(sizeof(float) * 3 * (size_t)S);
         b.d = malloc(sizeof(float) * (size_t)S);
         b.scratch = malloc(sizeof(float) * (size_t)S);
-        if (!b.X || !b.tmp_s || !b.T || !b.N || !b.d || !b.scratch) goto oom;
+        b.on_boundary = malloc((size_t)S);
+        if (!b.X || !b.tmp_s || !b.T || !b.N || !b.d || !b.scratch || !b.on_boundary) goto oom;
         if (build_sample_faces(cage, fo.samples_per_edge, S, &b) != SPIA_OK) goto oom;
         evaluate(scan, &b, b.V, S, &report->query_seconds);
         report->before = distance_stats(b.d, S, cutoff_abs, diagonal, b.scratch);
@@ -507,21 +514,22 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         b.targets = malloc(sizeof(float) * (size_t)N3);
         b.solved = malloc(sizeof(float) * (size_t)N3);
         float *closest = malloc(sizeof(float) * (size_t)N3), *dist = malloc(sizeof(float) * (size_t)(n + 1));
-        if (!Y || !b.targets || !b.solved || !closest || !dist) {
-            free(Y), free(closest), free(dist);
+        uint8_t *edge = malloc((size_t)n + 1);
+        if (!Y || !b.targets || !b.solved || !closest || !dist || !edge) {
+            free(Y), free(closest), free(dist), free(edge);
             goto oom;
         }
         t0 = spia__now();
         spia_stencils_apply(b.L, b.V0, Y);
-        spia__scan_closest_points_double(scan, n, Y, closest, NULL, dist, NULL);
+        spia__scan_closest_points_double(scan, n, Y, closest, NULL, dist, NULL, edge);
         report->query_seconds += spia__now() - t0;
         for (int32_t v = 0; v < n; ++v)
             for (int c = 0; c < 3; ++c) {
                 const int64_t i = 3 * (int64_t)v + c;
-                const int keep = adj.first[v + 1] == adj.first[v] || dist[v] > cutoff_abs;
+                const int keep = adj.first[v + 1] == adj.first[v] || dist[v] > cutoff_abs || edge[v];
                 b.targets[i] = keep ? (float)Y[i] : closest[i];
             }
-        free(Y), free(closest), free(dist);
+        free(Y), free(closest), free(dist), free(edge);
         spia_report rep;
         memset(&rep, 0, sizeof rep);
         t0 = spia__now();
@@ -544,7 +552,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         int32_t free_count = 0;
         for (int32_t v = 0; v < n; ++v) free_count += b.free_vertex[v];
         fit_system f;
-        f.M = b.M, f.Mt = b.Mt, f.n = n, f.S = S, f.normals = b.N, f.dist = b.d, f.weight = b.wts, f.cutoff_abs = cutoff_abs;
+        f.M = b.M, f.Mt = b.Mt, f.n = n, f.S = S, f.normals = b.N, f.dist = b.d, f.weight = b.wts, f.on_boundary = b.on_boundary, f.cutoff_abs = cutoff_abs;
         f.alpha = fo.point_weight;
         f.lambda = fo.smoothing * (double)(counted > 0 ? counted : S) / (double)(free_count > 0 ? free_count : 1);
         /* A whisper of damping towards the current iterate keeps vertices no
@@ -559,7 +567,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         }
         for (int round = 1; round <= fo.max_rounds; ++round) {
             t0 = spia__now();
-            cutoff_weights(b.d, S, cutoff_abs, b.wts);
+            cutoff_weights(b.d, b.on_boundary, S, cutoff_abs, b.wts);
             least_squares_round(&f, b.T, b.V0, b.V, fo.solver_iterations, b.work, b.precond);
             report->solve_seconds += spia__now() - t0;
             evaluate(scan, &b, b.V, S, &report->query_seconds);

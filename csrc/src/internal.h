@@ -140,7 +140,7 @@ spia_result spia__osd_surface_stencils(const spia_mesh *mesh, const spia_adjacen
 
 /* Closest points for points in double (scan.c); no argument checks. */
 void spia__scan_closest_points_double(const spia_scan *scan, int64_t count, const double *points, float *closest,
-                                      float *normals, float *distances, int32_t *faces);
+                                      float *normals, float *distances, int32_t *faces, uint8_t *on_boundary);
 
 #ifdef __cplusplus
 }

@@ -19,6 +19,10 @@ struct spia_scan {
     float *normals;        /* vertex_count * 3, unit or zero                     */
     int32_t *triangles;    /* triangle_count * 3                                 */
     int32_t *polygon_of;   /* triangle -> the scan polygon it was cut from        */
+    /* Per triangle, bit k set when its edge k (corner k to corner k + 1) is
+     * on the scan's boundary (used by no other triangle); bit 3 + k when
+     * corner k is a boundary vertex. */
+    unsigned char *boundary_bits;
     double diagonal;
     int64_t skipped_faces; /* faces that repeat a vertex: left out              */
 };
@@ -31,6 +35,7 @@ static void scan_release(spia_scan *s) {
     free(s->normals);
     free(s->triangles);
     free(s->polygon_of);
+    free(s->boundary_bits);
     free(s);
 }
 
@@ -38,6 +43,52 @@ void spia_scan_free(spia_scan *scan) { scan_release(scan); }
 
 double spia_scan_diagonal(const spia_scan *scan) { return scan ? scan->diagonal : 0.0; }
 int64_t spia_scan_triangle_count(const spia_scan *scan) { return scan ? scan->triangle_count : 0; }
+
+/* Boundary edges: sort the triangles' edges by (low, high) vertex and find
+ * those that occur once. */
+typedef struct edge_ref {
+    int32_t lo, hi;
+    int64_t slot; /* 3 * triangle + k */
+} edge_ref;
+
+static int compare_edge(const void *a, const void *b) {
+    const edge_ref *x = (const edge_ref *)a, *y = (const edge_ref *)b;
+    if (x->lo != y->lo) return x->lo < y->lo ? -1 : 1;
+    if (x->hi != y->hi) return x->hi < y->hi ? -1 : 1;
+    return (x->slot > y->slot) - (x->slot < y->slot);
+}
+
+static spia_result mark_boundary(spia_scan *s) {
+    const int64_t m = 3 * s->triangle_count;
+    edge_ref *e = malloc(sizeof(edge_ref) * (size_t)m);
+    unsigned char *vertex_boundary = calloc((size_t)s->vertex_count, 1);
+    s->boundary_bits = calloc((size_t)s->triangle_count, 1);
+    if (!e || !vertex_boundary || !s->boundary_bits) {
+        free(e), free(vertex_boundary);
+        return SPIA_ERROR_OUT_OF_MEMORY;
+    }
+    for (int64_t i = 0; i < m; ++i) {
+        const int32_t a = s->triangles[i], b = s->triangles[i % 3 == 2 ? i - 2 : i + 1];
+        e[i].lo = a < b ? a : b;
+        e[i].hi = a < b ? b : a;
+        e[i].slot = i;
+    }
+    qsort(e, (size_t)m, sizeof(edge_ref), compare_edge);
+    for (int64_t i = 0; i < m;) {
+        int64_t j = i + 1;
+        while (j < m && e[j].lo == e[i].lo && e[j].hi == e[i].hi) ++j;
+        if (j - i == 1) {
+            s->boundary_bits[e[i].slot / 3] |= (unsigned char)(1u << (e[i].slot % 3));
+            vertex_boundary[e[i].lo] = vertex_boundary[e[i].hi] = 1;
+        }
+        i = j;
+    }
+    for (int64_t t = 0; t < s->triangle_count; ++t)
+        for (int k = 0; k < 3; ++k)
+            if (vertex_boundary[s->triangles[3 * t + k]]) s->boundary_bits[t] |= (unsigned char)(1u << (3 + k));
+    free(e), free(vertex_boundary);
+    return SPIA_OK;
+}
 
 static int face_repeats_vertex(const int32_t *fv, int32_t size) {
     for (int32_t a = 0; a < size; ++a)
@@ -145,6 +196,11 @@ spia_result spia_scan_create(const spia_mesh *mesh, spia_scan **out, spia_status
             for (int q = 0; q < 3; ++q) s->normals[3 * (int64_t)v + q] = (float)(a[q] / len);
     }
     free(acc);
+
+    if (mark_boundary(s) != SPIA_OK) {
+        scan_release(s);
+        return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the scan's boundary");
+    }
 
     /* Embree: one triangle geometry, a static scene. */
     s->device = rtcNewDevice(NULL);
@@ -281,8 +337,21 @@ static bool query_triangle(struct RTCPointQueryFunctionArguments *args) {
 }
 
 /* One query; writes the outputs for point i. */
+/* Whether barycentric weights (of corners 0, 1, 2) put a point on the scan's
+ * boundary: on a boundary edge, or at a boundary vertex. */
+static int on_scan_boundary(unsigned char bits, const double bary[3]) {
+    const int zero[3] = {bary[0] == 0.0, bary[1] == 0.0, bary[2] == 0.0};
+    if (zero[0] + zero[1] + zero[2] == 2) /* a corner */
+        for (int k = 0; k < 3; ++k)
+            if (!zero[k]) return (bits >> (3 + k)) & 1;
+    /* edge k runs from corner k to corner k + 1: the third weight is 0 */
+    for (int k = 0; k < 3; ++k)
+        if (zero[(k + 2) % 3] && ((bits >> k) & 1)) return 1;
+    return 0;
+}
+
 static void closest_one(const spia_scan *s, const double p[3], int64_t i, float *closest, float *normals,
-                        float *distances, int32_t *faces) {
+                        float *distances, int32_t *faces, uint8_t *on_boundary) {
     query_state q;
     q.scan = s;
     memcpy(q.p, p, sizeof q.p);
@@ -309,6 +378,7 @@ static void closest_one(const spia_scan *s, const double p[3], int64_t i, float 
         for (int c = 0; c < 3; ++c) closest[3 * i + c] = (float)q.best_point[c];
     if (distances) distances[i] = (float)sqrt(q.best_d2);
     if (faces) faces[i] = s->polygon_of[q.best_tri];
+    if (on_boundary) on_boundary[i] = (uint8_t)on_scan_boundary(s->boundary_bits[q.best_tri], q.best_bary);
     if (normals) {
         const int32_t *tri = s->triangles + 3 * q.best_tri;
         double nrm[3] = {0.0, 0.0, 0.0};
@@ -330,13 +400,15 @@ static void closest_one(const spia_scan *s, const double p[3], int64_t i, float 
 }
 
 void spia__scan_closest_points_double(const spia_scan *s, int64_t count, const double *points, float *closest,
-                                      float *normals, float *distances, int32_t *faces) {
+                                      float *normals, float *distances, int32_t *faces, uint8_t *on_boundary) {
 #pragma omp parallel for schedule(dynamic, 256)
-    for (int64_t i = 0; i < count; ++i) closest_one(s, points + 3 * i, i, closest, normals, distances, faces);
+    for (int64_t i = 0; i < count; ++i)
+        closest_one(s, points + 3 * i, i, closest, normals, distances, faces, on_boundary);
 }
 
 spia_result spia_scan_closest_points(const spia_scan *scan, int64_t count, const float *points, float *closest,
-                                     float *normals, float *distances, int32_t *faces, spia_status *status) {
+                                     float *normals, float *distances, int32_t *faces, uint8_t *on_boundary,
+                                     spia_status *status) {
     if (!scan) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "scan must not be NULL");
     if (count < 0) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "negative point count");
     if (count > 0 && !points) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "points must not be NULL");
@@ -347,7 +419,7 @@ spia_result spia_scan_closest_points(const spia_scan *scan, int64_t count, const
 #pragma omp parallel for schedule(dynamic, 256)
     for (int64_t i = 0; i < count; ++i) {
         const double p[3] = {points[3 * i], points[3 * i + 1], points[3 * i + 2]};
-        closest_one(scan, p, i, closest, normals, distances, faces);
+        closest_one(scan, p, i, closest, normals, distances, faces, on_boundary);
     }
     spia__ok(status);
     return SPIA_OK;

@@ -1,0 +1,244 @@
+"""Surface samples, closest points and fitting a cage to a scan, checked
+against independent computations: the bicubic B-spline on regular faces,
+numpy geometry on spheres, and the library's own limit stencils."""
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+
+def quad_sphere(n, radius=1.0):
+    """A cube with every face cut into n x n quads, projected to a sphere."""
+    index, positions, faces = {}, [], []
+    g = np.linspace(-1.0, 1.0, n + 1)
+
+    def vertex(p):
+        key = tuple(np.round(p, 9))
+        if key not in index:
+            index[key] = len(positions)
+            positions.append(p)
+        return index[key]
+    for axis in range(3):
+        for sign in (-1.0, 1.0):
+            for i in range(n):
+                for j in range(n):
+                    quad = []
+                    for a, b in ((i, j), (i + 1, j), (i + 1, j + 1), (i, j + 1)):
+                        p = np.zeros(3)
+                        p[axis], p[(axis + 1) % 3], p[(axis + 2) % 3] = sign, g[a], g[b]
+                        quad.append(vertex(p))
+                    faces.append(quad[::-1] if sign < 0 else quad)
+    p = np.asarray(positions)
+    p = radius * p / np.linalg.norm(p, axis=1)[:, None]
+    return p.astype(np.float32), np.asarray(faces, np.int32)
+
+
+def uv_sphere(nu, nv, cap_angle=0.0):
+    """A triangulated unit sphere; with cap_angle > 0 the triangles within
+    that angle of +z are left out (a hole)."""
+    theta = np.linspace(0.0, np.pi, nv + 1)[1:-1]
+    phi = np.linspace(0.0, 2 * np.pi, nu, endpoint=False)
+    t, f = np.meshgrid(theta, phi, indexing="ij")
+    ring = np.stack([np.sin(t) * np.cos(f), np.sin(t) * np.sin(f), np.cos(t)], axis=-1).reshape(-1, 3)
+    pos = np.vstack([[0, 0, 1], ring, [0, 0, -1]]).astype(np.float32)
+    tris = []
+    for j in range(nu):
+        tris.append([0, 1 + j, 1 + (j + 1) % nu])
+    for i in range(nv - 2):
+        for j in range(nu):
+            a, b = 1 + i * nu + j, 1 + i * nu + (j + 1) % nu
+            tris += [[a, a + nu, b + nu], [a, b + nu, b]]
+    last, base = len(pos) - 1, 1 + (nv - 2) * nu
+    for j in range(nu):
+        tris.append([base + j, last, base + (j + 1) % nu])
+    tris = np.asarray(tris, np.int32)
+    if cap_angle > 0:
+        z = pos[tris][:, :, 2].max(axis=1)
+        tris = tris[z < np.cos(cap_angle)]
+    return pos, tris
+
+
+@pytest.fixture(scope="module")
+def sphere_scan(native):
+    pos, tris = uv_sphere(400, 200)
+    return native.Scan(native.Mesh.from_faces(pos, tris))
+
+
+def bspline(s):
+    return np.array([(1 - s) ** 3, 3 * s ** 3 - 6 * s ** 2 + 4, -3 * s ** 3 + 3 * s ** 2 + 3 * s + 1, s ** 3]) / 6
+
+
+def test_regular_samples_are_the_bicubic_bspline(native):
+    """On faces whose 16 neighbours are all regular, the samples are the
+    uniform bicubic B-spline at the grid centres (Catmull-Clark's regular
+    case), at the documented (s, t) and in the documented order."""
+    n, k = 7, 3
+    rng = np.random.default_rng(3)
+    grid = np.array([[i, j, 0.0] for j in range(n + 1) for i in range(n + 1)])
+    grid[:, 2] = rng.normal(scale=0.3, size=len(grid))
+    faces = [[j * (n + 1) + i, j * (n + 1) + i + 1, (j + 1) * (n + 1) + i + 1, (j + 1) * (n + 1) + i]
+             for j in range(n) for i in range(n)]
+    mesh = native.Mesh.from_faces(grid.astype(np.float32), faces)
+    M = native.surface_stencils(mesh, samples_per_edge=k)
+    assert M.row_count == n * n * k * k
+    samples = M.apply(mesh.positions)
+    P = mesh.positions.astype(np.float64).reshape(n + 1, n + 1, 3)
+    checked = 0
+    for fj in range(2, n - 2):
+        for fi in range(2, n - 2):
+            f = fj * n + fi
+            for j in range(k):
+                for i in range(k):
+                    s, t = (i + 0.5) / k, (j + 0.5) / k
+                    patch = P[fj - 1:fj + 3, fi - 1:fi + 3]
+                    expect = np.einsum("a,b,abx->x", bspline(t), bspline(s), patch)
+                    got = samples[(f * k + j) * k + i]
+                    assert np.abs(got - expect).max() < 1e-6, (f, i, j)
+                    checked += 1
+    assert checked == 9 * k * k
+
+
+def test_sample_count_matches_ptex_layout(native):
+    pos = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 0.5, 0], [0.5, -1, 0]], np.float32)
+    mesh = native.Mesh.from_faces(pos, [[0, 1, 2, 3], [1, 4, 2], [0, 5, 1]])
+    # one quad (1 ptex face) and two triangles (3 each)
+    assert native.surface_stencils(mesh, samples_per_edge=2).row_count == (1 + 3 + 3) * 4
+
+
+def test_closest_points_on_a_sphere(native, sphere_scan):
+    rng = np.random.default_rng(1)
+    d = rng.normal(size=(500, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    r = rng.uniform(0.5, 1.5, size=500)
+    closest, normals, dist, faces = sphere_scan.closest_points(d * r[:, None])
+    # the tessellation is within 1e-4 of the unit sphere at this density
+    assert np.abs(dist - np.abs(r - 1)).max() < 1e-4
+    assert np.abs(np.linalg.norm(closest, axis=1) - 1).max() < 1e-4
+    assert np.degrees(np.arccos(np.clip(np.sum(normals * d, axis=1), -1, 1))).max() < 0.5
+    assert faces.min() >= 0
+
+
+def _fit_sphere(native, scan, mode, **kw):
+    cp, cf = quad_sphere(6)
+    cage = native.Mesh.from_faces(cp, cf)
+    out, rep = native.fit(cage, scan, mode=mode, **kw)
+    return cage, out, rep
+
+
+def test_surface_fit_puts_every_sample_on_the_sphere(native, sphere_scan):
+    cage, out, rep = _fit_sphere(native, sphere_scan, "SURFACE")
+    assert rep.before.mean > 3e-3          # the plain cage's surface shrinks inside
+    M = native.surface_stencils(native.Mesh(out, cage.face_sizes, cage.face_vertices), 4)
+    samples = M.apply(out)
+    _, _, dist, _ = sphere_scan.closest_points(samples)
+    assert dist.max() / sphere_scan.diagonal < 1e-4
+    # independent of the scan's tessellation: the unit sphere itself
+    assert np.abs(np.linalg.norm(samples, axis=1) - 1).max() / sphere_scan.diagonal < 1e-4
+    assert abs(rep.after.max - dist.max() / sphere_scan.diagonal) < 1e-6
+    assert rep.history[0] == pytest.approx(rep.before.mean) and len(rep.history) == rep.rounds + 1
+
+
+def test_vertex_fit_puts_every_limit_point_on_the_sphere(native, sphere_scan):
+    cage, out, rep = _fit_sphere(native, sphere_scan, "VERTICES")
+    fitted = native.Mesh(out, cage.face_sizes, cage.face_vertices)
+    limit = native.limit_stencils(fitted).apply(out)
+    _, _, dist, _ = sphere_scan.closest_points(limit)
+    assert dist.max() / sphere_scan.diagonal < 1e-5
+    assert rep.rounds == 1 and rep.after.mean < rep.before.mean / 10
+
+
+def test_samples_over_a_hole_do_not_pull(native):
+    """A sphere scan with a 35-degree cap cut away and, 0.25 above the hole,
+    a loose disk the cage does not cover (a scanning table, say).  With the
+    cut-off, the surface over the hole stays near the cage's own surface and
+    continues the sphere; with the cut-off at the whole diagonal the disk
+    drags it up.  Samples whose closest point is on the hole's rim never
+    pull, at any cut-off."""
+    pos, tris = uv_sphere(200, 100, cap_angle=np.radians(35))
+    k = 48
+    ang = np.linspace(0, 2 * np.pi, k, endpoint=False)
+    disk = np.vstack([[0, 0, 1.25], np.c_[0.3 * np.cos(ang), 0.3 * np.sin(ang), np.full(k, 1.25)]])
+    disk_tris = np.array([[0, 1 + i, 1 + (i + 1) % k] for i in range(k)]) + len(pos)
+    scan = native.Scan(native.Mesh.from_faces(np.vstack([pos, disk]).astype(np.float32),
+                                              np.vstack([tris, disk_tris])))
+    cp, cf = quad_sphere(6)
+    cage = native.Mesh.from_faces(cp, cf)
+    M = native.surface_stencils(cage, 4)
+    baseline = M.apply(cage.positions)
+    shrink = np.abs(np.linalg.norm(baseline, axis=1) - 1)
+    over_hole = baseline[:, 2] / np.linalg.norm(baseline, axis=1) > np.cos(np.radians(20))
+    assert over_hole.sum() > 50
+
+    def fitted(cutoff):
+        out, rep = native.fit(cage, scan, cutoff=cutoff)
+        return M.apply(out), rep
+    kept, rep = fitted(0.02)
+    dragged, _ = fitted(1.0)
+    assert rep.after.ignored > 0
+    moved = np.linalg.norm(kept - baseline, axis=1)
+    # over the hole the surface moves no more than the baseline's own
+    # distance from the sphere (it follows the fitted surroundings) ...
+    assert moved[over_hole].max() < 1.3 * shrink.max()
+    # ... and continues the sphere more closely than the baseline does
+    assert np.abs(np.linalg.norm(kept[over_hole], axis=1) - 1).max() < 0.5 * shrink[over_hole].min()
+    assert np.linalg.norm(dragged - baseline, axis=1)[over_hole].max() > 0.15
+
+
+def test_scan_boundary_flag(native):
+    pos, tris = uv_sphere(60, 30, cap_angle=np.radians(35))
+    scan = native.Scan(native.Mesh.from_faces(pos, tris))
+    points = np.array([[0, 0, 1.0], [0, 0, -1.2], [1.1, 0, 0]], np.float32)
+    boundary = scan.closest_points(points, with_boundary=True)[4]
+    assert boundary.tolist() == [True, False, False]
+
+
+def test_fit_is_independent_of_the_thread_count(native):
+    code = (
+        "import sys, numpy as np; sys.path[:0] = %r\n"
+        "from test_fit import quad_sphere, uv_sphere\n"
+        "from subdiv_pia import native\n"
+        "p, t = uv_sphere(120, 60); scan = native.Scan(native.Mesh.from_faces(p, t))\n"
+        "cp, cf = quad_sphere(4); out, rep = native.fit(native.Mesh.from_faces(cp, cf), scan)\n"
+        "sys.stdout.write(out.tobytes().hex())\n" % (sys.path[:2] + [os.path.dirname(__file__)],))
+    outputs = []
+    for threads in ("1", "2"):
+        env = dict(os.environ, OMP_NUM_THREADS=threads)
+        outputs.append(subprocess.run([sys.executable, "-c", code], env=env, check=True,
+                                      capture_output=True, text=True).stdout)
+    assert len(outputs[0]) > 100 and outputs[0] == outputs[1]
+
+
+def test_bad_input(native, sphere_scan):
+    cp, cf = quad_sphere(2)
+    cage = native.Mesh.from_faces(cp, cf)
+    with pytest.raises(native.PiaError) as e:
+        native.Scan(native.Mesh(np.zeros((3, 3), np.float32), np.zeros(0, np.int32), np.zeros(0, np.int32)))
+    assert e.value.code == "EMPTY_MESH" and "no faces" in str(e.value)
+    with pytest.raises(native.PiaError) as e:
+        native.fit(cage, sphere_scan, mode="SURFACE", scheme="DOO_SABIN")
+    assert "VERTICES" in str(e.value)
+    with pytest.raises(native.PiaError):
+        native.fit(cage, sphere_scan, mode="NEAREST")
+    with pytest.raises(native.PiaError) as e:
+        native.fit(cage, sphere_scan, samples_per_edge=65)
+    assert "samples_per_edge" in str(e.value)
+    with pytest.raises(native.PiaError):
+        native.fit(cage, sphere_scan, cutoff=-1)
+    with pytest.raises(native.PiaError) as e:
+        sphere_scan.closest_points(np.array([[0.0, np.nan, 0.0]]))
+    assert e.value.code == "NONFINITE"
+    with pytest.raises(native.PiaCancelled):
+        native.fit(cage, sphere_scan, progress=lambda rnd, err: True)
+
+
+def test_vertex_fit_for_loop_cages(native, sphere_scan):
+    """VERTICES works for every scheme: a Loop cage's limit points land on the scan."""
+    cp, cf = quad_sphere(4)
+    tris = np.array([[q[0], q[1], q[2]] for q in cf] + [[q[0], q[2], q[3]] for q in cf], np.int32)
+    cage = native.Mesh.from_faces(cp, tris)
+    out, rep = native.fit(cage, sphere_scan, mode="VERTICES", scheme="LOOP")
+    limit = native.limit_stencils(native.Mesh(out, cage.face_sizes, cage.face_vertices), scheme="LOOP").apply(out)
+    _, _, dist, _ = sphere_scan.closest_points(limit)
+    assert dist.max() / sphere_scan.diagonal < 1e-5
