@@ -136,6 +136,21 @@ def quadriflow_problems(mesh):
     }
 
 
+def _small_islands(mesh, fraction):
+    """Indices of the vertices in connected components with fewer than
+    fraction x all vertices."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    n = len(mesh.vertices)
+    ev = np.empty(2 * len(mesh.edges), np.int64)
+    mesh.edges.foreach_get("vertices", ev)
+    ev = ev.reshape(-1, 2)
+    graph = coo_matrix((np.ones(len(ev)), (ev[:, 0], ev[:, 1])), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    size = np.bincount(label)
+    return np.flatnonzero(size[label] < fraction * n)
+
+
 def clean_for_quadriflow(mesh):
     """Make `mesh` acceptable to QuadriFlow with the least change, and say
     what was done.  Only applied to the copy that is remeshed; the cage is
@@ -156,6 +171,8 @@ def clean_for_quadriflow(mesh):
       rejects.  Rather than merging them, the copy is scaled up uniformly by
       a power of ten (undone after the remesh): nothing moves relative to
       anything else.
+    - Small islands are deleted (see below): with them the dragon's remesh
+      is not reproducible.
 
     Returns (scale applied to the mesh, list of steps done)."""
     steps = []
@@ -175,7 +192,9 @@ def clean_for_quadriflow(mesh):
         if duplicates:
             bmesh.ops.delete(bm, geom=duplicates, context='FACES_ONLY')
             steps.append("deleted %d duplicate faces" % len(duplicates))
-        fins = {f for e in bm.edges if len(e.link_faces) > 2 for f in e.link_faces}
+        fins = sorted({f.index for e in bm.edges if len(e.link_faces) > 2 for f in e.link_faces})
+        bm.faces.ensure_lookup_table()
+        fins = [bm.faces[i] for i in fins]
         if fins:
             bmesh.ops.delete(bm, geom=list(fins), context='FACES_ONLY')
             steps.append("deleted %d faces on edges with more than two faces" % len(fins))
@@ -186,12 +205,28 @@ def clean_for_quadriflow(mesh):
         if loose_v:
             bmesh.ops.delete(bm, geom=loose_v, context='VERTS')
         if loose_e or loose_v:
-            steps.append("deleted loose parts (%d edges, %d vertices)" % (len(loose_e), len(loose_v)))
+            steps.append("deleted %d edges and %d vertices left without faces"
+                         % (len(loose_e), len(loose_v)))
         bmesh.ops.recalc_face_normals(bm, faces=bm.faces)
         steps.append("recalculated normals (consistent orientation)")
         bm.to_mesh(mesh)
         bm.free()
         mesh.update()
+        found = quadriflow_problems(mesh)
+    # Islands of a few vertices (scan debris; the dragon has six, of 4-6
+    # vertices, after the deletions above) make QuadriFlow's result change
+    # from run to run with the same seed, even with one thread: delete
+    # every island below 1% of the vertices.
+    small = _small_islands(mesh, 0.01)
+    if len(small):
+        bm = bmesh.new()
+        bm.from_mesh(mesh)
+        bm.verts.ensure_lookup_table()
+        bmesh.ops.delete(bm, geom=[bm.verts[i] for i in small], context='VERTS')
+        bm.to_mesh(mesh)
+        bm.free()
+        mesh.update()
+        steps.append("deleted %d vertices in islands below 1%% of the vertices" % len(small))
         found = quadriflow_problems(mesh)
     scale = 1.0
     while found["short_edges"] and scale < 1e6:
