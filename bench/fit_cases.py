@@ -426,10 +426,13 @@ def measure(cage_obj, scan_obj, levels=3, cutoff=0.02, method="bvh"):
     mask), seconds (closest-point time), method.
 
     method 'bvh' (default) calls BVHTree.find_nearest once per point; 'kdtree'
-    is the vectorized TriangleSampler.  Measured on the bunny case (180k
-    points, 69k triangles, Blender 3.4.1, busy 2-core machine) the BVH loop
-    took 0.9 s and the kd-tree path 2.1 s, agreeing to 6e-8 of the
-    diagonal; bench_fit.py --check compares them again on a subset."""
+    is the vectorized TriangleSampler.  Measured side by side (Blender
+    3.4.1, busy 2-core machine): bunny, 180k points on 69k triangles, BVH
+    loop 0.9 s, kd-tree path 2.1 s, agreeing to 6e-8 of the diagonal;
+    dragon, 600k points on 203k triangles, 4.9 s and 5.2 s, and the kd-tree
+    path missed the closest triangle for 1-2 in 60k points (by up to 1e-4
+    of the diagonal).  So the exact BVH is the default; bench_fit.py
+    --check compares the two again on a subset."""
     subdivide(cage_obj, levels)
     pts, nrm, _ = evaluated_surface(cage_obj)
     verts, tris = scan_geometry(scan_obj)
