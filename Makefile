@@ -50,6 +50,7 @@ bench: build
 	$(PYTHON) bench/bench_interpolate.py
 	$(PYTHON) bench/bench_loop_papers.py
 	$(PYTHON) bench/bench_doosabin.py
+	$(BLENDER_RUN) --python bench/bench_fit.py
 
 clean:
 	$(PYTHON) setup.py clean

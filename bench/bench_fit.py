@@ -1,0 +1,200 @@
+"""How close a subdivided cage comes to the scan it was made from.
+
+    blender -b --factory-startup --python-exit-code 1 --python bench/bench_fit.py -- \
+        [--cases bunny dragon] [--force] [--check] [--export-test-data]
+
+For each case (a scan in tests/data and a QuadriFlow face count) the cage
+is QuadriFlow + shrinkwrap (fit_cases.make_cage), cached as OBJ in
+out/bench/ (--force rebuilds it).  Each entry of METHODS turns a copy of
+the cage into an object whose Subdivision Surface (level 3, limit surface,
+quality 3) is measured against the scan with fit_cases.measure: distances
+from the subdivided surface's vertices to the scan relative to the scan's
+bounding-box diagonal (samples farther than 2% ignored: the scan's holes)
+and the mean angle to the scan's normal.  Prints a Markdown table and
+writes it to out/bench/fit.md.
+
+--check also runs the kd-tree closest-point path on a subset of the points
+and prints how far it is from the BVH one.  --export-test-data copies the
+cages to tests/data (bun_zipper_quadriflow_cage.obj, ...).
+"""
+import argparse
+import os
+import shutil
+import sys
+import time
+
+import bpy
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+sys.path.insert(0, HERE)
+import fit_cases  # noqa: E402
+
+OUT = os.path.join(ROOT, "out", "bench")
+LEVELS = 3
+CUTOFF = 0.02
+SEED = 0
+
+# name: (scan in tests/data, QuadriFlow target faces, cage file in tests/data)
+CASES = {
+    "bunny": ("bun_zipper.obj", 3000, "bun_zipper_quadriflow_cage.obj"),
+    "dragon": ("dragon_res2.obj", 10000, "dragon_res2_quadriflow_cage.obj"),
+}
+
+
+def ensure_addon():
+    """Register subdiv_pia from build/addon (for methods that call its
+    operator); returns the package."""
+    sys.path.insert(0, os.path.join(ROOT, "build", "addon"))
+    import subdiv_pia
+    if not hasattr(bpy.types, "OBJECT_OT_subdiv_pia_interpolate"):
+        subdiv_pia.register()
+    return subdiv_pia
+
+
+# --------------------------------------------------------------------------
+# Methods: function(cage_obj, scan_obj) -> the object whose subdivision
+# surface is measured.  cage_obj is a fresh copy of the shrinkwrapped cage,
+# without modifiers; measure() adds (or sets) its Subdivision Surface
+# modifier to LEVELS, limit surface, quality 3.
+
+def shrinkwrap_subdivision(cage_obj, scan_obj):
+    """The baseline: the shrinkwrapped cage as it is."""
+    return cage_obj
+
+
+METHODS = [
+    ("shrinkwrap + subdivision", shrinkwrap_subdivision),
+]
+
+
+# --------------------------------------------------------------------------
+
+def sci(x, digits=2):
+    """1.21e-3 style; 0 as 0."""
+    if x == 0:
+        return "0"
+    m, e = ("%.*e" % (digits, x)).split("e")
+    return "%se%d" % (m, int(e))
+
+
+def cache_path(case):
+    scan_file, faces, _ = CASES[case]
+    return os.path.join(OUT, "%s_quadriflow%d_seed%d.obj"
+                        % (os.path.splitext(scan_file)[0], faces, SEED))
+
+
+def load_case(case, force=False):
+    """Empty scene with the scan and its cage (from the cache, or made and
+    cached).  Returns (scan, cage, info) where info has the cage's vertex and
+    face counts and, when made now, the cleanup steps and remesh seconds."""
+    scan_file, faces, _ = CASES[case]
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scan = fit_cases.import_obj(os.path.join(fit_cases.DATA, scan_file), "scan")
+    path = cache_path(case)
+    info = {}
+    if force or not os.path.isfile(path):
+        cage = fit_cases.make_cage(scan, faces, SEED, name="cage", report=info)
+        fit_cases.export_obj(cage, path)
+        info["made"] = True
+    else:
+        cage = fit_cases.import_obj(path, "cage")
+        cage.data.polygons.foreach_set("use_smooth", np.ones(len(cage.data.polygons), bool))
+        info["made"] = False
+    info.setdefault("vertices", len(cage.data.vertices))
+    info.setdefault("faces", len(cage.data.polygons))
+    return scan, cage, info
+
+
+def fresh_copy(obj, name):
+    new = obj.copy()
+    new.data = obj.data.copy()
+    new.modifiers.clear()
+    new.name = new.data.name = name
+    bpy.context.scene.collection.objects.link(new)
+    for other in bpy.context.view_layer.objects:
+        other.select_set(False)
+    new.select_set(True)
+    bpy.context.view_layer.objects.active = new
+    return new
+
+
+def check_closest(cage, scan, step=10):
+    """BVH against kd-tree closest points on every step-th subdivided vertex."""
+    fit_cases.subdivide(cage, LEVELS)
+    pts, _, _ = fit_cases.evaluated_surface(cage)
+    verts, tris = fit_cases.scan_geometry(scan)
+    sub = pts[::step]
+    t0 = time.perf_counter()
+    a, _ = fit_cases.closest_bvh(sub, verts, tris)
+    t1 = time.perf_counter()
+    b, _ = fit_cases.closest_kdtree(sub, verts, tris)
+    t2 = time.perf_counter()
+    da, db = np.linalg.norm(sub - a, axis=1), np.linalg.norm(sub - b, axis=1)
+    diag = fit_cases.diagonal(verts)
+    return ("%d points: BVH %.2f s, kd-tree %.2f s (with its build); "
+            "|distance difference| max %.2g of the diagonal, kd-tree farther on %d"
+            % (len(sub), t1 - t0, t2 - t1, np.abs(da - db).max() / diag,
+               int(((db - da) > 1e-7 * diag).sum())))
+
+
+def main(argv):
+    parser = argparse.ArgumentParser(prog="bench_fit.py")
+    parser.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
+    parser.add_argument("--force", action="store_true", help="rebuild the cached cages")
+    parser.add_argument("--check", action="store_true", help="compare BVH and kd-tree closest points")
+    parser.add_argument("--export-test-data", action="store_true",
+                        help="copy the cages to tests/data")
+    args = parser.parse_args(argv)
+
+    header = ["| method | cage | mean | 95th percentile | max | mean angle | ignored | time s |",
+              "|---|---|---:|---:|---:|---:|---:|---:|"]
+    rows, notes = [], []
+    print("\n".join(header), flush=True)
+    for case in args.cases:
+        scan_file, faces, test_file = CASES[case]
+        t0 = time.perf_counter()
+        scan, cage, info = load_case(case, args.force)
+        if info["made"]:
+            notes.append("%s: QuadriFlow %d faces, seed %d, %.1f s (cleanup: %s), shrinkwrap %.2f s"
+                         % (scan_file, faces, SEED, info["remesh_s"],
+                            "; ".join(info["cleanup"]) or "none", info["shrinkwrap_s"]))
+        else:
+            notes.append("%s: cage read from %s (made in an earlier run; --force remakes it)"
+                         % (scan_file, os.path.relpath(cache_path(case), ROOT)))
+        if args.export_test_data:
+            shutil.copyfile(cache_path(case), os.path.join(fit_cases.DATA, test_file))
+        label = "%s, %d v, %d quads" % (scan_file, info["vertices"], info["faces"])
+        for name, method in METHODS:
+            work = fresh_copy(cage, "%s %s" % (case, name))
+            t0 = time.perf_counter()
+            result = method(work, scan)
+            seconds = time.perf_counter() - t0
+            r = fit_cases.measure(result, scan, levels=LEVELS, cutoff=CUTOFF)
+            row = ("| %s | %s | %s | %s | %s | %.1f deg | %s | %.2f |"
+                   % (name, label, sci(r["mean"]), sci(r["p95"]), sci(r["max"]),
+                      r["angle_deg"], sci(r["ignored"], 1), seconds))
+            rows.append(row)
+            print(row, flush=True)
+            notes.append("%s, %s: %d samples, closest points (%s) %.1f s, normals facing away "
+                         "from the scan's on %.2g of the kept samples"
+                         % (scan_file, name, r["samples"], r["method"], r["seconds"], r["flipped"]))
+        if args.check:
+            notes.append("%s check: %s" % (scan_file, check_closest(fresh_copy(cage, "check"), scan)))
+    text = "\n".join(
+        ["Distances from the vertices of the level-%d subdivision surface (Blender %s, "
+         "limit surface, quality 3) to the scan, relative to the scan's bounding-box "
+         "diagonal; samples farther than %g ignored; angle between vertex normals and the "
+         "scan triangle's normal, unsigned. Made by bench/bench_fit.py." %
+         (LEVELS, bpy.app.version_string, CUTOFF), ""] + header + rows + [""]
+        + ["- " + n for n in notes]) + "\n"
+    print("\n".join("- " + n for n in notes))
+    os.makedirs(OUT, exist_ok=True)
+    with open(os.path.join(OUT, "fit.md"), "w") as f:
+        f.write(text)
+    print("wrote %s" % os.path.relpath(os.path.join(OUT, "fit.md"), ROOT))
+
+
+if __name__ == "__main__":
+    main(sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else [])
