@@ -12,6 +12,7 @@ Script use (background or foreground)::
     subdiv_pia.refresh_limit(cage)               # after editing the cage
     cage, report = subdiv_pia.interpolate(closed_obj, scheme='DOO_SABIN', shape_parameter=0.8,
                                           shape_attribute="pia_shape")  # per-face values win
+    fitted, report = subdiv_pia.interpolate(cage_obj, target="Scan", fit='SURFACE')  # fit to a scan
 
 The numeric core (``native``) imports no ``bpy``; everything else is loaded
 only inside Blender so that ``subdiv_pia.native`` stays importable outside it.

@@ -16,6 +16,15 @@ either: the cage's child ``<cage>_limit`` holds the refined control mesh
 step uses a shape parameter per face: the float FACE attribute named by
 shape_attribute where the mesh has it (read again from the cage on refresh,
 so it can be repainted there), else shape_parameter.
+
+Fitting to a scan: with a ``target`` (the name of a mesh object, usually a
+dense scan), the cage is not interpolated through its own vertices but
+fitted to the target's evaluated surface (native.fit): 'SURFACE' moves the
+whole Catmull-Clark limit surface onto it, 'VERTICES' moves each limit
+point of a control vertex to its closest scan point and interpolates those.
+The target is read in the cage's object space, so the two objects may have
+any transforms. The new object carries the distances as a point attribute
+(``pia_distance``) and a heat-map colour attribute (``pia_distance_color``).
 """
 
 import bmesh
@@ -40,7 +49,21 @@ DEFAULT_SETTINGS = {
     "max_iterations": 1000,
     "shape_parameter": 0.5,
     "shape_attribute": "pia_shape",
+    # Fitting to a scan (target empty: interpolate the cage's own vertices).
+    "target": "",
+    "fit": 'SURFACE',
+    "fit_cutoff": 0.02,
+    "fit_smoothing": 1e-5,
+    "fit_samples": 4,
 }
+
+FIT_MODES = tuple(native.FIT_MODES)
+FIT_NAMES = {'SURFACE': "Surface", 'VERTICES': "Vertices"}
+# The heat map is red at this distance (relative to the scan's diagonal) and beyond.
+HEAT_SCALE = 1e-3
+DISTANCE_ATTRIBUTE = "pia_distance"
+COLOR_ATTRIBUTE = "pia_distance_color"
+FIT_SETTINGS = ("target", "fit", "fit_cutoff", "fit_smoothing", "fit_samples")
 
 SCHEMES = ('CATMULL_CLARK', 'LOOP', 'DOO_SABIN')
 # Schemes Blender's modifier cannot show: a `_limit` child shows the surface.
@@ -138,6 +161,28 @@ def check_settings(settings):
         raise ValueError("max_iterations must be at least 1")
     if not (s["tolerance"] > 0.0 and np.isfinite(s["tolerance"])):
         raise ValueError("tolerance must be a positive number")
+    target = s["target"]
+    if target is None:
+        target = ""
+    elif isinstance(target, bpy.types.Object):
+        target = target.name
+    if not isinstance(target, str):
+        raise ValueError("target must be the name of a mesh object (or the object), not %r" % (target,))
+    s["target"] = target
+    if s["fit"] not in FIT_MODES:
+        raise ValueError("fit must be one of %s, not %r" % (FIT_MODES, s["fit"]))
+    s["fit_cutoff"] = float(s["fit_cutoff"])
+    s["fit_smoothing"] = float(s["fit_smoothing"])
+    s["fit_samples"] = int(s["fit_samples"])
+    if not (s["fit_cutoff"] > 0.0 and np.isfinite(s["fit_cutoff"])):
+        raise ValueError("fit_cutoff must be a positive number (a fraction of the scan's diagonal)")
+    if not (s["fit_smoothing"] >= 0.0 and np.isfinite(s["fit_smoothing"])):
+        raise ValueError("fit_smoothing must be zero or a positive number")
+    if not 1 <= s["fit_samples"] <= 64:
+        raise ValueError("fit_samples must be in 1..64, not %d" % s["fit_samples"])
+    if target and s["fit"] == 'SURFACE' and s["scheme"] != 'CATMULL_CLARK':
+        raise ValueError("The Surface fit works on the Catmull-Clark limit surface only: use "
+                         "Fit 'Vertices' for %s" % SCHEME_NAMES[s["scheme"]])
     return s
 
 
@@ -331,10 +376,60 @@ def triangulated_copy(mesh, name=None):
     return copy
 
 
-def compute_cage(obj, settings, progress=None, mesh=None):
-    """Run the solver on obj's mesh data (not its modifiers), or on mesh if given.
+def find_target(obj, settings):
+    """The target object (the scan) named by settings["target"], or None when
+    no target is set. ValueError with a user-facing message if it cannot be
+    used: not found, not a mesh object, obj itself, or no faces after its
+    modifiers."""
+    name = settings.get("target") or ""
+    if not name:
+        return None
+    target = bpy.data.objects.get(name)
+    if target is None:
+        raise ValueError("Target '%s' not found: give the name of the mesh object to fit to (the scan)"
+                         % name)
+    if target.type != 'MESH':
+        raise ValueError("Target '%s' is not a mesh object (type %s): the scan must be a mesh"
+                         % (target.name, target.type))
+    if obj is not None and target == obj:
+        raise ValueError("Target '%s' is the cage itself: pick the scan to fit '%s' to"
+                         % (target.name, obj.name))
+    return target
 
-    Returns (cage, report)."""
+
+def scan_arrays(target, cage_obj, context=None):
+    """(positions (N, 3) float32, face_sizes, face_vertices) of target's
+    evaluated mesh (its modifiers applied) in cage_obj's object space.
+    ValueError if it has no faces."""
+    context = context or bpy.context
+    depsgraph = context.evaluated_depsgraph_get()
+    evaluated = target.evaluated_get(depsgraph)
+    mesh = evaluated.to_mesh()
+    try:
+        if mesh is None or len(mesh.polygons) == 0:
+            raise ValueError("Target '%s' has no faces: the scan must be a mesh with faces" % target.name)
+        arrays = mesh_arrays(mesh)
+        positions = arrays["positions"].astype(np.float64)
+        to_cage = np.array(cage_obj.matrix_world.inverted() @ target.matrix_world, dtype=np.float64)
+        positions = positions @ to_cage[:3, :3].T + to_cage[:3, 3]
+        return (np.ascontiguousarray(positions, np.float32), arrays["face_sizes"].copy(),
+                np.array(arrays["face_vertices"], np.int32))
+    finally:
+        evaluated.to_mesh_clear()
+
+
+def make_scan(target, cage_obj, context=None):
+    """native.Scan of target's evaluated mesh in cage_obj's object space."""
+    _require_library()
+    positions, face_sizes, face_vertices = scan_arrays(target, cage_obj, context)
+    return native.Scan(native.Mesh(positions, face_sizes, face_vertices))
+
+
+def compute_cage(obj, settings, progress=None, mesh=None, scan=None):
+    """Run the solver on obj's mesh data (not its modifiers), or on mesh if given.
+    With scan (a native.Scan), fit the cage to it instead (native.fit).
+
+    Returns (cage, report): a native.Report, or a native.FitReport for a fit."""
     scheme = settings["scheme"]
     _require_library()
     data = mesh if mesh is not None else obj.data
@@ -344,14 +439,18 @@ def compute_cage(obj, settings, progress=None, mesh=None):
         values = face_shape_parameters(data, settings)
         # Creases are not part of the Doo-Sabin scheme: ignored, as the panel shows.
         shapes = {"shape_parameter": settings["shape_parameter"], "face_shape_parameters": values}
+    options = dict(scheme=scheme, boundary_rule=settings["boundary_rule"],
+                   boundary_smooth=settings["boundary_smooth"],
+                   use_creases=settings["use_creases"] and scheme != 'DOO_SABIN',
+                   quality=settings["quality"], method=settings["method"],
+                   tolerance=settings["tolerance"], max_iterations=settings["max_iterations"],
+                   staged=settings["staged"] and scheme == 'LOOP', progress=progress, **shapes)
     try:
-        return native.interpolate(
-            native_mesh(data), scheme=scheme, boundary_rule=settings["boundary_rule"],
-            boundary_smooth=settings["boundary_smooth"],
-            use_creases=settings["use_creases"] and scheme != 'DOO_SABIN',
-            quality=settings["quality"], method=settings["method"],
-            tolerance=settings["tolerance"], max_iterations=settings["max_iterations"],
-            staged=settings["staged"] and scheme == 'LOOP', progress=progress, **shapes)
+        if scan is not None:
+            return native.fit(native_mesh(data), scan, mode=settings["fit"],
+                              samples_per_edge=settings["fit_samples"], cutoff=settings["fit_cutoff"],
+                              smoothing=settings["fit_smoothing"], **options)
+        return native.interpolate(native_mesh(data), **options)
     except native.PiaError as error:
         named = _shape_error(error, values, settings)
         if named is not None:
@@ -510,6 +609,54 @@ def set_limit_object(cage, limit, context=None):
     return child
 
 
+def heat_colors(distances, scale=HEAT_SCALE):
+    """RGBA (N, 4) float32 for relative distances: blue at 0 through cyan,
+    green and yellow to red at `scale` and beyond (hue 240 to 0 degrees)."""
+    t = np.clip(np.asarray(distances, np.float64) / scale, 0.0, 1.0)
+    hue = (1.0 - t) * 4.0  # 4 = blue, 2 = green, 0 = red, in sixths of the circle
+    rgb = np.empty((len(t), 3))
+    rgb[:, 0] = np.clip(2.0 - hue, 0.0, 1.0)                     # red: rises from green to red
+    rgb[:, 1] = np.clip(np.minimum(hue, 4.0 - hue), 0.0, 1.0)    # green: 0 at blue and red
+    rgb[:, 2] = np.clip(hue - 2.0, 0.0, 1.0)                     # blue: falls from blue to green
+    rgba = np.ones((len(t), 4), np.float32)
+    rgba[:, :3] = rgb
+    return rgba
+
+
+def store_fit(obj, report, settings):
+    """Custom properties and distance attributes of a fitted cage."""
+    obj["pia_status"] = str(report.status)
+    # Surface: the library's least squares; Vertices: the interpolation's method as requested.
+    obj["pia_method"] = "LEAST_SQUARES" if report.mode == 'SURFACE' else str(settings["method"])
+    obj["pia_iterations"] = int(report.iterations)
+    obj["pia_fit"] = str(report.mode)
+    obj["pia_fit_target"] = str(settings["target"])
+    obj["pia_fit_rounds"] = int(report.rounds)
+    obj["pia_fit_sample_count"] = int(report.sample_count)
+    for when, d in (("before", report.before), ("after", report.after)):
+        obj["pia_fit_mean_%s" % when] = float(d.mean)
+        obj["pia_fit_p95_%s" % when] = float(d.p95)
+        obj["pia_fit_max_%s" % when] = float(d.max)
+        obj["pia_fit_ignored_%s" % when] = int(d.ignored)
+    for key in ("fit_cutoff", "fit_smoothing", "fit_samples"):
+        obj["pia_" + key] = settings[key]
+    obj["pia_distance_scale"] = HEAT_SCALE
+    mesh = obj.data
+    distances = np.ascontiguousarray(report.vertex_distances, np.float32)
+    for name in (DISTANCE_ATTRIBUTE, COLOR_ATTRIBUTE):
+        old = mesh.attributes.get(name)
+        if old is not None:
+            mesh.attributes.remove(old)
+    attr = mesh.attributes.new(DISTANCE_ATTRIBUTE, 'FLOAT', 'POINT')
+    attr.data.foreach_set("value", distances)
+    colors = mesh.color_attributes.new(COLOR_ATTRIBUTE, 'FLOAT_COLOR', 'POINT')
+    colors.data.foreach_set("color", heat_colors(distances).ravel())
+    mesh.color_attributes.active_color = colors
+    if hasattr(mesh.color_attributes, "render_color_index"):
+        mesh.color_attributes.render_color_index = mesh.color_attributes.active_color_index
+    mesh.update()
+
+
 def build_object(source, cage, report, settings, context=None, name=None, mesh=None, limit=None):
     """New object with the cage positions on a copy of source's mesh (or on mesh).
 
@@ -546,11 +693,14 @@ def build_object(source, cage, report, settings, context=None, name=None, mesh=N
             mod.uv_smooth = src_mod.uv_smooth
             mod.show_only_control_edges = src_mod.show_only_control_edges
 
-    new_obj["pia_iterations"] = int(report.iterations)
-    new_obj["pia_max_error"] = float(report.max_error_relative)
-    new_obj["pia_mean_error"] = float(report.mean_error_relative)
-    new_obj["pia_status"] = str(report.status)
-    new_obj["pia_method"] = str(report.method)
+    if isinstance(report, native.FitReport):
+        store_fit(new_obj, report, settings)
+    else:
+        new_obj["pia_iterations"] = int(report.iterations)
+        new_obj["pia_max_error"] = float(report.max_error_relative)
+        new_obj["pia_mean_error"] = float(report.mean_error_relative)
+        new_obj["pia_status"] = str(report.status)
+        new_obj["pia_method"] = str(report.method)
     new_obj["pia_tolerance"] = float(settings["tolerance"])
     for key in STORED_SETTINGS:
         if key not in ("method", "tolerance"):  # pia_method is the method used
@@ -593,7 +743,20 @@ def interpolate(obj, *, context=None, name=None, progress=None, **settings):
     Doo-Sabin: likewise, the child holds the cage refined `levels` times (a
     control mesh whose face centroids lie on the limit surface).
 
-    progress(iteration, relative_error) -> bool: return True to cancel.
+    Fitting to a scan: target (a mesh object or its name; its evaluated
+    mesh, read in obj's object space) fits the cage to that surface instead
+    of interpolating obj's vertices: fit 'SURFACE' (Catmull-Clark: the whole
+    limit surface, least squares over fit_samples**2 samples per face) or
+    'VERTICES' (each control vertex's limit point moves to its closest point
+    on the target; any scheme). fit_cutoff (relative to the target's
+    bounding-box diagonal): samples farther away do not pull (holes);
+    fit_smoothing: fairness weight. The report is then a native.FitReport
+    (before/after distances relative to the target's diagonal), and the new
+    object has the point attributes pia_distance (per vertex, relative) and
+    pia_distance_color (heat map, the active colour attribute).
+
+    progress(iteration, relative_error) -> bool: return True to cancel
+    (for a Surface fit: progress(round, mean relative distance)).
 
     Returns (new_object, report); report.converged is False when the tolerance
     was not reached (the object is made anyway). Raises ValueError or
@@ -609,11 +772,13 @@ def interpolate(obj, *, context=None, name=None, progress=None, **settings):
     s = check_settings(merged)
     loop = s["scheme"] == 'LOOP'
     separate_limit = s["scheme"] in LIMIT_SCHEMES
+    target = find_target(obj, s)
+    scan = make_scan(target, obj, context) if target is not None else None
     mesh = None
     if loop and s["triangulate"] and non_triangle_count(obj.data):
         mesh = triangulated_copy(obj.data)
     try:
-        cage, report = compute_cage(obj, s, progress=progress, mesh=mesh)
+        cage, report = compute_cage(obj, s, progress=progress, mesh=mesh, scan=scan)
         limit = (limit_arrays(mesh if mesh is not None else obj.data, s, cage)
                  if separate_limit else None)
     except BaseException:
@@ -647,6 +812,29 @@ def refresh_limit(obj, context=None):
         cage.update_from_editmode()
     check_source(cage)
     return set_limit_object(cage, limit_arrays(cage.data, stored_settings(cage)), context=context)
+
+
+def format_fit_report(report, target_name):
+    """One line for the status bar and the command line, for a fit."""
+    b, a = report.before, report.after
+    line = ("%s fit to '%s': mean distance %.2g (was %.2g), 95th percentile %.2g (was %.2g), "
+            "max %.2g (was %.2g) of the scan's diagonal"
+            % (FIT_NAMES.get(report.mode, report.mode), target_name, a.mean, b.mean, a.p95, b.p95,
+               a.max, b.max))
+    if report.mode == 'SURFACE':
+        line += ", %d round%s" % (report.rounds, "" if report.rounds == 1 else "s")
+    else:
+        line += ", %d iterations" % report.iterations
+    if a.ignored:
+        line += "; %d of %d samples beyond the cut-off ignored" % (a.ignored, report.sample_count)
+    if report.status != 'CONVERGED':
+        line += " (interpolation %s: %s)" % (report.status.lower().replace("_", " "), report.message)
+    return line
+
+
+def report_converged(report):
+    """True unless an interpolation (or a Vertices fit's) stopped short of its tolerance."""
+    return report.status == 'CONVERGED'
 
 
 def format_report(report):

@@ -70,6 +70,20 @@ def parse_args(argv):
     parser.add_argument("--tolerance", type=float,
                         help="max error relative to the bounding-box diagonal (default 1e-6)")
     parser.add_argument("--max-iterations", type=int, help="iteration limit (default 1000)")
+    fit = parser.add_argument_group(
+        "fitting to a scan",
+        "With --target, the cage (INPUT) is fitted to the target's surface instead of "
+        "interpolating its own vertices; distances are relative to the target's bounding-box "
+        "diagonal, and the new object gets the attributes pia_distance and pia_distance_color.")
+    fit.add_argument("--target", help="the scan: a mesh file (.obj, .ply, .stl) or the name of a "
+                                      "mesh object in a .blend INPUT")
+    fit.add_argument("--fit", choices=("SURFACE", "VERTICES"),
+                     help="SURFACE (default; Catmull-Clark): the whole limit surface; VERTICES: "
+                          "the limit points of the control vertices (any scheme)")
+    fit.add_argument("--fit-cutoff", type=float,
+                     help="samples farther than this from the scan do not pull (default 0.02)")
+    fit.add_argument("--fit-smoothing", type=float, help="fairness weight (default 1e-5)")
+    fit.add_argument("--fit-samples", type=int, help="samples per face edge (default 4)")
     return parser.parse_args(argv)
 
 
@@ -110,6 +124,14 @@ def load_input(path, object_name=None):
         return meshes[0]
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
+    return import_mesh_file(path, object_name)
+
+
+def import_mesh_file(path, object_name=None):
+    """Import a .obj, .ply or .stl file into the current scene; return its mesh object."""
+    if not os.path.isfile(path):
+        raise ValueError("File not found: %s" % path)
+    ext = os.path.splitext(path)[1].lower()
     before = set(bpy.data.objects)
     if ext == ".obj":
         if operator_exists("wm", "obj_import"):  # C++ importer (3.3+): keeps vertex order
@@ -123,7 +145,8 @@ def load_input(path, object_name=None):
     elif ext == ".stl":
         _call_first((("wm", "stl_import"), ("import_mesh", "stl")), filepath=path)
     else:
-        raise ValueError("Unsupported input type %r (use .obj, .ply, .stl or .blend)" % ext)
+        raise ValueError("Unsupported mesh file type %r (use .obj, .ply or .stl; INPUT may also "
+                         "be .blend)" % ext)
     new = [o for o in bpy.data.objects if o not in before and o.type == 'MESH']
     if object_name:
         new = [o for o in new if o.name == object_name]
@@ -153,6 +176,19 @@ def main(argv):
         settings["triangulate"] = True
     if args.staged:
         settings["staged"] = True
+    if args.target:
+        if os.path.splitext(args.target)[1].lower() in (".obj", ".ply", ".stl"):
+            target = import_mesh_file(os.path.abspath(args.target))
+        else:
+            target = bpy.data.objects.get(args.target)
+            if target is None:
+                raise ValueError("Target %r is neither a mesh file (.obj, .ply, .stl) nor an object "
+                                 "in %s" % (args.target, args.input))
+        settings["target"] = target.name
+    for name in ("fit", "fit_cutoff", "fit_smoothing", "fit_samples"):
+        value = getattr(args, name)
+        if value is not None:
+            settings[name] = value
 
     progress = None
     if sys.stdout.isatty():
@@ -164,8 +200,13 @@ def main(argv):
     new_obj, report = package.interpolate(obj, progress=progress, **settings)
     if progress is not None:
         sys.stdout.write("\n")
-    print("subdiv_pia: %s: %s" % (new_obj.name, package.api.format_report(report)))
-    print("subdiv_pia: stencils %.3f s, solve %.3f s" % (report.stencil_seconds, report.solve_seconds))
+    if "target" in settings:
+        print("subdiv_pia: %s: %s" % (new_obj.name, package.api.format_fit_report(report, settings["target"])))
+        print("subdiv_pia: stencils %.3f s, closest points %.3f s, solve %.3f s"
+              % (report.stencil_seconds, report.query_seconds, report.solve_seconds))
+    else:
+        print("subdiv_pia: %s: %s" % (new_obj.name, package.api.format_report(report)))
+        print("subdiv_pia: stencils %.3f s, solve %.3f s" % (report.stencil_seconds, report.solve_seconds))
     limit = package.api.find_limit_object(new_obj)
     if limit is not None:
         print("subdiv_pia: limit surface %s: %d vertices, %d faces"

@@ -67,6 +67,24 @@ def draw_settings(layout, settings, from_modifier=False):
     row.prop(settings, "use_creases")
 
 
+# native.fit's default number of least-squares rounds: the progress bar's length.
+FIT_ROUNDS = 20
+
+
+def draw_fit_settings(layout, settings, has_target):
+    """Fit, cut-off, smoothing and samples, greyed out without a target;
+    the target itself is drawn by the caller (a name in the operator, a
+    pointer in the panel)."""
+    col = layout.column()
+    col.enabled = has_target
+    col.prop(settings, "fit")
+    col.prop(settings, "fit_cutoff")
+    sub = col.column()
+    sub.enabled = settings.fit == 'SURFACE'
+    sub.prop(settings, "fit_smoothing")
+    sub.prop(settings, "fit_samples")
+
+
 class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
     """Make a new object whose subdivision limit surface passes through this mesh's vertices"""
     bl_idname = "object.subdiv_pia_interpolate"
@@ -100,12 +118,16 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
         layout.prop(self, "method")
         layout.prop(self, "tolerance")
         layout.prop(self, "max_iterations")
+        layout.separator()
+        layout.prop_search(self, "target", context.blend_data, "objects")
+        draw_fit_settings(layout, self, bool(self.target))
 
     def execute(self, context):
         # Also here: scripts call the operator without invoke (EXEC_DEFAULT).
         self._defaults_from_modifier(context)
         settings = {name: getattr(self, name) for name in SETTING_NAMES}
-        progress = _Progress(context, settings["max_iterations"])
+        surface_fit = bool(settings["target"]) and settings["fit"] == 'SURFACE'
+        progress = _Progress(context, FIT_ROUNDS if surface_fit else settings["max_iterations"])
         try:
             obj = context.active_object
             api.check_source(obj)
@@ -120,8 +142,12 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
             return {'CANCELLED'}
         finally:
             progress.end()
-        self.report({'INFO'} if report.converged else {'WARNING'},
-                    "%s: %s" % (new_obj.name, api.format_report(report)))
+        if isinstance(report, native.FitReport):
+            line = api.format_fit_report(report, settings["target"])
+        else:
+            line = api.format_report(report)
+        self.report({'INFO'} if api.report_converged(report) else {'WARNING'},
+                    "%s: %s" % (new_obj.name, line))
         return {'FINISHED'}
 
 

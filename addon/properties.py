@@ -2,7 +2,7 @@
 """Settings shared by the operator and the panel (scene.subdiv_pia)."""
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
 from .api import DEFAULT_SETTINGS
 
@@ -34,6 +34,15 @@ METHOD_ITEMS = (
     ('CHEBYSHEV', "Chebyshev PIA", "PIA accelerated with Chebyshev polynomials over the estimated spectrum"),
     ('WPIA', "Weighted PIA", "PIA with the best constant weight, estimated from the spectrum"),
     ('CG', "Conjugate Gradients", "Conjugate gradients: closed meshes only (a symmetrizable limit matrix)"),
+)
+
+FIT_ITEMS = (
+    ('SURFACE', "Surface",
+     "Move the whole Catmull-Clark limit surface onto the target (least squares over samples "
+     "of every face)"),
+    ('VERTICES', "Vertices",
+     "Move the limit point of each control vertex to its closest point on the target and "
+     "interpolate those (any scheme)"),
 )
 
 
@@ -88,16 +97,48 @@ def settings_annotations():
         "max_iterations": IntProperty(name="Max Iterations", default=d["max_iterations"],
                                       min=1, max=1000000,
                                       description="Stop after this many iterations"),
+        # An operator cannot hold a pointer to an object: the target is named.
+        "target": StringProperty(name="Target",
+                                 default=d["target"],
+                                 description="Mesh object to fit the cage to (a scan; its modifiers "
+                                             "applied). Empty: interpolate the cage's own vertices"),
+        "fit": EnumProperty(name="Fit", items=FIT_ITEMS, default=d["fit"],
+                            description="What is fitted to the target"),
+        "fit_cutoff": FloatProperty(name="Cut-off", default=d["fit_cutoff"], min=1e-6, max=1.0,
+                                    precision=4, step=0.1,
+                                    description="Parts of the surface farther than this from the "
+                                                "target (relative to its bounding-box diagonal) do "
+                                                "not pull: holes and areas the scan misses"),
+        "fit_smoothing": FloatProperty(name="Smoothing", default=d["fit_smoothing"], min=0.0, max=1.0,
+                                       precision=7, step=0.0001,
+                                       description="Surface fit: fairness weight; larger keeps the "
+                                                   "cage smoother and farther from the target"),
+        "fit_samples": IntProperty(name="Samples per Edge", default=d["fit_samples"], min=1, max=64,
+                                   soft_max=8,
+                                   description="Surface fit: samples per face edge (the square "
+                                               "per quad, or per corner of another polygon)"),
     }
 
 
 SETTING_NAMES = tuple(settings_annotations())
 
 
+# The panel picks the target with a pointer (target_object) and passes its name.
+SCENE_SETTING_NAMES = tuple(name for name in SETTING_NAMES if name != "target")
+
+
+def _is_mesh(_settings, obj):
+    return obj.type == 'MESH'
+
+
 class SubdivPiaSettings(bpy.types.PropertyGroup):
     """Panel settings, stored on the scene."""
     __annotations__ = dict(
-        settings_annotations(),
+        {name: value for name, value in settings_annotations().items() if name != "target"},
+        target_object=PointerProperty(
+            name="Target", type=bpy.types.Object, poll=_is_mesh,
+            description="Mesh object to fit the cage to (a scan; its modifiers applied). "
+                        "Empty: interpolate the cage's own vertices"),
         use_modifier_settings=BoolProperty(
             name="From Modifier", default=True,
             description="Take levels, quality, boundary and creases from the active object's "

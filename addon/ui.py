@@ -5,8 +5,8 @@ import bpy
 
 from . import api, native
 from .operators import (OBJECT_OT_subdiv_pia_interpolate, OBJECT_OT_subdiv_pia_refresh_limit,
-                        draw_settings, menu_func)
-from .properties import SETTING_NAMES
+                        draw_fit_settings, draw_settings, menu_func)
+from .properties import SCENE_SETTING_NAMES
 
 RESULT_KEYS = ("pia_status", "pia_method", "pia_iterations", "pia_max_error", "pia_mean_error")
 
@@ -44,16 +44,36 @@ class DATA_PT_subdiv_pia(bpy.types.Panel):
         layout.prop(settings, "tolerance")
         layout.prop(settings, "max_iterations")
 
+        layout.separator()
+        layout.prop(settings, "target_object")
+        target = settings.target_object
+        draw_fit_settings(layout, settings, target is not None)
+
         op = layout.operator(OBJECT_OT_subdiv_pia_interpolate.bl_idname, icon='MOD_SUBSURF')
         modifier_names = set(api.MODIFIER_SETTINGS) if from_modifier else set()
-        for name in SETTING_NAMES:
+        for name in SCENE_SETTING_NAMES:
             if name not in modifier_names:
                 setattr(op, name, getattr(settings, name))
+        op.target = target.name if target is not None else ""
 
         if api.limit_cage_of(obj) is not None:
             layout.operator(OBJECT_OT_subdiv_pia_refresh_limit.bl_idname, icon='FILE_REFRESH')
 
-        if "pia_status" in obj:
+        if "pia_fit" in obj:
+            box = layout.box()
+            box.label(text="Last fit", icon='INFO')
+            col = box.column(align=True)
+            col.label(text="%s fit to '%s', %d rounds" % (api.FIT_NAMES.get(obj["pia_fit"], obj["pia_fit"]),
+                                                          obj.get("pia_fit_target", "?"),
+                                                          int(obj.get("pia_fit_rounds", 0))))
+            for label, key in (("Mean", "mean"), ("95th percentile", "p95"), ("Max", "max")):
+                col.label(text="%s distance: %.2g (was %.2g)"
+                          % (label, float(obj.get("pia_fit_%s_after" % key, 0.0)),
+                             float(obj.get("pia_fit_%s_before" % key, 0.0))))
+            col.label(text="Of the scan's diagonal; heat map red at %.2g"
+                      % float(obj.get("pia_distance_scale", api.HEAT_SCALE)))
+            col.label(text="(Viewport Shading > Color > Attribute)")
+        elif "pia_status" in obj:
             box = layout.box()
             box.label(text="Last result", icon='INFO')
             col = box.column(align=True)
