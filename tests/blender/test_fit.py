@@ -1,0 +1,431 @@
+# SPDX-License-Identifier: GPL-2.0-or-later
+"""Fitting a cage to a scan (the operator's `target`): surface samples
+against Blender's evaluated modifier, closest points against mathutils'
+BVH tree, the Stanford bunny with a QuadriFlow cage, bad input, the
+attributes and properties on the result, transforms, progress and the
+command line."""
+
+import os
+import subprocess
+
+import bmesh
+import bpy
+import numpy as np
+import pytest
+from mathutils import Euler, Matrix, Vector
+from mathutils.bvhtree import BVHTree
+from mathutils.kdtree import KDTree
+
+import shapes
+import subdiv_pia
+from subdiv_pia import api, native
+from conftest import (DATA, assert_unchanged, evaluated_control_points, expect_error, import_obj,
+                      link_and_activate, link_and_activate_existing, object_from_pydata, positions,
+                      run_operator, snapshot)
+
+
+# --- helpers ---------------------------------------------------------------------
+
+def quad_sphere(name="Cage", cuts=3, radius=1.0):
+    """A cube cut `cuts` times and pushed onto a sphere: all quads, eight
+    valence-3 vertices; its vertices lie on the sphere, as if shrinkwrapped."""
+    bm = bmesh.new()
+    bmesh.ops.create_cube(bm, size=2.0)
+    bmesh.ops.subdivide_edges(bm, edges=bm.edges[:], cuts=cuts, use_grid_fill=True)
+    for vert in bm.verts:
+        vert.co = vert.co.normalized() * radius
+    mesh = bpy.data.meshes.new(name)
+    bm.to_mesh(mesh)
+    bm.free()
+    return link_and_activate(bpy.data.objects.new(name, mesh))
+
+
+def fine_sphere(name="Scan", segments=256, rings=128):
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=segments, ring_count=rings, radius=1.0)
+    scan = bpy.context.active_object
+    scan.name = name
+    return scan
+
+
+def activate(obj):
+    return link_and_activate_existing(obj)
+
+
+def scan_in_cage_space(scan, cage):
+    """(vertices (N, 3) float64, polygons) of scan's evaluated mesh, in cage's object space."""
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    evaluated = scan.evaluated_get(depsgraph)
+    mesh = evaluated.to_mesh()
+    try:
+        co = positions(mesh).astype(np.float64)
+        polygons = [tuple(p.vertices) for p in mesh.polygons]
+    finally:
+        evaluated.to_mesh_clear()
+    m = np.array(cage.matrix_world.inverted() @ scan.matrix_world)
+    return co @ m[:3, :3].T + m[:3, 3], polygons
+
+
+def bvh_of(vertices, polygons):
+    return BVHTree.FromPolygons([Vector(v) for v in vertices], polygons, all_triangles=False, epsilon=0.0)
+
+
+def bvh_distances(bvh, points):
+    out = np.empty(len(points))
+    for i, p in enumerate(points):
+        out[i] = bvh.find_nearest(Vector(p))[3]
+    return out
+
+
+def used_diagonal(vertices, polygons):
+    used = np.unique(np.fromiter((v for p in polygons for v in p), np.int64))
+    pts = vertices[used]
+    return float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))
+
+
+def native_scan(vertices, polygons):
+    return native.Scan(native.Mesh.from_faces(vertices, polygons))
+
+
+def surface_samples(obj, samples_per_edge=4, **options):
+    mesh = api.native_mesh(obj.data)
+    stencils = native.surface_stencils(mesh, samples_per_edge=samples_per_edge, **options)
+    return stencils.apply(mesh.positions)
+
+
+def fit(cage, scan, **settings):
+    """Run the operator on cage with scan as target; the new object."""
+    activate(cage)
+    before = snapshot(cage)
+    assert run_operator(target=scan.name, **settings) == {'FINISHED'}
+    new_obj = bpy.context.active_object
+    assert new_obj is not cage and new_obj.name.startswith(cage.name + "_pia")
+    assert_unchanged(cage, before)
+    return new_obj
+
+
+# --- the samples are points of Blender's surface ----------------------------------------
+
+def _mixed_with_crease():
+    obj = shapes.mixed()  # triangles, quads, a pentagon, an open boundary, a valence-6 vertex
+    values = np.zeros(len(obj.data.edges), np.float32)
+    for edge in obj.data.edges:
+        if set(edge.vertices) in ({1, 4}, {4, 7}):
+            values[edge.index] = 0.5  # semi-sharp: Blender's adaptive patches there
+    assert np.count_nonzero(values) == 2
+    shapes.set_edge_creases(obj.data, values)
+    return obj
+
+
+@pytest.mark.parametrize("make", (_mixed_with_crease, shapes.edge_creases, shapes.ngon_cylinder),
+                         ids=("mixed-crease", "cube-creases", "ngon-cylinder"))
+def test_surface_samples_are_blender_surface_points(make):
+    obj = make()
+    points = surface_samples(obj, samples_per_edge=4, quality=3)
+    sizes = np.array([len(p.vertices) for p in obj.data.polygons])
+    assert len(points) == 16 * int(np.where(sizes == 4, 1, sizes).sum())
+    # (2i+1)/8 is a grid point of a quad at level 3; Blender samples the
+    # corner sub-quads of other polygons with half as many segments, so
+    # level 4 holds every sample of every face.
+    mod = obj.modifiers.new("Subdivision", 'SUBSURF')
+    mod.levels, mod.quality, mod.use_limit_surface = 4, 3, True
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    depsgraph.update()
+    evaluated = obj.evaluated_get(depsgraph)
+    mesh = evaluated.to_mesh()
+    try:
+        grid = positions(mesh).astype(np.float64)
+    finally:
+        evaluated.to_mesh_clear()
+    tree = KDTree(len(grid))
+    for i, p in enumerate(grid):
+        tree.insert(p, i)
+    tree.balance()
+    diag = float(np.linalg.norm(grid.max(axis=0) - grid.min(axis=0)))
+    found = [tree.find(p) for p in points]
+    miss = max(d for _, _, d in found) / diag
+    assert miss <= 1e-6, miss
+    assert len({i for _, i, _ in found}) == len(points), "two samples at one surface point"
+
+
+# --- synthetic: a quad sphere on a finely tessellated sphere ------------------------
+
+def test_surface_fit_puts_every_sample_on_the_sphere():
+    scan = fine_sphere()
+    cage = quad_sphere(cuts=3)
+    new_obj = fit(cage, scan, fit='SURFACE')
+    vertices, polygons = scan_in_cage_space(scan, new_obj)
+    diag = used_diagonal(vertices, polygons)
+    points = surface_samples(new_obj)
+    _, _, dist, _ = native_scan(vertices, polygons).closest_points(points)
+    rel = dist.astype(np.float64) / diag
+    assert rel.max() <= 1e-4, rel.max()
+    assert new_obj["pia_fit_mean_before"] > 100 * rel.mean()  # the plain cage was far off
+    # An independent closest-point oracle on a subset.
+    rng = np.random.default_rng(0)
+    subset = rng.choice(len(points), 400, replace=False)
+    oracle = bvh_distances(bvh_of(vertices, polygons), points[subset]) / diag
+    np.testing.assert_allclose(rel[subset], oracle, rtol=0, atol=2e-7)
+    # The report is the same measurement.
+    assert new_obj["pia_fit_max_after"] == pytest.approx(rel.max(), rel=1e-3, abs=1e-7)
+    assert new_obj["pia_fit_mean_after"] == pytest.approx(rel.mean(), rel=1e-3, abs=1e-7)
+
+
+def test_vertices_fit_puts_every_limit_point_on_the_sphere():
+    scan = fine_sphere()
+    cage = quad_sphere(cuts=3)
+    new_obj = fit(cage, scan, fit='VERTICES', quality=3)
+    n = len(cage.data.vertices)
+    limit_points = evaluated_control_points(new_obj, n)  # Blender's modifier, identity transforms
+    vertices, polygons = scan_in_cage_space(scan, new_obj)
+    diag = used_diagonal(vertices, polygons)
+    rel = bvh_distances(bvh_of(vertices, polygons), limit_points) / diag
+    assert rel.max() <= 1e-5, rel.max()
+    assert new_obj["pia_fit"] == 'VERTICES' and new_obj["pia_status"] == 'CONVERGED'
+
+
+def test_fit_attributes_and_properties():
+    scan = fine_sphere(segments=64, rings=32)
+    cage = quad_sphere(cuts=2)
+    new_obj = fit(cage, scan, fit='SURFACE', fit_cutoff=0.05)
+    mesh = new_obj.data
+    n = len(mesh.vertices)
+    attr = mesh.attributes[api.DISTANCE_ATTRIBUTE]
+    assert (attr.domain, attr.data_type, len(attr.data)) == ('POINT', 'FLOAT', n)
+    distances = np.empty(n, np.float32)
+    attr.data.foreach_get("value", distances)
+    # Each vertex: the largest distance of the samples on its faces (all quads: 16 per face).
+    vertices, polygons = scan_in_cage_space(scan, new_obj)
+    diag = used_diagonal(vertices, polygons)
+    _, _, dist, _ = native_scan(vertices, polygons).closest_points(surface_samples(new_obj))
+    per_face = (dist.astype(np.float64) / diag).reshape(len(mesh.polygons), 16).max(axis=1)
+    expected = np.zeros(n)
+    for face in mesh.polygons:
+        for v in face.vertices:
+            expected[v] = max(expected[v], per_face[face.index])
+    np.testing.assert_allclose(distances, expected, rtol=1e-3, atol=1e-8)
+    assert distances.max() == pytest.approx(new_obj["pia_fit_max_after"], rel=1e-5)
+
+    colors = mesh.color_attributes.get(api.COLOR_ATTRIBUTE)
+    assert colors is not None and colors.domain == 'POINT' and len(colors.data) == n
+    assert mesh.color_attributes.active_color.name == api.COLOR_ATTRIBUTE
+    rgba = np.empty(4 * n, np.float32)
+    colors.data.foreach_get("color", rgba)
+    np.testing.assert_allclose(rgba.reshape(n, 4), api.heat_colors(distances), atol=1e-6)
+    np.testing.assert_allclose(api.heat_colors([0.0, api.HEAT_SCALE, 10 * api.HEAT_SCALE]),
+                               [(0, 0, 1, 1), (1, 0, 0, 1), (1, 0, 0, 1)])
+
+    for key in ("pia_fit", "pia_fit_target", "pia_fit_rounds", "pia_distance_scale",
+                "pia_fit_mean_before", "pia_fit_p95_before", "pia_fit_max_before",
+                "pia_fit_mean_after", "pia_fit_p95_after", "pia_fit_max_after"):
+        assert key in new_obj, key
+    assert (new_obj["pia_fit"], new_obj["pia_fit_target"]) == ('SURFACE', scan.name)
+    assert 1 <= new_obj["pia_fit_rounds"] <= 20
+    assert new_obj["pia_fit_mean_after"] < new_obj["pia_fit_mean_before"]
+    assert new_obj["pia_fit_mean_after"] <= new_obj["pia_fit_p95_after"] <= new_obj["pia_fit_max_after"]
+    mod = new_obj.modifiers[0]
+    assert mod.type == 'SUBSURF' and mod.use_limit_surface
+
+
+# --- real: the Stanford bunny scan and a QuadriFlow cage -----------------------------
+
+def _level3_distances(obj, bvh, diag):
+    """Distances of Blender's level-3 limit surface vertices to the scan, relative."""
+    mod = obj.modifiers[0]
+    mod.levels, mod.quality, mod.use_limit_surface = 3, 3, True
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    depsgraph.update()
+    evaluated = obj.evaluated_get(depsgraph)
+    mesh = evaluated.to_mesh()
+    try:
+        points = positions(mesh).astype(np.float64)
+    finally:
+        evaluated.to_mesh_clear()
+    return bvh_distances(bvh, points) / diag
+
+
+def test_bunny_scan_surface_fit():
+    scan = import_obj(os.path.join(DATA, "bun_zipper.obj"))
+    cage = import_obj(os.path.join(DATA, "bun_zipper_quadriflow_cage.obj"))
+    assert np.allclose(np.array(cage.matrix_world), np.array(scan.matrix_world))
+    new_obj = fit(cage, scan, fit='SURFACE', levels=3, quality=3)
+
+    baseline = bpy.data.objects.new("Baseline", cage.data.copy())
+    bpy.context.scene.collection.objects.link(baseline)
+    baseline.matrix_world = cage.matrix_world.copy()
+    baseline.modifiers.new("Subdivision", 'SUBSURF')
+
+    vertices, polygons = scan_in_cage_space(scan, cage)
+    diag = used_diagonal(vertices, polygons)
+    bvh = bvh_of(vertices, polygons)
+    stats = {}
+    for label, obj in (("fitted", new_obj), ("baseline", baseline)):
+        d = _level3_distances(obj, bvh, diag)
+        kept = d[d <= 0.02]
+        stats[label] = (float(kept.mean()), float(np.percentile(kept, 95)), float(kept.max()),
+                        len(d) - len(kept))
+    print("\nbunny level-3 distances (mean, p95, max, ignored): fitted %s, baseline %s; reported "
+          "mean %.3g p95 %.3g max %.3g, %d rounds"
+          % (stats["fitted"], stats["baseline"], new_obj["pia_fit_mean_after"],
+             new_obj["pia_fit_p95_after"], new_obj["pia_fit_max_after"], new_obj["pia_fit_rounds"]))
+    mean, p95 = stats["fitted"][:2]
+    assert mean <= 1.5e-4, stats
+    assert p95 <= 8e-4, stats
+    assert stats["baseline"][0] >= 5 * mean, stats
+
+
+# --- bad input ------------------------------------------------------------------------
+
+def _missing(cage):
+    return dict(target="NoSuchScan"), r"Target 'NoSuchScan' not found"
+
+
+def _not_mesh(cage):
+    bpy.context.scene.collection.objects.link(bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", 'POINT')))
+    return dict(target="Lamp"), r"Target 'Lamp' is not a mesh object \(type LIGHT\)"
+
+
+def _no_faces(cage):
+    wire = bpy.data.meshes.new("Wire")
+    wire.from_pydata([(0, 0, 0), (1, 0, 0), (1, 1, 0)], [(0, 1), (1, 2)], [])
+    bpy.context.scene.collection.objects.link(bpy.data.objects.new("Wire", wire))
+    return dict(target="Wire"), r"Target 'Wire' has no faces"
+
+
+def _empty_mesh(cage):
+    bpy.context.scene.collection.objects.link(bpy.data.objects.new("Nothing", bpy.data.meshes.new("Nothing")))
+    return dict(target="Nothing"), r"Target 'Nothing' has no faces"
+
+
+def _itself(cage):
+    return dict(target=cage.name), r"Target 'Cage' is the cage itself"
+
+
+def _loop_surface(cage):
+    return dict(target="Scan", scheme='LOOP', triangulate=True), r"Surface fit works on the Catmull-Clark .* only.*'Vertices'"
+
+
+def _doo_sabin_surface(cage):
+    return dict(target="Scan", scheme='DOO_SABIN'), r"Surface fit works on the Catmull-Clark .* only.*'Vertices'"
+
+
+@pytest.mark.parametrize("case", (_missing, _not_mesh, _no_faces, _empty_mesh, _itself, _loop_surface,
+                                  _doo_sabin_surface), ids=lambda f: f.__name__.strip("_"))
+def test_bad_target_is_refused(case):
+    fine_sphere(segments=16, rings=8)
+    cage = quad_sphere(cuts=1)
+    settings, pattern = case(cage)
+    activate(cage)
+    before = snapshot(cage)
+    expect_error(pattern, fit='SURFACE', **settings)
+    assert_unchanged(cage, before)
+    assert not [o for o in bpy.data.objects if o.name.endswith("_pia")]
+
+
+# --- transforms, modifiers on the scan --------------------------------------------------
+
+@pytest.mark.parametrize("mode", ('SURFACE', 'VERTICES'))
+def test_transforms_fit_in_the_cage_space(mode):
+    scan = fine_sphere(segments=64, rings=32)
+    cage = quad_sphere(cuts=2)
+    # Turned off the sphere's symmetry planes: a limit point on one of them
+    # is equally close to two faces of the scan, and rounding picks either.
+    cage.data.transform(Euler((0.3, 0.5, 0.7)).to_matrix().to_4x4())
+    # A cut-off well above every distance: samples near the cut-off could
+    # fall on either side of it with rounding and change the result.
+    first = fit(cage, scan, fit=mode, fit_cutoff=0.1)
+    plain = positions(first.data).astype(np.float64)
+
+    # The same scan, relative to the cage, with other transforms on both.
+    cage.matrix_world = Matrix.LocRotScale(Vector((1.0, -2.0, 0.5)), None, Vector((2.0, 2.0, 2.0)))
+    scan_matrix = Matrix.LocRotScale(Vector((-3.0, 1.0, 4.0)), Matrix.Rotation(0.7, 3, 'X').to_quaternion(),
+                                     Vector((0.5, 0.5, 0.5)))
+    moved = scan.data.copy()
+    co = positions(moved).astype(np.float64)
+    m = np.array(scan_matrix.inverted() @ cage.matrix_world)
+    moved.vertices.foreach_set("co", (co @ m[:3, :3].T + m[:3, 3]).astype(np.float32).ravel())
+    moved.update()
+    scan2 = bpy.data.objects.new("Scan2", moved)
+    bpy.context.scene.collection.objects.link(scan2)
+    scan2.matrix_world = scan_matrix
+    bpy.context.view_layer.update()
+    new_obj = fit(cage, scan2, fit=mode, fit_cutoff=0.1)
+    assert np.allclose(np.array(new_obj.matrix_world), np.array(cage.matrix_world), atol=1e-6)
+    transformed = positions(new_obj.data).astype(np.float64)
+    diag = float(np.linalg.norm(plain.max(axis=0) - plain.min(axis=0)))
+    print("\n%s: rounds %d / %d, means %.4g / %.4g, position difference %.3g of the diagonal"
+          % (mode, first["pia_fit_rounds"], new_obj["pia_fit_rounds"], first["pia_fit_mean_after"],
+             new_obj["pia_fit_mean_after"], np.abs(transformed - plain).max() / diag))
+    assert np.abs(transformed - plain).max() / diag <= 1e-5
+    assert new_obj["pia_fit_mean_after"] == pytest.approx(first["pia_fit_mean_after"], rel=0.02)
+
+
+def test_scan_modifiers_are_applied():
+    coarse = fine_sphere("Coarse", segments=12, rings=6)
+    mod = coarse.modifiers.new("Subdivision", 'SUBSURF')
+    mod.levels = 3
+    cage = quad_sphere(cuts=2, radius=1.0)
+    new_obj = fit(cage, coarse, fit='VERTICES')
+    limit_points = evaluated_control_points(new_obj, len(cage.data.vertices))
+    evaluated = scan_in_cage_space(coarse, new_obj)
+    diag = used_diagonal(*evaluated)
+    on_evaluated = bvh_distances(bvh_of(*evaluated), limit_points) / diag
+    base = (positions(coarse.data).astype(np.float64), [tuple(p.vertices) for p in coarse.data.polygons])
+    on_base = bvh_distances(bvh_of(*base), limit_points) / diag
+    assert on_evaluated.max() <= 1e-5, on_evaluated.max()
+    assert on_base.max() > 1e-3  # the base mesh is elsewhere: it was not what was fitted
+
+
+# --- script API, progress, command line -----------------------------------------------
+
+def test_api_fit_progress_and_cancel():
+    scan = fine_sphere(segments=64, rings=32)
+    cage = quad_sphere(cuts=2)
+    calls = []
+    new_obj, report = subdiv_pia.interpolate(cage, target=scan, fit='SURFACE',
+                                             progress=lambda r, d: calls.append((r, d)) and False)
+    assert isinstance(report, native.FitReport)
+    assert [r for r, _ in calls] == list(range(1, report.rounds + 1))
+    assert calls[-1][1] == pytest.approx(report.history[-1])
+    line = api.format_fit_report(report, scan.name)
+    assert line.startswith("Surface fit to '%s': mean distance" % scan.name) and "rounds" in line
+    count = len(bpy.data.objects), len(bpy.data.meshes)
+    with pytest.raises(native.PiaCancelled):
+        subdiv_pia.interpolate(cage, target=scan.name, progress=lambda r, d: True)
+    assert (len(bpy.data.objects), len(bpy.data.meshes)) == count
+
+
+def test_panel_passes_the_target():
+    from test_ui import draw_panel
+    scan = fine_sphere(segments=32, rings=16)
+    cage = quad_sphere(cuts=1)
+    settings = bpy.context.scene.subdiv_pia
+    log = draw_panel()
+    for name in ("target_object", "fit", "fit_cutoff", "fit_smoothing", "fit_samples"):
+        assert ("prop", name) in log, name
+    settings.target_object = scan
+    assert bpy.ops.object.subdiv_pia_interpolate(target=settings.target_object.name) == {'FINISHED'}
+    labels = [text for kind, text in draw_panel() if kind == "label"]
+    assert any(text.startswith("Surface fit to '%s'" % scan.name) for text in labels), labels
+    assert any(text.startswith("Mean distance:") for text in labels), labels
+    assert cage.name + "_pia" in bpy.data.objects
+
+
+def test_cli_fits_to_a_target(tmp_path):
+    from test_api_cli import run_cli
+    fine_sphere("Scan", segments=64, rings=32)
+    quad_sphere("Cage", cuts=2)
+    path = str(tmp_path / "scene.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path, copy=True)
+    output = str(tmp_path / "out.blend")
+    result = run_cli(path, output, "--object", "Cage", "--target", "Scan", "--fit", "SURFACE",
+                     "--fit-cutoff", "0.05", "--fit-samples", "3")
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "Surface fit to 'Scan'" in result.stdout
+    with bpy.data.libraries.load(output) as (data_from, data_to):
+        data_to.objects = ["Cage_pia"]
+    new_obj = data_to.objects[0]
+    assert new_obj["pia_fit_samples"] == 3
+    assert new_obj["pia_fit_sample_count"] == 6 * 3 * 3 * 3 * 3  # 54 quads, 9 samples each
+    assert new_obj["pia_fit_cutoff"] == pytest.approx(0.05)
+    result = run_cli(path, output, "--object", "Cage", "--target", "NoSuchScan")
+    assert result.returncode == 1 and "NoSuchScan" in result.stderr
