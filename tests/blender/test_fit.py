@@ -392,6 +392,10 @@ def test_api_fit_progress_and_cancel():
     with pytest.raises(native.PiaCancelled):
         subdiv_pia.interpolate(cage, target=scan.name, progress=lambda r, d: True)
     assert (len(bpy.data.objects), len(bpy.data.meshes)) == count
+    # Every sample beyond the cut-off: said, not passed off as a fit.
+    _, far = subdiv_pia.interpolate(cage, target=scan, fit_cutoff=1e-6)
+    assert far.after.ignored == far.sample_count and not api.report_converged(far)
+    assert "nothing was fitted" in api.format_fit_report(far, scan.name)
 
 
 def test_panel_passes_the_target():
