@@ -457,7 +457,7 @@ typedef struct spia_fit_options {
     /* A sample (or, for VERTICES, a limit point) whose closest scan point is
      * farther than cutoff * scan diagonal is over a hole or off the scan: it
      * does not pull.  Nor does one whose closest point is on the scan's
-     * boundary (over a hole however near).  [0.02] */
+     * boundary farther than a tenth of the cut-off (over a hole).  [0.02] */
     double cutoff;
     /* Fairness: weight of |Laplacian(cage - initial cage)|^2 per cage vertex
      * against the squared distances of the samples, per sample.  Keeps the
@@ -469,8 +469,9 @@ typedef struct spia_fit_options {
      * (1 = both alike); it lets samples slide along the scan less.
      * Negative for none.  [1e-3] */
     double point_weight;
-    int32_t max_rounds;        /* projection + least-squares rounds [20]                             */
-    /* Stop when a round lowers the mean distance by less than this fraction. [0.002] */
+    int32_t max_rounds;        /* projection + least-squares rounds [16]                             */
+    /* Stop after two rounds in a row that lowered the best mean distance by
+     * less than this fraction (the cage written is the best one seen). [0.005] */
     double round_tolerance;
     int32_t solver_iterations; /* conjugate gradient steps per round [30]                            */
 } spia_fit_options;
