@@ -164,8 +164,9 @@ _COMMON_BYTES = 1 << 16  # cholmod_common is 2,664 bytes in CHOLMOD 3; it is opa
 
 def solve_cholmod_spd(S, B):
     """Solves S X = B for a symmetric positive definite S (only its upper
-    triangle is read) with CHOLMOD's default analysis (AMD or METIS, simplicial
-    or supernodal as it chooses)."""
+    triangle is read) with CHOLMOD's defaults (AMD or METIS ordering,
+    simplicial LDL' or supernodal LL' as it chooses).  A zero pivot (or, in
+    LL', a non-positive one) raises DirectSolverError."""
     lib = _load("cholmod")
     vp = ctypes.c_void_p
     lib.cholmod_start.argtypes = [vp]
