@@ -265,6 +265,8 @@ def outcome(r):
         return f"{DNF}: {r['dnf']}"
     if "failed" in r:
         return f"failed: {r['failed']}"
+    if "skipped" in r:
+        return f"not run: {r['skipped']}"
     if "refused" in r:
         return f"refused: {r['refused']}"
     return None
@@ -412,8 +414,8 @@ def main():
             for method in METHODS:
                 first = results.get((name, METHODS[0]), {})
                 if method != METHODS[0] and "dnf" in first:
-                    results[(name, method)] = dict(failed=f"not run: {METHODS[0]} did not finish and the "
-                                                          f"stencils are the same")
+                    results[(name, method)] = dict(skipped=f"{METHODS[0]} did not finish and the stencils "
+                                                           f"are the same")
                     rows.append([name, "", "", method, "", "", "", "", outcome(results[(name, method)]), "", "", ""])
                     print(table(header, rows[-1:]).splitlines()[-1], flush=True)
                     continue
