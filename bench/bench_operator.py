@@ -107,11 +107,17 @@ def main():
     call_s, report = best_reports[-1]
 
     select_only(src)
+    t = time.perf_counter()
+    bpy.context.view_layer.update()  # what bpy.ops would otherwise do first, after the removals above
+    pre_update_s = time.perf_counter() - t
     profiler = cProfile.Profile()
     profiler.enable()
     bpy.ops.object.subdiv_pia_interpolate()
     profiler.disable()
     new = bpy.context.view_layer.objects.active
+    modifiers = [f"{m.type} levels {m.levels}" for m in new.modifiers if m.type == 'SUBSURF']
+    evaluated = new.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+    evaluated_vertices = len(evaluated.vertices)
     t = time.perf_counter()
     bpy.context.view_layer.update()  # evaluates the new object's Subdivision Surface modifier
     depsgraph_s = time.perf_counter() - t
@@ -142,7 +148,8 @@ def main():
     out = dict(vertices=len(src.data.vertices), repeats=args.repeats, build_s=build_s, operator_s=best_s,
                profiled_s=profiled_s,
                all_runs_s=[r[0] for r in runs], native_call_s=call_s, split=split, profile=profile,
-               first_evaluation_s=depsgraph_s, new_object=new.name, iterations=report.iterations,
+               first_evaluation_s=depsgraph_s, pre_update_s=pre_update_s, modifiers=modifiers,
+               evaluated_vertices=evaluated_vertices, new_object=new.name, iterations=report.iterations,
                max_error=report.max_error_relative, method=report.method)
     print(f"{out['vertices']:,} vertices: operator {best_s:.3f} s (runs {', '.join(f'{s:.3f}' for s, _ in runs)}), "
           f"native.interpolate {call_s:.3f} s (stencils {report.stencil_seconds:.3f}, solve "

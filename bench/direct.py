@@ -96,44 +96,46 @@ def solve_umfpack(L, P):
     A = scipy.sparse.csc_matrix(L)
     A.sort_indices()
     n = A.shape[0]
-    Ap = np.ascontiguousarray(A.indptr, np.int32)
-    Ai = np.ascontiguousarray(A.indices, np.int32)
+    # The "dl" (int64) interface: the "di" one runs out of integer
+    # workspace on meshes of about 2M vertices.
+    Ap = np.ascontiguousarray(A.indptr, np.int64)
+    Ai = np.ascontiguousarray(A.indices, np.int64)
     Ax = np.ascontiguousarray(A.data, np.float64)
     vp = ctypes.c_void_p
     dp = ctypes.POINTER(ctypes.c_double)
-    ip = ctypes.POINTER(ctypes.c_int32)
-    lib.umfpack_di_symbolic.argtypes = [ctypes.c_int32, ctypes.c_int32, ip, ip, dp, ctypes.POINTER(vp), dp, dp]
-    lib.umfpack_di_numeric.argtypes = [ip, ip, dp, vp, ctypes.POINTER(vp), dp, dp]
-    lib.umfpack_di_solve.argtypes = [ctypes.c_int32, ip, ip, dp, dp, dp, vp, dp, dp]
-    lib.umfpack_di_free_symbolic.argtypes = [ctypes.POINTER(vp)]
-    lib.umfpack_di_free_numeric.argtypes = [ctypes.POINTER(vp)]
-    for f in ("umfpack_di_symbolic", "umfpack_di_numeric", "umfpack_di_solve"):
-        getattr(lib, f).restype = ctypes.c_int32
+    ip = ctypes.POINTER(ctypes.c_int64)
+    lib.umfpack_dl_symbolic.argtypes = [ctypes.c_int64, ctypes.c_int64, ip, ip, dp, ctypes.POINTER(vp), dp, dp]
+    lib.umfpack_dl_numeric.argtypes = [ip, ip, dp, vp, ctypes.POINTER(vp), dp, dp]
+    lib.umfpack_dl_solve.argtypes = [ctypes.c_int64, ip, ip, dp, dp, dp, vp, dp, dp]
+    lib.umfpack_dl_free_symbolic.argtypes = [ctypes.POINTER(vp)]
+    lib.umfpack_dl_free_numeric.argtypes = [ctypes.POINTER(vp)]
+    for f in ("umfpack_dl_symbolic", "umfpack_dl_numeric", "umfpack_dl_solve"):
+        getattr(lib, f).restype = ctypes.c_int64  # SuiteSparse_long in the dl interface
     ptr = lambda a, t: a.ctypes.data_as(t)  # noqa: E731
     symbolic, numeric = vp(), vp()
-    code = lib.umfpack_di_symbolic(n, n, ptr(Ap, ip), ptr(Ai, ip), ptr(Ax, dp), ctypes.byref(symbolic), None, None)
+    code = lib.umfpack_dl_symbolic(n, n, ptr(Ap, ip), ptr(Ai, ip), ptr(Ax, dp), ctypes.byref(symbolic), None, None)
     if code != 0:
-        raise DirectSolverError(f"umfpack_di_symbolic: status {code}")
+        raise DirectSolverError(f"umfpack_dl_symbolic: status {code}")
     try:
-        code = lib.umfpack_di_numeric(ptr(Ap, ip), ptr(Ai, ip), ptr(Ax, dp), symbolic, ctypes.byref(numeric),
+        code = lib.umfpack_dl_numeric(ptr(Ap, ip), ptr(Ai, ip), ptr(Ax, dp), symbolic, ctypes.byref(numeric),
                                       None, None)
         if code != 0:
-            raise DirectSolverError(f"umfpack_di_numeric: status {code}")
+            raise DirectSolverError(f"umfpack_dl_numeric: status {code}")
         B = np.asfortranarray(np.asarray(P, np.float64))
         X = np.empty_like(B, order="F")
         for a in range(B.shape[1]):
             b = np.ascontiguousarray(B[:, a])
             x = np.empty(n)
-            code = lib.umfpack_di_solve(_UMFPACK_A, ptr(Ap, ip), ptr(Ai, ip), ptr(Ax, dp), ptr(x, dp), ptr(b, dp),
+            code = lib.umfpack_dl_solve(_UMFPACK_A, ptr(Ap, ip), ptr(Ai, ip), ptr(Ax, dp), ptr(x, dp), ptr(b, dp),
                                         numeric, None, None)
             if code != 0:
-                raise DirectSolverError(f"umfpack_di_solve: status {code}")
+                raise DirectSolverError(f"umfpack_dl_solve: status {code}")
             X[:, a] = x
         return np.ascontiguousarray(X)
     finally:
         if numeric:
-            lib.umfpack_di_free_numeric(ctypes.byref(numeric))
-        lib.umfpack_di_free_symbolic(ctypes.byref(symbolic))
+            lib.umfpack_dl_free_numeric(ctypes.byref(numeric))
+        lib.umfpack_dl_free_symbolic(ctypes.byref(symbolic))
 
 
 # --------------------------------------------------------------------------
