@@ -5,10 +5,11 @@
 PYTHON  ?= /usr/bin/python3
 BLENDER ?= blender
 BLENDER_RUN = $(BLENDER) -b --factory-startup --python-exit-code 1
-DEBIAN_PACKAGES = blender libosd-dev libembree-dev cmake g++ make python3-numpy python3-scipy python3-pytest python3-matplotlib
+DEBIAN_PACKAGES = blender libosd-dev libembree-dev cmake g++ make python3-numpy python3-scipy python3-pytest \
+                  python3-matplotlib libsuitesparse-dev
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: all deps build test test-c test-asan test-python test-blender demo bench clean
+.PHONY: all deps build test test-c test-asan test-python test-blender demo bench bench-scale clean
 
 all: build
 
@@ -46,11 +47,18 @@ demo: build
 	$(BLENDER_RUN) --python build/addon/subdiv_pia/cli.py -- tests/data/mushroom.obj out/mushroom_interpolated.blend
 	$(BLENDER_RUN) --python bench/render_comparison.py -- tests/data/mushroom.obj out/mushroom_comparison.png
 
-bench: build
+bench: build bench-scale
 	$(PYTHON) bench/bench_interpolate.py
 	$(PYTHON) bench/bench_loop_papers.py
 	$(PYTHON) bench/bench_doosabin.py
 	$(BLENDER_RUN) --python bench/bench_fit.py
+
+# Speed and scale (bench/bench_scale.py; BENCH_QUICK=1 for a short subset).  The
+# OpenSubdiv helper is built in its own tree, with -DSPIA_BENCH=ON.
+bench-scale: build
+	cmake -S . -B build/bench -DCMAKE_BUILD_TYPE=Release -DSPIA_BENCH=ON -DSPIA_TESTS=OFF
+	cmake --build build/bench --target spia_bench_osd --parallel 2
+	$(PYTHON) bench/bench_scale.py --blender $(BLENDER)
 
 clean:
 	$(PYTHON) setup.py clean
