@@ -488,7 +488,9 @@ typedef struct spia_fit_report {
     int64_t sample_count;
     double diagonal;           /* of the scan                                                        */
     /* Distances of the limit surface (the samples) to the scan, for the
-     * cage given and for the cage written. */
+     * cage given and for the cage written.  Loop and Doo-Sabin (VERTICES
+     * only) have no samples: their limit points are measured instead, and
+     * sample_count is the vertex count. */
     spia_fit_distances before, after;
     /* VERTICES: the interpolation's report (iterations, errors). */
     int32_t iterations;
@@ -496,7 +498,8 @@ typedef struct spia_fit_report {
     double stencil_seconds, query_seconds, solve_seconds;
     /* Optional caller-owned buffer of cage vertex_count floats: for each
      * vertex, the largest relative distance to the scan of the samples on
-     * the faces around it (after the fit; 0 where no sample counts). */
+     * the faces around it (after the fit; 0 where no sample counts); for
+     * Loop and Doo-Sabin, the distance of its limit point. */
     float *vertex_distances;
     /* Optional caller-owned buffer: the mean relative distance after each
      * round, history[0] being the cage given. */

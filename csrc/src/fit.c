@@ -485,7 +485,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
     surface_opt.scheme = SPIA_SCHEME_CATMULL_CLARK;
     int64_t S = 0;
     /* The samples serve the report in both modes; for Loop and Doo-Sabin
-     * (VERTICES only) there are none, and the distances stay 0. */
+     * (VERTICES only) there are none, and the limit points are measured. */
     const int surface_samples = opt.scheme == SPIA_SCHEME_CATMULL_CLARK;
     if (surface_samples) {
         r = spia__osd_surface_stencils(cage, &adj, &surface_opt, fo.samples_per_edge, &b.M, status);
@@ -536,9 +536,19 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         for (int32_t v = 0; v < n; ++v)
             for (int c = 0; c < 3; ++c) {
                 const int64_t i = 3 * (int64_t)v + c;
-                const int keep = adj.first[v + 1] == adj.first[v] || dist[v] > cutoff_abs || edge[v];
+                const int keep = adj.first[v + 1] == adj.first[v] || dist[v] > cutoff_abs ||
+                                 (edge[v] && dist[v] > 0.1 * cutoff_abs);
                 b.targets[i] = keep ? (float)Y[i] : closest[i];
             }
+        if (!surface_samples) { /* Loop, Doo-Sabin: the limit points are what is measured */
+            float *scratch = malloc(sizeof(float) * (size_t)(n + 1));
+            if (!scratch) {
+                free(Y), free(closest), free(dist), free(edge);
+                goto oom;
+            }
+            report->before = distance_stats(dist, n, cutoff_abs, diagonal, scratch);
+            free(scratch);
+        }
         free(Y), free(closest), free(dist), free(edge);
         spia_report rep;
         memset(&rep, 0, sizeof rep);
@@ -623,8 +633,23 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
                 }
             }
         }
-    } else if (report->vertex_distances) {
-        memset(report->vertex_distances, 0, sizeof(float) * (size_t)n);
+    } else if (b.L) { /* the limit points of the cage written */
+        double *Y = malloc(sizeof(double) * (size_t)N3);
+        float *dist = malloc(sizeof(float) * (size_t)(n + 1)), *scratch = malloc(sizeof(float) * (size_t)(n + 1));
+        if (!Y || !dist || !scratch) {
+            free(Y), free(dist), free(scratch);
+            goto oom;
+        }
+        t0 = spia__now();
+        spia_stencils_apply(b.L, b.best, Y);
+        spia__scan_closest_points_double(scan, n, Y, NULL, NULL, dist, NULL, NULL);
+        report->query_seconds += spia__now() - t0;
+        report->after = distance_stats(dist, n, cutoff_abs, diagonal, scratch);
+        report->sample_count = n;
+        if (report->vertex_distances)
+            for (int32_t v = 0; v < n; ++v)
+                report->vertex_distances[v] = dist[v] <= cutoff_abs ? (float)(dist[v] / (diagonal > 0.0 ? diagonal : 1.0)) : 0.0f;
+        free(Y), free(dist), free(scratch);
     }
     for (int64_t i = 0; i < N3; ++i) cage_out[i] = (float)b.best[i];
     if (r >= 0 && fo.mode == SPIA_FIT_SURFACE) r = SPIA_OK;

@@ -245,3 +245,7 @@ def test_vertex_fit_for_loop_cages(native, sphere_scan):
     limit = native.limit_stencils(native.Mesh(out, cage.face_sizes, cage.face_vertices), scheme="LOOP").apply(out)
     _, _, dist, _ = sphere_scan.closest_points(limit)
     assert dist.max() / sphere_scan.diagonal < 1e-5
+    # without surface samples the limit points are what the report measures
+    assert rep.sample_count == cage.vertex_count
+    assert rep.before.mean > 1e-3 and rep.after.max == pytest.approx(dist.max() / sphere_scan.diagonal, abs=1e-7)
+    assert rep.vertex_distances.max() == pytest.approx(rep.after.max, abs=1e-7)
