@@ -657,7 +657,7 @@ class FitReport:
 
 
 def fit(cage, scan, mode="SURFACE", samples_per_edge=4, cutoff=0.02, smoothing=1e-5, point_weight=1e-3,
-        max_rounds=16, round_tolerance=0.005, solver_iterations=30, **options):
+        max_rounds=16, round_tolerance=0.01, solver_iterations=20, **options):
     """Moves the vertices of ``cage`` (a :class:`Mesh`) so that its limit
     surface lies on ``scan`` (a :class:`Scan`).  mode 'SURFACE' fits the
     whole surface (Catmull-Clark); 'VERTICES' interpolates the closest scan

@@ -26,16 +26,9 @@ import bench_fit  # noqa: E402
 import fit_cases  # noqa: E402
 
 
-def fitted_stand_in(cage_obj, scan_obj):
-    # THE SLOT TO FILL: the fitted surface.  Until the fit operator exists
-    # this shows the baseline again; replace the body by the fit method
-    # (the 'SURFACE' entry of bench_fit.METHODS) and rename the panel.
-    return bench_fit.shrinkwrap_subdivision(cage_obj, scan_obj)
-
-
 PANELS = [
     ("shrinkwrap + subdivision", bench_fit.shrinkwrap_subdivision),
-    ("fitted (stand-in: shrinkwrap + subdivision)", fitted_stand_in),
+    ("fitted (fit SURFACE)", bench_fit.METHODS[-1][1]),
 ]
 
 # Colour scale stops (linear RGB) from 0 to 1 of the scale.

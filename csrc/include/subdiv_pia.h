@@ -457,7 +457,7 @@ typedef struct spia_fit_options {
     /* A sample (or, for VERTICES, a limit point) whose closest scan point is
      * farther than cutoff * scan diagonal is over a hole or off the scan: it
      * does not pull.  Nor does one whose closest point is on the scan's
-     * boundary farther than a tenth of the cut-off (over a hole).  [0.02] */
+     * boundary (over a hole, however near its rim).  [0.02] */
     double cutoff;
     /* Fairness: weight of |Laplacian(cage - initial cage)|^2 per cage vertex
      * against the squared distances of the samples, per sample.  Keeps the
@@ -471,9 +471,9 @@ typedef struct spia_fit_options {
     double point_weight;
     int32_t max_rounds;        /* projection + least-squares rounds [16]                             */
     /* Stop after two rounds in a row that lowered the best mean distance by
-     * less than this fraction (the cage written is the best one seen). [0.005] */
+     * less than this fraction (the cage written is the best one seen). [0.01] */
     double round_tolerance;
-    int32_t solver_iterations; /* conjugate gradient steps per round [30]                            */
+    int32_t solver_iterations; /* conjugate gradient steps per round [20]                            */
 } spia_fit_options;
 
 typedef struct spia_fit_distances {

@@ -41,8 +41,8 @@ static spia_result resolve_fit(const spia_fit_options *in, spia_fit_options *out
     if (o.smoothing == 0.0) o.smoothing = 1e-5;
     if (o.point_weight == 0.0) o.point_weight = 1e-3;
     if (o.max_rounds == 0) o.max_rounds = 16;
-    if (o.round_tolerance == 0.0) o.round_tolerance = 0.005;
-    if (o.solver_iterations == 0) o.solver_iterations = 30;
+    if (o.round_tolerance == 0.0) o.round_tolerance = 0.01;
+    if (o.solver_iterations == 0) o.solver_iterations = 20;
     if (!(o.cutoff > 0.0) || !isfinite(o.cutoff))
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "cutoff must be a positive number");
     if (!isfinite(o.smoothing) || !isfinite(o.point_weight) || !isfinite(o.round_tolerance) ||
@@ -89,9 +89,14 @@ spia_result spia_surface_stencils_create(const spia_mesh *mesh, const spia_optio
 
 /* ---- sparse products ---------------------------------------------------- */
 
+/* The least-squares kernels run on one thread: they are a millisecond or two
+ * each, and OpenMP's barriers between so many short loops cost more than
+ * they save whenever the cores are shared (ten times slower measured on a
+ * busy 2-core machine).  The closest-point queries, the bulk of a round,
+ * run on every core (scan.c). */
+
 /* y = M x, 3 doubles per point. */
 static void rows_apply(const spia_stencils *M, const double *x, double *y) {
-#pragma omp parallel for schedule(static)
     for (int32_t r = 0; r < M->rows; ++r) spia__row_product(M, r, x, y + 3 * (int64_t)r);
 }
 
@@ -164,13 +169,13 @@ static double mean_within(const float *d, int64_t count, double cutoff_abs) {
 }
 
 /* Sample weights: 1 within the cut-off, else 0; and 0 where the closest
- * point is on the scan's boundary more than a tenth of the cut-off away.
- * Such a sample lies beyond the scan's edge, over a hole: pulled, it drags
- * the surface onto the rim (or, pulled along the normal only, flattens it
- * into the rim's tangent plane), where smoothness fills the hole better.
- * Nearer the rim (a hole of a few missing triangles) it still pulls. */
+ * point is on the scan's boundary.  Such a sample lies beyond the scan's
+ * edge, over a hole: pulled, it drags the surface onto the rim (or, pulled
+ * along the normal only, flattens it into the rim's tangent plane; pulled
+ * only within a tenth of the cut-off of the rim, it draws a crease around
+ * every hole), where smoothness fills the hole better. */
 static void cutoff_weights(const float *d, const uint8_t *on_boundary, int64_t count, double cutoff_abs, float *w) {
-    for (int64_t i = 0; i < count; ++i) w[i] = d[i] <= cutoff_abs && (!on_boundary[i] || d[i] <= 0.1 * cutoff_abs) ? 1.0f : 0.0f;
+    for (int64_t i = 0; i < count; ++i) w[i] = d[i] <= cutoff_abs && !on_boundary[i] ? 1.0f : 0.0f;
 }
 
 /* Conjugate gradients stop early only when the residual has fallen this far:
@@ -210,7 +215,6 @@ static inline void apply_b(const fit_system *f, int64_t s, const double u[3], do
 }
 
 static void laplacian(const fit_system *f, const double *x, double *y) {
-#pragma omp parallel for schedule(static)
     for (int32_t v = 0; v < f->n; ++v) {
         const int64_t a = f->nb_start[v], b = f->nb_start[v + 1];
         double *out = y + 3 * (int64_t)v;
@@ -227,7 +231,6 @@ static void laplacian(const fit_system *f, const double *x, double *y) {
 
 /* z += scale * Lap^T y (the neighbour relation is symmetric). */
 static void laplacian_transpose_add(const fit_system *f, const double *y, double scale, double *z) {
-#pragma omp parallel for schedule(static)
     for (int32_t v = 0; v < f->n; ++v) {
         const int64_t a = f->nb_start[v], b = f->nb_start[v + 1];
         if (a == b) continue;
@@ -244,7 +247,6 @@ static void laplacian_transpose_add(const fit_system *f, const double *y, double
 /* out = M^T g for per-sample vectors g. */
 static void gather(const fit_system *f, const double *g, double *out) {
     const spia_stencils *T = f->Mt;
-#pragma omp parallel for schedule(static)
     for (int32_t v = 0; v < f->n; ++v) spia__row_product(T, v, g, out + 3 * (int64_t)v);
 }
 
@@ -252,7 +254,6 @@ static void gather(const fit_system *f, const double *g, double *out) {
 static void system_apply(const fit_system *f, const double *x, double *y) {
     double *t = f->tmp_s;
     rows_apply(f->M, x, t);
-#pragma omp parallel for schedule(static)
     for (int64_t s = 0; s < f->S; ++s) {
         double u[3] = {t[3 * s], t[3 * s + 1], t[3 * s + 2]};
         apply_b(f, s, u, t + 3 * s);
@@ -297,7 +298,6 @@ static int least_squares_round(fit_system *f, const float *T, const double *V0, 
     /* b = M^T B T + lambda Lap^T Lap V0 + damping V (the damping anchors the
      * current iterate, so it does not bias the fit). */
     double *t = f->tmp_s;
-#pragma omp parallel for schedule(static)
     for (int64_t s = 0; s < f->S; ++s) {
         const double u[3] = {T[3 * s], T[3 * s + 1], T[3 * s + 2]};
         apply_b(f, s, u, t + 3 * s);
@@ -311,7 +311,6 @@ static int least_squares_round(fit_system *f, const float *T, const double *V0, 
 
     /* Block-Jacobi preconditioner: sum_s m_si^2 B_s + lambda (Lap^T Lap)_ii + damping. */
     const spia_stencils *Mt = f->Mt;
-#pragma omp parallel for schedule(static)
     for (int32_t v = 0; v < f->n; ++v) {
         double a[6] = {0, 0, 0, 0, 0, 0};
         for (int64_t k = Mt->offsets[v]; k < Mt->offsets[v + 1]; ++k) {
@@ -381,7 +380,9 @@ static int least_squares_round(fit_system *f, const float *T, const double *V0, 
 
 typedef struct fit_buffers {
     spia_stencils *M, *Mt, *L;
-    double *V0, *V, *best, *X, *work, *precond, *tmp_s, *tmp_n;
+    double *V0, *V, *best, *X, *X_prev, *work, *precond, *tmp_s, *tmp_n;
+    float *radius;
+    int evaluated;
     float *T, *N, *d, *scratch, *targets, *solved, *wts;
     uint8_t *on_boundary;
     int64_t *nb_start;
@@ -394,7 +395,7 @@ static void buffers_free(fit_buffers *b) {
     spia_stencils_free(b->M);
     spia_stencils_free(b->Mt);
     spia_stencils_free(b->L);
-    free(b->V0), free(b->V), free(b->best), free(b->X), free(b->work), free(b->precond), free(b->tmp_s);
+    free(b->V0), free(b->V), free(b->best), free(b->X), free(b->X_prev), free(b->radius), free(b->work), free(b->precond), free(b->tmp_s);
     free(b->tmp_n), free(b->T), free(b->N), free(b->d), free(b->scratch), free(b->targets), free(b->solved);
     free(b->wts), free(b->on_boundary);
     free(b->nb_start), free(b->nb), free(b->free_vertex), free(b->sample_face);
@@ -435,10 +436,24 @@ static spia_result build_sample_faces(const spia_mesh *mesh, int32_t per_edge, i
     return s == S ? SPIA_OK : SPIA_ERROR_INTERNAL;
 }
 
-static void evaluate(const spia_scan *scan, const fit_buffers *b, const double *V, int64_t S, double *query_seconds) {
+/* Samples of the cage V and their closest points.  After the first call,
+ * each search starts from the bound "previous distance + how far the sample
+ * moved", which prunes most of the scan's hierarchy. */
+static void evaluate(const spia_scan *scan, fit_buffers *b, const double *V, int64_t S, double diagonal,
+                     double *query_seconds) {
     const double t0 = spia__now();
+    if (b->evaluated) memcpy(b->X_prev, b->X, sizeof(double) * 3 * (size_t)S);
     rows_apply(b->M, V, b->X);
-    spia__scan_closest_points_double(scan, S, b->X, b->T, b->N, b->d, NULL, b->on_boundary);
+    if (b->evaluated)
+        for (int64_t s = 0; s < S; ++s) {
+            const double *x = b->X + 3 * s, *y = b->X_prev + 3 * s;
+            const double moved = sqrt((x[0] - y[0]) * (x[0] - y[0]) + (x[1] - y[1]) * (x[1] - y[1]) +
+                                      (x[2] - y[2]) * (x[2] - y[2]));
+            b->radius[s] = (float)((b->d[s] + moved) * (1.0 + 1e-5) + 1e-7 * diagonal);
+        }
+    spia__scan_closest_points_double(scan, S, b->X, b->evaluated ? b->radius : NULL, b->T, b->N, b->d, NULL,
+                                     b->on_boundary);
+    b->evaluated = 1;
     *query_seconds += spia__now() - t0;
 }
 
@@ -509,9 +524,12 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         b.d = malloc(sizeof(float) * (size_t)S);
         b.scratch = malloc(sizeof(float) * (size_t)S);
         b.on_boundary = malloc((size_t)S);
-        if (!b.X || !b.tmp_s || !b.T || !b.N || !b.d || !b.scratch || !b.on_boundary) goto oom;
+        b.X_prev = malloc(sizeof(double) * 3 * (size_t)S);
+        b.radius = malloc(sizeof(float) * (size_t)S);
+        if (!b.X || !b.tmp_s || !b.T || !b.N || !b.d || !b.scratch || !b.on_boundary || !b.X_prev || !b.radius)
+            goto oom;
         if (build_sample_faces(cage, fo.samples_per_edge, S, &b) != SPIA_OK) goto oom;
-        evaluate(scan, &b, b.V, S, &report->query_seconds);
+        evaluate(scan, &b, b.V, S, diagonal, &report->query_seconds);
         report->before = distance_stats(b.d, S, cutoff_abs, diagonal, b.scratch);
     }
 
@@ -531,13 +549,12 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         }
         t0 = spia__now();
         spia_stencils_apply(b.L, b.V0, Y);
-        spia__scan_closest_points_double(scan, n, Y, closest, NULL, dist, NULL, edge);
+        spia__scan_closest_points_double(scan, n, Y, NULL, closest, NULL, dist, NULL, edge);
         report->query_seconds += spia__now() - t0;
         for (int32_t v = 0; v < n; ++v)
             for (int c = 0; c < 3; ++c) {
                 const int64_t i = 3 * (int64_t)v + c;
-                const int keep = adj.first[v + 1] == adj.first[v] || dist[v] > cutoff_abs ||
-                                 (edge[v] && dist[v] > 0.1 * cutoff_abs);
+                const int keep = adj.first[v + 1] == adj.first[v] || dist[v] > cutoff_abs || edge[v];
                 b.targets[i] = keep ? (float)Y[i] : closest[i];
             }
         if (!surface_samples) { /* Loop, Doo-Sabin: the limit points are what is measured */
@@ -591,7 +608,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
             cutoff_weights(b.d, b.on_boundary, S, cutoff_abs, b.wts);
             report->iterations += least_squares_round(&f, b.T, b.V0, b.V, fo.solver_iterations, CG_TOLERANCE, b.work, b.precond);
             report->solve_seconds += spia__now() - t0;
-            evaluate(scan, &b, b.V, S, &report->query_seconds);
+            evaluate(scan, &b, b.V, S, diagonal, &report->query_seconds);
             const double mean = mean_within(b.d, S, cutoff_abs);
             report->rounds = round;
             if (report->history && round < report->history_capacity) {
@@ -617,7 +634,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
 
     /* Distances of the cage written. */
     if (S > 0) {
-        evaluate(scan, &b, b.best, S, &report->query_seconds);
+        evaluate(scan, &b, b.best, S, diagonal, &report->query_seconds);
         report->after = distance_stats(b.d, S, cutoff_abs, diagonal, b.scratch);
         if (report->vertex_distances) {
             float *vd = report->vertex_distances;
@@ -642,7 +659,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         }
         t0 = spia__now();
         spia_stencils_apply(b.L, b.best, Y);
-        spia__scan_closest_points_double(scan, n, Y, NULL, NULL, dist, NULL, NULL);
+        spia__scan_closest_points_double(scan, n, Y, NULL, NULL, NULL, dist, NULL, NULL);
         report->query_seconds += spia__now() - t0;
         report->after = distance_stats(dist, n, cutoff_abs, diagonal, scratch);
         report->sample_count = n;

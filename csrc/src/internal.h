@@ -138,9 +138,12 @@ spia_result spia__require_triangles(const spia_mesh *mesh, spia_status *status);
 spia_result spia__osd_surface_stencils(const spia_mesh *mesh, const spia_adjacency *adj, const spia_options *options,
                                        int32_t samples_per_edge, spia_stencils **out, spia_status *status);
 
-/* Closest points for points in double (scan.c); no argument checks. */
-void spia__scan_closest_points_double(const spia_scan *scan, int64_t count, const double *points, float *closest,
-                                      float *normals, float *distances, int32_t *faces, uint8_t *on_boundary);
+/* Closest points for points in double (scan.c); no argument checks.  radius,
+ * when not NULL, bounds each point's distance from above (a search hint;
+ * a bound that proves too small falls back to a full search). */
+void spia__scan_closest_points_double(const spia_scan *scan, int64_t count, const double *points, const float *radius,
+                                      float *closest, float *normals, float *distances, int32_t *faces,
+                                      uint8_t *on_boundary);
 
 #ifdef __cplusplus
 }

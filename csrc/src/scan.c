@@ -350,8 +350,8 @@ static int on_scan_boundary(unsigned char bits, const double bary[3]) {
     return 0;
 }
 
-static void closest_one(const spia_scan *s, const double p[3], int64_t i, float *closest, float *normals,
-                        float *distances, int32_t *faces, uint8_t *on_boundary) {
+static void closest_one(const spia_scan *s, const double p[3], float radius, int64_t i, float *closest,
+                        float *normals, float *distances, int32_t *faces, uint8_t *on_boundary) {
     query_state q;
     q.scan = s;
     memcpy(q.p, p, sizeof q.p);
@@ -362,10 +362,15 @@ static void closest_one(const spia_scan *s, const double p[3], int64_t i, float 
     query.y = (float)p[1];
     query.z = (float)p[2];
     query.time = 0.0f;
-    query.radius = INFINITY;
+    query.radius = radius;
     struct RTCPointQueryContext context;
     rtcInitPointQueryContext(&context);
     rtcPointQuery(s->scene, &query, &context, query_triangle, &q);
+    if (q.best_tri < 0 && radius < INFINITY) { /* the hint was too tight: search everything */
+        query.radius = INFINITY;
+        rtcInitPointQueryContext(&context);
+        rtcPointQuery(s->scene, &query, &context, query_triangle, &q);
+    }
     if (q.best_tri < 0) { /* cannot happen with a non-empty scene; be safe */
         q.best_tri = 0;
         const int32_t *tri = s->triangles;
@@ -399,11 +404,13 @@ static void closest_one(const spia_scan *s, const double p[3], int64_t i, float 
     }
 }
 
-void spia__scan_closest_points_double(const spia_scan *s, int64_t count, const double *points, float *closest,
-                                      float *normals, float *distances, int32_t *faces, uint8_t *on_boundary) {
+void spia__scan_closest_points_double(const spia_scan *s, int64_t count, const double *points, const float *radius,
+                                      float *closest, float *normals, float *distances, int32_t *faces,
+                                      uint8_t *on_boundary) {
 #pragma omp parallel for schedule(dynamic, 256)
     for (int64_t i = 0; i < count; ++i)
-        closest_one(s, points + 3 * i, i, closest, normals, distances, faces, on_boundary);
+        closest_one(s, points + 3 * i, radius ? radius[i] : INFINITY, i, closest, normals, distances, faces,
+                    on_boundary);
 }
 
 spia_result spia_scan_closest_points(const spia_scan *scan, int64_t count, const float *points, float *closest,
@@ -419,7 +426,7 @@ spia_result spia_scan_closest_points(const spia_scan *scan, int64_t count, const
 #pragma omp parallel for schedule(dynamic, 256)
     for (int64_t i = 0; i < count; ++i) {
         const double p[3] = {points[3 * i], points[3 * i + 1], points[3 * i + 2]};
-        closest_one(scan, p, i, closest, normals, distances, faces, on_boundary);
+        closest_one(scan, p, INFINITY, i, closest, normals, distances, faces, on_boundary);
     }
     spia__ok(status);
     return SPIA_OK;
