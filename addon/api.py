@@ -39,7 +39,7 @@ DEFAULT_SETTINGS = {
     "boundary_rule": 'SMOOTH',
     "triangulate": False,
     "staged": False,
-    "levels": 2,
+    "levels": 1,  # as a new Subdivision Surface modifier: Levels Viewport 1, Render 2
     "render_levels": 2,
     "quality": 3,
     "boundary_smooth": 'ALL',

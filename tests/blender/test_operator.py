@@ -191,7 +191,8 @@ def test_menu_and_panel_registered():
     assert hasattr(bpy.types, "DATA_PT_subdiv_pia")
     assert bpy.types.DATA_PT_subdiv_pia.bl_context == "modifier"
     settings = bpy.context.scene.subdiv_pia
-    assert settings.levels == 2 and settings.quality == 3
+    # the defaults of a new Subdivision Surface modifier
+    assert settings.levels == 1 and settings.render_levels == 2 and settings.quality == 3
     assert math.isclose(settings.tolerance, 1e-6, rel_tol=1e-6)
 
 
