@@ -52,6 +52,8 @@ bench: build bench-scale
 	$(PYTHON) bench/bench_loop_papers.py
 	$(PYTHON) bench/bench_doosabin.py
 	$(BLENDER_RUN) --python bench/bench_fit.py
+	$(BLENDER_RUN) --python bench/render_fit.py -- --case bunny --scale 2e-3
+	$(BLENDER_RUN) --python bench/render_fit.py -- --case dragon --scale 2e-3
 
 # Speed and scale (bench/bench_scale.py; BENCH_QUICK=1 for a short subset).  The
 # OpenSubdiv helper is built in its own tree, with -DSPIA_BENCH=ON.
