@@ -825,22 +825,15 @@ def format_fit_report(report, target_name):
         line += ", %d round%s" % (report.rounds, "" if report.rounds == 1 else "s")
     else:
         line += ", %d iterations" % report.iterations
-    if report.sample_count and a.ignored >= report.sample_count:
-        line += ("; every sample is farther from the scan than the cut-off, so nothing was fitted: "
-                 "raise Cut-off")
-    elif a.ignored:
+    if a.ignored:
         line += "; %d of %d samples beyond the cut-off ignored" % (a.ignored, report.sample_count)
     if report.status != 'CONVERGED':
-        line += " (interpolation %s: %s)" % (report.status.lower().replace("_", " "), report.message)
+        line += " (%s: %s)" % (report.status.lower().replace("_", " "), report.message)
     return line
 
 
 def report_converged(report):
-    """True unless an interpolation (or a Vertices fit's) stopped short of its
-    tolerance, or a fit found no sample within its cut-off."""
-    if isinstance(report, native.FitReport) and report.sample_count \
-            and report.after.ignored >= report.sample_count:
-        return False
+    """True unless an interpolation or a fit stopped short of its tolerance."""
     return report.status == 'CONVERGED'
 
 

@@ -513,11 +513,15 @@ typedef struct spia_fit_report {
  * `options` gives the subdivision settings (scheme, quality, creases,
  * boundary) and, for VERTICES, the solver settings; its progress callback
  * is called after every round with the round and the mean relative
- * distance, and cancels as elsewhere.  `cage_out` (vertex_count * 3 floats)
- * is written on success and on SPIA_MAX_ITERATIONS / SPIA_STAGNATED from
- * the VERTICES solve; untouched on failure.  It may alias cage->positions
- * only if the caller accepts that a failure leaves it untouched.  Vertices
- * no face uses keep their positions.
+ * distance, and cancels as elsewhere.
+ *
+ * Returns SPIA_OK; or SPIA_MAX_ITERATIONS when SURFACE used max_rounds with
+ * the distances still falling, or the VERTICES solve stopped short of its
+ * tolerance (SPIA_STAGNATED likewise): the cage written is usable then.
+ * Fails with SPIA_ERROR_INVALID_ARGUMENT when no sample (no limit point) is
+ * within the cut-off: the cage does not lie on the scan.  `cage_out`
+ * (vertex_count * 3 floats) is written unless the call fails.  It may alias
+ * cage->positions.  Vertices no face uses keep their positions.
  */
 SPIA_API spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_options *options,
                               const spia_fit_options *fit, float *cage_out, spia_fit_report *report,

@@ -677,8 +677,12 @@ spia_result surface(const spia_mesh *m, const spia_adjacency *adj, const spia_op
     const int ptex_count = ptex.GetNumFaces();
     const int per_face = per_edge * per_edge;
     const int64_t rows = (int64_t)ptex_count * per_face;
-    if (rows > INT32_MAX)
-        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "%lld samples are too many", (long long)rows);
+    // OpenSubdiv indexes the weights with int: at up to 64 weights a sample
+    // (more than Catmull-Clark patches need), this many samples stay safe.
+    if (rows > INT32_MAX / 64)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1,
+                          "%lld samples are too many (at most %d): lower samples_per_edge", (long long)rows,
+                          INT32_MAX / 64);
     std::vector<double> grid_s((size_t)per_face), grid_t((size_t)per_face);
     for (int j = 0; j < per_edge; ++j)
         for (int i = 0; i < per_edge; ++i) {

@@ -160,6 +160,15 @@ static spia_fit_distances distance_stats(const float *d, int64_t count, double c
     return s;
 }
 
+/* The mean with every sample beyond the cut-off counted at the cut-off: what
+ * picks the best cage, so that a round that pushes samples off the scan
+ * never looks like a gain. */
+static double mean_clamped(const float *d, int64_t count, double cutoff_abs) {
+    double sum = 0.0;
+    for (int64_t i = 0; i < count; ++i) sum += d[i] <= cutoff_abs ? d[i] : cutoff_abs;
+    return count ? sum / (double)count : 0.0;
+}
+
 static double mean_within(const float *d, int64_t count, double cutoff_abs) {
     double sum = 0.0;
     int64_t n = 0;
@@ -439,6 +448,13 @@ static spia_result build_sample_faces(const spia_mesh *mesh, int32_t per_edge, i
 /* Samples of the cage V and their closest points.  After the first call,
  * each search starts from the bound "previous distance + how far the sample
  * moved", which prunes most of the scan's hierarchy. */
+static spia_result nothing_to_fit(spia_status *status, const char *what, double cutoff) {
+    return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1,
+                      "no %s lies within the cut-off (%g of the scan's diagonal) of the scan, so there is "
+                      "nothing to fit: check that the cage lies on the scan, or raise the cut-off",
+                      what, cutoff);
+}
+
 static void evaluate(const spia_scan *scan, fit_buffers *b, const double *V, int64_t S, double diagonal,
                      double *query_seconds) {
     const double t0 = spia__now();
@@ -465,10 +481,15 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         memset(&local, 0, sizeof local);
         report = &local;
     }
+    {   /* every field but the caller's buffers starts afresh */
+        spia_fit_report fresh;
+        memset(&fresh, 0, sizeof fresh);
+        fresh.vertex_distances = report->vertex_distances;
+        fresh.history = report->history;
+        fresh.history_capacity = report->history_capacity;
+        *report = fresh;
+    }
     report->result = SPIA_ERROR_INVALID_ARGUMENT;
-    report->rounds = 0;
-    report->iterations = 0;
-    report->history_count = 0;
     if (!scan) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "the scan must not be NULL");
     if (!cage_out) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "cage_out must not be NULL");
     spia_options opt;
@@ -528,9 +549,17 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         b.radius = malloc(sizeof(float) * (size_t)S);
         if (!b.X || !b.tmp_s || !b.T || !b.N || !b.d || !b.scratch || !b.on_boundary || !b.X_prev || !b.radius)
             goto oom;
-        if (build_sample_faces(cage, fo.samples_per_edge, S, &b) != SPIA_OK) goto oom;
+        if ((r = build_sample_faces(cage, fo.samples_per_edge, S, &b)) != SPIA_OK) {
+            if (r == SPIA_ERROR_OUT_OF_MEMORY) goto oom;
+            r = spia__fail(status, SPIA_ERROR_INTERNAL, -1, "the samples do not match the cage's faces");
+            goto done;
+        }
         evaluate(scan, &b, b.V, S, diagonal, &report->query_seconds);
         report->before = distance_stats(b.d, S, cutoff_abs, diagonal, b.scratch);
+        if (report->before.ignored >= S) {
+            r = nothing_to_fit(status, "sample of the cage's limit surface", fo.cutoff);
+            goto done;
+        }
     }
 
     if (fo.mode == SPIA_FIT_VERTICES) {
@@ -551,12 +580,20 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         spia_stencils_apply(b.L, b.V0, Y);
         spia__scan_closest_points_double(scan, n, Y, NULL, closest, NULL, dist, NULL, edge);
         report->query_seconds += spia__now() - t0;
-        for (int32_t v = 0; v < n; ++v)
+        int32_t pulled = 0;
+        for (int32_t v = 0; v < n; ++v) {
+            const int keep = adj.first[v + 1] == adj.first[v] || dist[v] > cutoff_abs || edge[v];
+            pulled += !keep;
             for (int c = 0; c < 3; ++c) {
                 const int64_t i = 3 * (int64_t)v + c;
-                const int keep = adj.first[v + 1] == adj.first[v] || dist[v] > cutoff_abs || edge[v];
                 b.targets[i] = keep ? (float)Y[i] : closest[i];
             }
+        }
+        if (!pulled) {
+            free(Y), free(closest), free(dist), free(edge);
+            r = nothing_to_fit(status, "limit point of the cage", fo.cutoff);
+            goto done;
+        }
         if (!surface_samples) { /* Loop, Doo-Sabin: the limit points are what is measured */
             float *scratch = malloc(sizeof(float) * (size_t)(n + 1));
             if (!scratch) {
@@ -575,7 +612,13 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         report->iterations = rep.iterations;
         report->max_error_relative = rep.max_error_relative;
         if (r < 0) goto done;
-        for (int64_t i = 0; i < N3; ++i) b.best[i] = b.solved[i];
+        /* Vertices no face uses stay where they are (the solve keeps their
+         * limit points, which loose edges tie to moving vertices). */
+        for (int32_t v = 0; v < n; ++v)
+            for (int c = 0; c < 3; ++c) {
+                const int64_t i = 3 * (int64_t)v + c;
+                b.best[i] = adj.first[v + 1] > adj.first[v] ? (double)b.solved[i] : b.V0[i];
+            }
         report->rounds = 1;
     } else {
         b.Mt = transpose(b.M, n);
@@ -597,12 +640,12 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         f.damping = 1e-6 * (1.0 + f.lambda) * (double)S / (double)(free_count > 0 ? free_count : 1);
         f.nb_start = b.nb_start, f.nb = b.nb, f.free_vertex = b.free_vertex;
         f.tmp_s = b.tmp_s, f.tmp_n = b.tmp_n;
-        double best_mean = mean_within(b.d, S, cutoff_abs);
+        double best_score = mean_clamped(b.d, S, cutoff_abs);
         if (report->history && report->history_capacity > 0) {
-            report->history[0] = best_mean / (diagonal > 0.0 ? diagonal : 1.0);
+            report->history[0] = mean_within(b.d, S, cutoff_abs) / (diagonal > 0.0 ? diagonal : 1.0);
             report->history_count = 1;
         }
-        int stale = 0;
+        int stale = 0, settled = 0;
         for (int round = 1; round <= fo.max_rounds; ++round) {
             t0 = spia__now();
             cutoff_weights(b.d, b.on_boundary, S, cutoff_abs, b.wts);
@@ -622,13 +665,24 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
             /* The distances do not fall monotonically (new closest points,
              * new planes): keep the best cage, and stop after two rounds in
              * a row that improved it by less than round_tolerance. */
-            const double gain = (best_mean - mean) / best_mean;
-            if (mean < best_mean) {
-                best_mean = mean;
+            const double score = mean_clamped(b.d, S, cutoff_abs);
+            const double gain = best_score > 0.0 ? (best_score - score) / best_score : 0.0;
+            if (score < best_score) {
+                best_score = score;
                 memcpy(b.best, b.V, sizeof(double) * (size_t)N3);
             }
             stale = gain < fo.round_tolerance ? stale + 1 : 0;
-            if (stale >= 2) break;
+            if (stale >= 2) {
+                settled = 1;
+                break;
+            }
+        }
+        if (!settled && fo.max_rounds > 0) {
+            r = SPIA_MAX_ITERATIONS;
+            spia__fail(status, SPIA_MAX_ITERATIONS, -1,
+                       "stopped after max_rounds (%d) rounds with the distances still falling by more than "
+                       "round_tolerance; the best cage so far is written",
+                       fo.max_rounds);
         }
     }
 
@@ -669,7 +723,6 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         free(Y), free(dist), free(scratch);
     }
     for (int64_t i = 0; i < N3; ++i) cage_out[i] = (float)b.best[i];
-    if (r >= 0 && fo.mode == SPIA_FIT_SURFACE) r = SPIA_OK;
     if (r == SPIA_OK) spia__ok(status);
     goto done;
 oom:

@@ -236,6 +236,36 @@ spia_result spia_scan_create(const spia_mesh *mesh, spia_scan **out, spia_status
     return SPIA_OK;
 }
 
+/* The closest point to p on segment ab, as the weight t of b. */
+static double closest_on_segment(const double p[3], const double a[3], const double b[3]) {
+    double ab[3], ap[3];
+    for (int i = 0; i < 3; ++i) ab[i] = b[i] - a[i], ap[i] = p[i] - a[i];
+    const double len2 = ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2];
+    if (!(len2 > 0.0)) return 0.0;
+    const double t = (ab[0] * ap[0] + ab[1] * ap[1] + ab[2] * ap[2]) / len2;
+    return t < 0.0 ? 0.0 : (t > 1.0 ? 1.0 : t);
+}
+
+/* A triangle without area (two corners at one place, or in a line: an
+ * unwelded or collapsed scan) is the union of its edges: the nearest point
+ * of the three segments. */
+static void closest_on_flat_triangle(const double p[3], const double *v[3], double bary[3]) {
+    double best = INFINITY;
+    for (int k = 0; k < 3; ++k) {
+        const int k1 = (k + 1) % 3;
+        const double t = closest_on_segment(p, v[k], v[k1]);
+        double d2 = 0.0;
+        for (int i = 0; i < 3; ++i) {
+            const double x = (1.0 - t) * v[k][i] + t * v[k1][i] - p[i];
+            d2 += x * x;
+        }
+        if (d2 < best) {
+            best = d2;
+            bary[k] = 1.0 - t, bary[k1] = t, bary[(k + 2) % 3] = 0.0;
+        }
+    }
+}
+
 /* The closest point to p on triangle (a, b, c), as barycentric weights
  * (u, v, w) of a, b, c; by the Voronoi regions of vertices, edges and face. */
 static void closest_on_triangle(const double p[3], const double a[3], const double b[3], const double c[3],
@@ -247,6 +277,15 @@ static void closest_on_triangle(const double p[3], const double a[3], const doub
         ap[i] = p[i] - a[i];
     }
 #define DOT(x, y) ((x)[0] * (y)[0] + (x)[1] * (y)[1] + (x)[2] * (y)[2])
+    {
+        const double n[3] = {ab[1] * ac[2] - ab[2] * ac[1], ab[2] * ac[0] - ab[0] * ac[2],
+                             ab[0] * ac[1] - ab[1] * ac[0]};
+        if (!(DOT(n, n) > 1e-24 * DOT(ab, ab) * DOT(ac, ac))) {
+            const double *v[3] = {a, b, c};
+            closest_on_flat_triangle(p, v, bary);
+            return;
+        }
+    }
     const double d1 = DOT(ab, ap), d2 = DOT(ac, ap);
     if (d1 <= 0.0 && d2 <= 0.0) {
         bary[0] = 1.0, bary[1] = 0.0, bary[2] = 0.0;
@@ -286,12 +325,6 @@ static void closest_on_triangle(const double p[3], const double a[3], const doub
         return;
     }
     const double denom = va + vb + vc;
-    if (!(denom > 0.0)) { /* a degenerate triangle: the nearest of its corners */
-        const double da = DOT(ap, ap), db = DOT(bp, bp), dc = DOT(cp, cp);
-        const int k = da <= db && da <= dc ? 0 : (db <= dc ? 1 : 2);
-        bary[0] = k == 0, bary[1] = k == 1, bary[2] = k == 2;
-        return;
-    }
     const double v = vb / denom, w = vc / denom;
     bary[0] = 1.0 - v - w, bary[1] = v, bary[2] = w;
 #undef DOT

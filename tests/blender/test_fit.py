@@ -392,10 +392,11 @@ def test_api_fit_progress_and_cancel():
     with pytest.raises(native.PiaCancelled):
         subdiv_pia.interpolate(cage, target=scan.name, progress=lambda r, d: True)
     assert (len(bpy.data.objects), len(bpy.data.meshes)) == count
-    # Every sample beyond the cut-off: said, not passed off as a fit.
-    _, far = subdiv_pia.interpolate(cage, target=scan, fit_cutoff=1e-6)
-    assert far.after.ignored == far.sample_count and not api.report_converged(far)
-    assert "nothing was fitted" in api.format_fit_report(far, scan.name)
+    # Every sample beyond the cut-off: refused with the reason, nothing made.
+    with pytest.raises(native.PiaError) as e:
+        subdiv_pia.interpolate(cage, target=scan, fit_cutoff=1e-6)
+    assert "nothing to fit" in str(e.value) and "cut-off" in str(e.value)
+    assert (len(bpy.data.objects), len(bpy.data.meshes)) == count
 
 
 def test_panel_passes_the_target():
@@ -407,7 +408,9 @@ def test_panel_passes_the_target():
     for name in ("target_object", "fit", "fit_cutoff", "fit_smoothing", "fit_samples"):
         assert ("prop", name) in log, name
     settings.target_object = scan
-    assert bpy.ops.object.subdiv_pia_interpolate(target=settings.target_object.name) == {'FINISHED'}
+    # a one-cut cube around the sphere is farther from it than the default cut-off
+    assert bpy.ops.object.subdiv_pia_interpolate(target=settings.target_object.name,
+                                                 fit_cutoff=0.2) == {'FINISHED'}
     labels = [text for kind, text in draw_panel() if kind == "label"]
     assert any(text.startswith("Surface fit to '%s'" % scan.name) for text in labels), labels
     assert any(text.startswith("Mean distance:") for text in labels), labels

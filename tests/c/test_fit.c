@@ -117,6 +117,25 @@ int main(void) {
         CHECK(!on_torus[0] && !on_torus[1] && !on_torus[2], "a closed scan has no boundary");
     }
 
+    /* A triangle with two corners at one place (an unwelded scan) is a
+     * segment: its closest point is still found. */
+    {
+        const float pos[] = {0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 0, 5, 1, 0, 5, 0, 1, 5};
+        const int32_t sizes[] = {3, 3}, fv[] = {0, 1, 2, 3, 4, 5};
+        spia_mesh dm;
+        memset(&dm, 0, sizeof dm);
+        dm.vertex_count = 6, dm.positions = pos, dm.face_count = 2, dm.face_sizes = sizes, dm.face_vertices = fv;
+        spia_scan *ds = NULL;
+        CHECK(spia_scan_create(&dm, &ds, &st) == SPIA_OK, "degenerate scan: %s", st.message);
+        const float q[3] = {0.5f, 1.0f, 0.0f};
+        float d = -1.0f, cl[3];
+        int32_t face = -1;
+        CHECK(spia_scan_closest_points(ds, 1, q, cl, NULL, &d, &face, NULL, &st) == SPIA_OK, "degenerate query");
+        CHECK(fabs(d - 1.0) < 1e-6 && face == 0 && fabs(cl[0] - 0.5) < 1e-6, "degenerate: distance %g on face %d", d,
+              face);
+        spia_scan_free(ds);
+    }
+
     tmesh coarse = make_torus(16, 8, 0);
     spia_mesh cm = tmesh_view(&coarse);
     const int32_t nv = coarse.nv;

@@ -204,7 +204,8 @@ def test_fit_is_independent_of_the_thread_count(native):
         "from subdiv_pia import native\n"
         "p, t = uv_sphere(120, 60); scan = native.Scan(native.Mesh.from_faces(p, t))\n"
         "cp, cf = quad_sphere(4); out, rep = native.fit(native.Mesh.from_faces(cp, cf), scan)\n"
-        "sys.stdout.write(out.tobytes().hex())\n" % (sys.path[:2] + [os.path.dirname(__file__)],))
+        "sys.stdout.write(out.tobytes().hex())\n"
+        % ([os.path.dirname(os.path.dirname(os.path.abspath(native.__file__))), os.path.dirname(__file__)],))
     outputs = []
     for threads in ("1", "2"):
         env = dict(os.environ, OMP_NUM_THREADS=threads)
@@ -214,7 +215,7 @@ def test_fit_is_independent_of_the_thread_count(native):
 
 
 def test_bad_input(native, sphere_scan):
-    cp, cf = quad_sphere(2)
+    cp, cf = quad_sphere(4)
     cage = native.Mesh.from_faces(cp, cf)
     with pytest.raises(native.PiaError) as e:
         native.Scan(native.Mesh(np.zeros((3, 3), np.float32), np.zeros(0, np.int32), np.zeros(0, np.int32)))
@@ -234,6 +235,12 @@ def test_bad_input(native, sphere_scan):
     assert e.value.code == "NONFINITE"
     with pytest.raises(native.PiaCancelled):
         native.fit(cage, sphere_scan, progress=lambda rnd, err: True)
+    # a cage nowhere near the scan: nothing to fit, said so, in both modes
+    far = native.Mesh.from_faces(cp + np.float32(5.0), cf)
+    for mode in ("SURFACE", "VERTICES"):
+        with pytest.raises(native.PiaError) as e:
+            native.fit(far, sphere_scan, mode=mode)
+        assert e.value.code == "INVALID_ARGUMENT" and "nothing to fit" in str(e.value)
 
 
 def test_vertex_fit_for_loop_cages(native, sphere_scan):
