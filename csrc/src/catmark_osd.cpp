@@ -292,16 +292,21 @@ spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_opti
     std::unique_ptr<Far::TopologyRefiner> &refiner = p.refiner;
 
 
-    // 5. Which vertices need Blender's adaptive patches.  Where the limit
-    //    point has a closed form (smooth interior and boundary vertices,
-    //    extraordinary or not, any face sizes, infinitely sharp creases and
-    //    corners of manifold meshes) Blender's patches reproduce it exactly,
-    //    and Bfr gives it at a fraction of the cost.  At semi-sharp features,
-    //    darts, non-manifold vertices and smooth valence-2 boundary corners
-    //    Blender's surface depends on the isolation level, so those
-    //    vertices go through the adaptive LimitStencilTableFactory, on their
-    //    neighbourhood only, as Blender builds it.  The test against the full
-    //    adaptive table (tests/c/test_reference.cpp) holds this to 1e-12.
+    // 5. How each vertex's row is computed.  Where the limit point has a
+    //    closed form (smooth interior and boundary vertices, extraordinary or
+    //    not, any face sizes, infinitely sharp creases and corners of
+    //    manifold meshes) Blender's patches reproduce it exactly, and Bfr
+    //    gives it at a fraction of the cost.  At semi-sharp features and
+    //    darts of manifold meshes Blender's surface depends on the isolation
+    //    level; there Bfr with its approximation levels (sharp and smooth)
+    //    set to `quality` builds the same patches as Blender's adaptive
+    //    refinement at that level, evaluated at the vertex's corner of its
+    //    first face as Blender does.  Non-manifold vertices and smooth
+    //    valence-2 boundary corners go through the adaptive
+    //    LimitStencilTableFactory, on their neighbourhood only, as Blender
+    //    builds it (Bfr does not reproduce those).  The test against the
+    //    full adaptive table (tests/c/test_reference.cpp, with random
+    //    creases on scans) holds all of this to 1e-12.
     const Far::TopologyLevel &base = refiner->GetLevel(0);
     std::vector<char> feature((size_t)osd_n, 0);
     std::vector<Far::Index> feature_faces;
@@ -327,6 +332,7 @@ spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_opti
     // some faces next to non-manifold vertices (seen on the Stanford dragon
     // scan).  The limit point of a smooth vertex is the same from every face.
     std::vector<int64_t> bfr_corner((size_t)osd_n, -1);
+    std::vector<char> approx((size_t)osd_n, 0);
     for (int32_t o = 0; o < osd_n; ++o) {
         const float vs = base.GetVertexSharpness(o);
         Far::ConstIndexArray ve = base.GetVertexEdges(o);
@@ -347,10 +353,17 @@ spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_opti
         // non-manifold vertex: Blender's patches there do not reproduce the
         // closed-form corner or crease masks (measured on the dragon scan,
         // up to 1.3e-4 of the diagonal at vertices with 7 to 12 faces).
-        bool adaptive = semi_sharp || infinitely_sharp == 1 || base.IsVertexNonManifold(o);
-        if (!adaptive && blender && opt->boundary_smooth == SPIA_BOUNDARY_SMOOTH_ALL && base.IsVertexBoundary(o) &&
-            ve.size() == 2)
-            adaptive = true;  // smooth corner: Blender is not at the limit
+        // Darts and semi-sharp vertices take Bfr at the isolation level
+        // (Catmull-Clark only: Loop is taken at its exact limit).
+        const bool dart = infinitely_sharp == 1;
+        const bool smooth_corner = blender && opt->boundary_smooth == SPIA_BOUNDARY_SMOOTH_ALL &&
+                                   base.IsVertexBoundary(o) && ve.size() == 2;
+        bool adaptive = base.IsVertexNonManifold(o);
+        if (smooth_corner) adaptive = true;  // Blender is not at the limit there
+        else if (!adaptive && (semi_sharp || dart)) {
+            if (blender) approx[o] = 1;
+            else adaptive = true;
+        }
         if (!adaptive) {
             const int32_t v = vertex_of[o];
             for (int64_t i = adj->first[v]; i < adj->first[v + 1] && bfr_corner[o] < 0; ++i) {
@@ -362,7 +375,9 @@ spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_opti
                 if (clean) bfr_corner[o] = c;
             }
             adaptive = bfr_corner[o] < 0;
+            if (approx[o] && bfr_corner[o] != adj->corner_of[adj->first[v]]) adaptive = true;
         }
+        if (adaptive) approx[o] = 0;
         if (adaptive) {
             feature[o] = 1;
             ++feature_count;
@@ -371,28 +386,34 @@ spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_opti
         }
     }
 
-    // 6. Smooth vertices: Bfr at the corner chosen above.
+    // 6. Bfr at the corner chosen above: closed-form vertices with the
+    //    default options, the others at the isolation level.
     {
         Bfr::RefinerSurfaceFactory<> factory(*refiner, Bfr::SurfaceFactory::Options());
-        Bfr::Surface<double> surface;
+        Bfr::SurfaceFactory::Options qopt;
+        qopt.SetApproxLevelSharp(opt->quality).SetApproxLevelSmooth(opt->quality);
+        Bfr::RefinerSurfaceFactory<> qfactory(*refiner, qopt);
+        Bfr::Surface<double> surface, qsurface;
         std::vector<Far::Index> cv;
         std::vector<double> w;
         for (int32_t f = 0; f < m->face_count; ++f) {
-            bool initialized = false;
+            bool initialized[2] = {false, false};
             for (int64_t c = adj->corner_start[f]; c < adj->corner_start[f + 1]; ++c) {
                 int32_t o = osd_of[m->face_vertices[c]];
                 if (bfr_corner[o] != c) continue;
-                if (!initialized) {
-                    if (!factory.InitVertexSurface(f, &surface) || !surface.IsValid())
+                const int q = approx[o];
+                Bfr::Surface<double> &srf = q ? qsurface : surface;
+                if (!initialized[q]) {
+                    if (!(q ? qfactory.InitVertexSurface(f, &srf) : factory.InitVertexSurface(f, &srf)) || !srf.IsValid())
                         return spia__fail(status, SPIA_ERROR_INTERNAL, f, "OpenSubdiv built no limit surface for face %d", (int)f);
-                    cv.resize((size_t)surface.GetNumControlPoints());
-                    w.resize(cv.size());
-                    surface.GetControlPointIndices(cv.data());
-                    initialized = true;
+                    initialized[q] = true;
                 }
+                cv.resize((size_t)srf.GetNumControlPoints());
+                w.resize(cv.size());
+                srf.GetControlPointIndices(cv.data());
                 double uv[2];
-                surface.GetParameterization().GetVertexCoord((int)(c - adj->corner_start[f]), uv);
-                surface.EvaluateStencil(uv, w.data());
+                srf.GetParameterization().GetVertexCoord((int)(c - adj->corner_start[f]), uv);
+                srf.EvaluateStencil(uv, w.data());
                 begin_row(o);
                 for (size_t k = 0; k < cv.size(); ++k)
                     if (w[k] != 0.0) add_weight(cv[k], w[k]);
