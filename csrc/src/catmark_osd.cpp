@@ -22,8 +22,13 @@
 
 #include "internal.h"
 
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
 #include <opensubdiv/bfr/refinerSurfaceFactory.h>
 #include <opensubdiv/bfr/surface.h>
+#include <opensubdiv/bfr/surfaceFactoryCache.h>
 #include <opensubdiv/far/patchTableFactory.h>
 #include <opensubdiv/far/primvarRefiner.h>
 #include <opensubdiv/far/ptexIndices.h>
@@ -33,9 +38,13 @@
 #include <opensubdiv/far/topologyRefinerFactory.h>
 
 #include <algorithm>
+#include <climits>
 #include <cmath>
+#include <cstring>
 #include <memory>
+#include <mutex>
 #include <new>
+#include <shared_mutex>
 #include <vector>
 
 using namespace OpenSubdiv;
@@ -44,6 +53,11 @@ namespace {
 
 typedef Far::LimitStencilTableFactoryReal<double> LimitFactory;
 typedef Far::LimitStencilTableReal<double> LimitTable;
+typedef std::pair<int32_t, double> Entry;  // column, weight
+// A Bfr factory whose cache of irregular patches threads can share.
+typedef Bfr::RefinerSurfaceFactory<Bfr::SurfaceFactoryCacheThreaded<
+    std::shared_mutex, std::shared_lock<std::shared_mutex>, std::unique_lock<std::shared_mutex>>>
+    SharedFactory;
 
 const float kInfiniteSharpness = Sdc::Crease::SHARPNESS_INFINITE;  // 10
 
@@ -312,13 +326,12 @@ spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_opti
     std::vector<Far::Index> feature_faces;
     int32_t feature_count = 0;
 
-    // Rows in OpenSubdiv numbering, filled in any order, then gathered.
+    // Rows of the adaptive (feature) vertices in OpenSubdiv numbering,
+    // filled in any order, then gathered.
     std::vector<int64_t> row_start((size_t)osd_n, -1);
     std::vector<int32_t> row_size((size_t)osd_n, 0);
     std::vector<Far::Index> row_indices;
     std::vector<double> row_weights;
-    row_indices.reserve((size_t)osd_n * 16);
-    row_weights.reserve((size_t)osd_n * 16);
     auto begin_row = [&](int32_t o) { row_start[o] = (int64_t)row_indices.size(); };
     auto add_weight = [&](Far::Index j, double w) {
         row_indices.push_back(j);
@@ -385,39 +398,29 @@ spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_opti
             feature_faces.insert(feature_faces.end(), vf.begin(), vf.end());
         }
     }
-
-    // 6. Bfr at the corner chosen above: closed-form vertices with the
-    //    default options, the others at the isolation level.
-    {
-        Bfr::RefinerSurfaceFactory<> factory(*refiner, Bfr::SurfaceFactory::Options());
-        Bfr::SurfaceFactory::Options qopt;
-        qopt.SetApproxLevelSharp(opt->quality).SetApproxLevelSmooth(opt->quality);
-        Bfr::RefinerSurfaceFactory<> qfactory(*refiner, qopt);
-        Bfr::Surface<double> surface, qsurface;
-        std::vector<Far::Index> cv;
-        std::vector<double> w;
-        for (int32_t f = 0; f < m->face_count; ++f) {
-            bool initialized[2] = {false, false};
-            for (int64_t c = adj->corner_start[f]; c < adj->corner_start[f + 1]; ++c) {
-                int32_t o = osd_of[m->face_vertices[c]];
-                if (bfr_corner[o] != c) continue;
-                const int q = approx[o];
-                Bfr::Surface<double> &srf = q ? qsurface : surface;
-                if (!initialized[q]) {
-                    if (!(q ? qfactory.InitVertexSurface(f, &srf) : factory.InitVertexSurface(f, &srf)) || !srf.IsValid())
-                        return spia__fail(status, SPIA_ERROR_INTERNAL, f, "OpenSubdiv built no limit surface for face %d", (int)f);
-                    initialized[q] = true;
+    // Closed-form vertices come out the same from any of their faces and at
+    // any level: where one of their clean faces already gives a vertex at
+    // the isolation level, they share its surface instead of costing one
+    // more (a sharp face at Bfr's default levels is the dearest of all).
+    std::vector<char> level_face;
+    if (std::find(approx.begin(), approx.end(), 1) != approx.end()) {
+        level_face.assign((size_t)m->face_count, 0);
+        for (int32_t o = 0; o < osd_n; ++o)
+            if (approx[o]) level_face[adj->face_of_corner[bfr_corner[o]]] = 1;
+        for (int32_t o = 0; o < osd_n; ++o) {
+            if (approx[o] || bfr_corner[o] < 0 || level_face[adj->face_of_corner[bfr_corner[o]]]) continue;
+            const int32_t v = vertex_of[o];
+            for (int64_t i = adj->first[v]; i < adj->first[v + 1]; ++i) {
+                const int64_t c = adj->corner_of[i];
+                const int32_t f = adj->face_of_corner[c];
+                if (!level_face[f]) continue;
+                bool clean = true;
+                for (int64_t d = adj->corner_start[f]; d < adj->corner_start[f + 1] && clean; ++d)
+                    clean = !base.IsVertexNonManifold(osd_of[m->face_vertices[d]]);
+                if (clean) {
+                    bfr_corner[o] = c;
+                    break;
                 }
-                cv.resize((size_t)srf.GetNumControlPoints());
-                w.resize(cv.size());
-                srf.GetControlPointIndices(cv.data());
-                double uv[2];
-                srf.GetParameterization().GetVertexCoord((int)(c - adj->corner_start[f]), uv);
-                srf.EvaluateStencil(uv, w.data());
-                begin_row(o);
-                for (size_t k = 0; k < cv.size(); ++k)
-                    if (w[k] != 0.0) add_weight(cv[k], w[k]);
-                end_row(o);
             }
         }
     }
@@ -585,38 +588,230 @@ spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_opti
             }
     }
     auto smoothed_loose = [&](int32_t v) { return !loose_degree.empty() && loose_degree[v] == 2; };
-    int64_t nnz = (int64_t)row_indices.size();
-    for (int32_t v = 0; v < n; ++v)
-        if (osd_of[v] < 0) nnz += smoothed_loose(v) ? 3 : 1;
-    spia_stencils *s = spia__stencils_alloc(n, nnz);
-    if (!s) return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for %lld stencil weights", (long long)nnz);
-    int64_t pos = 0;
-    for (int32_t v = 0; v < n; ++v) {
-        s->offsets[v] = pos;
-        int32_t o = osd_of[v];
-        if (o < 0) {
-            s->indices[pos] = v;
-            s->weights[pos++] = smoothed_loose(v) ? 4.0 / 6.0 : 1.0;
-            if (smoothed_loose(v))
-                for (int k = 0; k < 2; ++k) {
-                    s->indices[pos] = loose_ends[2 * (size_t)v + k];
-                    s->weights[pos++] = 1.0 / 6.0;
+
+    // 9. The table, written in place: each row gets room for a bound on its
+    //    length (the distinct vertices of the vertex's faces, on which its
+    //    limit point alone depends; the adaptive rows' own lengths), is
+    //    filled, sorted, merged and stripped of zeros there, and the rows are
+    //    then moved together.  A row longer than its bound (not expected) is
+    //    kept aside and the arrays are rebuilt to fit.
+    std::vector<int32_t> bound((size_t)n, 0);
+    {
+        std::vector<int32_t> stamp((size_t)osd_n, -1);
+        for (int32_t v = 0; v < n; ++v) {
+            const int32_t o = osd_of[v];
+            if (o < 0) {
+                bound[v] = smoothed_loose(v) ? 3 : 1;
+            } else if (feature[o]) {
+                bound[v] = row_size[o];
+            } else {
+                int32_t count = 0;
+                for (int64_t i = adj->first[v]; i < adj->first[v + 1]; ++i) {
+                    const int32_t f = adj->face_of_corner[adj->corner_of[i]];
+                    for (int64_t c = adj->corner_start[f]; c < adj->corner_start[f + 1]; ++c) {
+                        const int32_t u = osd_of[m->face_vertices[c]];
+                        if (stamp[u] != o) {
+                            stamp[u] = o;
+                            ++count;
+                        }
+                    }
                 }
-            continue;
-        }
-        for (int32_t k = 0; k < row_size[o]; ++k) {
-            Far::Index j = row_indices[row_start[o] + k];
-            if (j < 0 || j >= osd_n) {
-                spia_stencils_free(s);
-                return spia__fail(status, SPIA_ERROR_INTERNAL, v, "OpenSubdiv stencil refers to point %d, not a control vertex", (int)j);
+                bound[v] = count;
             }
-            s->indices[pos] = vertex_of[j];
-            s->weights[pos++] = row_weights[row_start[o] + k];
         }
     }
-    s->offsets[n] = pos;
-    spia__stencils_canonicalize(s);
-    *out = s;
+    int64_t capacity = 0;
+    for (int32_t v = 0; v < n; ++v) capacity += bound[v];
+    spia_stencils *s = spia__stencils_alloc(n, capacity);
+    if (!s) return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for %lld stencil weights", (long long)capacity);
+    std::unique_ptr<spia_stencils, void (*)(spia_stencils *)> owner(s, spia_stencils_free);
+    for (int32_t v = 0; v < n; ++v) s->offsets[v + 1] = s->offsets[v] + bound[v];
+    std::vector<int32_t> &length = bound;  // bound[v] becomes the row's length once written
+    std::vector<std::pair<int32_t, std::vector<Entry>>> spilled;
+
+    // Writes row v from entries in caller numbering (any order, repeats
+    // allowed): stable sort by column, repeats added up in order, zeros
+    // dropped; returns false if it did not fit (then it is spilled).
+    auto write_row = [&](int32_t v, std::vector<Entry> &row, std::vector<std::pair<int32_t, std::vector<Entry>>> &spill) {
+        for (size_t i = 1; i < row.size(); ++i) {
+            Entry e = row[i];
+            size_t j = i;
+            while (j > 0 && row[j - 1].first > e.first) {
+                row[j] = row[j - 1];
+                --j;
+            }
+            row[j] = e;
+        }
+        size_t out = 0;
+        for (size_t i = 0; i < row.size();) {
+            const int32_t k = row[i].first;
+            double w = 0.0;
+            while (i < row.size() && row[i].first == k) w += row[i++].second;
+            if (w != 0.0) row[out++] = Entry(k, w);
+        }
+        row.resize(out);
+        if ((int64_t)out > s->offsets[v + 1] - s->offsets[v]) {
+            spill.emplace_back(v, row);
+            length[v] = (int32_t)out;
+            return;
+        }
+        int32_t *idx = s->indices + s->offsets[v];
+        double *wt = s->weights + s->offsets[v];
+        for (size_t i = 0; i < out; ++i) {
+            idx[i] = row[i].first;
+            wt[i] = row[i].second;
+        }
+        length[v] = (int32_t)out;
+    };
+
+    // Vertices no face uses, and the adaptive rows.
+    {
+        std::vector<Entry> row;
+        for (int32_t v = 0; v < n; ++v) {
+            const int32_t o = osd_of[v];
+            row.clear();
+            if (o < 0) {
+                row.emplace_back(v, smoothed_loose(v) ? 4.0 / 6.0 : 1.0);
+                if (smoothed_loose(v))
+                    for (int k = 0; k < 2; ++k) row.emplace_back(loose_ends[2 * (size_t)v + k], 1.0 / 6.0);
+            } else if (feature[o]) {
+                for (int32_t k = 0; k < row_size[o]; ++k) {
+                    Far::Index j = row_indices[row_start[o] + k];
+                    if (j < 0 || j >= osd_n)
+                        return spia__fail(status, SPIA_ERROR_INTERNAL, v,
+                                          "OpenSubdiv stencil refers to point %d, not a control vertex", (int)j);
+                    row.emplace_back(vertex_of[j], row_weights[row_start[o] + k]);
+                }
+            } else {
+                continue;
+            }
+            write_row(v, row, spilled);
+        }
+        std::vector<int64_t>().swap(row_start);
+        std::vector<int32_t>().swap(row_size);
+        std::vector<Far::Index>().swap(row_indices);
+        std::vector<double>().swap(row_weights);
+    }
+
+    // 10. Bfr at the corner chosen in step 5: closed-form vertices with the
+    //     default options, unless their face also gives a vertex at the
+    //     isolation level: then the face's one surface at that level serves
+    //     both (closed-form vertices come out the same from Blender's
+    //     patches at any level).  Faces are shared out among threads; each
+    //     row comes from one face, so the table is the same whatever the
+    //     number of threads.  The factories' caches of irregular patches
+    //     (keyed by topology) are shared between threads.
+    {
+        Bfr::SurfaceFactory::Options qopt;
+        qopt.SetApproxLevelSharp(opt->quality).SetApproxLevelSmooth(opt->quality);
+        SharedFactory factory(*refiner, Bfr::SurfaceFactory::Options()), qfactory(*refiner, qopt);
+        const int32_t face_count = m->face_count;
+        int32_t failed_face = INT32_MAX;  // the first face Bfr failed on
+        bool out_of_memory = false, other_failure = false;
+        std::vector<std::vector<std::pair<int32_t, std::vector<Entry>>>> spill_of(opt->threads > 0 ? opt->threads : 1);
+#pragma omp parallel num_threads(opt->threads > 0 ? opt->threads : 1)
+        {
+#ifdef _OPENMP
+            const int thread = omp_get_thread_num();
+#else
+            const int thread = 0;
+#endif
+            try {
+                Bfr::Surface<double> srf;
+                std::vector<Far::Index> cv;
+                std::vector<double> w;
+                std::vector<Entry> row;
+#pragma omp for schedule(dynamic, 256)
+                for (int32_t f = 0; f < face_count; ++f) {
+                    bool initialized = false;
+                    const bool q = !level_face.empty() && level_face[f];
+                    for (int64_t c = adj->corner_start[f]; c < adj->corner_start[f + 1]; ++c) {
+                        const int32_t o = osd_of[m->face_vertices[c]];
+                        if (bfr_corner[o] != c) continue;
+                        if (!initialized) {
+                            if (!(q ? qfactory.InitVertexSurface(f, &srf) : factory.InitVertexSurface(f, &srf)) ||
+                                !srf.IsValid()) {
+#pragma omp critical(spia_bfr_failure)
+                                failed_face = std::min(failed_face, f);
+                                break;
+                            }
+                            initialized = true;
+                            cv.resize((size_t)srf.GetNumControlPoints());
+                            w.resize(cv.size());
+                            srf.GetControlPointIndices(cv.data());
+                        }
+                        double uv[2];
+                        srf.GetParameterization().GetVertexCoord((int)(c - adj->corner_start[f]), uv);
+                        srf.EvaluateStencil(uv, w.data());
+                        row.clear();
+                        for (size_t k = 0; k < cv.size(); ++k)
+                            if (w[k] != 0.0) row.emplace_back(vertex_of[cv[k]], w[k]);
+                        write_row(m->face_vertices[c], row, spill_of[(size_t)thread]);
+                    }
+                }
+            } catch (const std::bad_alloc &) {
+#pragma omp critical(spia_bfr_failure)
+                out_of_memory = true;
+            } catch (...) {
+#pragma omp critical(spia_bfr_failure)
+                other_failure = true;
+            }
+        }
+        if (out_of_memory) throw std::bad_alloc();
+        if (other_failure) return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "unexpected failure computing limit stencils");
+        if (failed_face != INT32_MAX)
+            return spia__fail(status, SPIA_ERROR_INTERNAL, failed_face, "OpenSubdiv built no limit surface for face %d",
+                              (int)failed_face);
+        for (auto &part : spill_of)
+            for (auto &r : part) spilled.push_back(std::move(r));
+    }
+
+    // 11. Rows moved together (or, if some were spilled, copied into arrays
+    //     that fit them all).
+    if (spilled.empty()) {
+        int64_t pos = 0;
+        for (int32_t v = 0; v < n; ++v) {
+            const int64_t start = s->offsets[v];
+            s->offsets[v] = pos;
+            if (start != pos) {
+                memmove(s->indices + pos, s->indices + start, sizeof(int32_t) * (size_t)length[v]);
+                memmove(s->weights + pos, s->weights + start, sizeof(double) * (size_t)length[v]);
+            }
+            pos += length[v];
+        }
+        s->offsets[n] = pos;
+        s->nnz = pos;
+    } else {
+        std::sort(spilled.begin(), spilled.end(),
+                  [](const std::pair<int32_t, std::vector<Entry>> &a, const std::pair<int32_t, std::vector<Entry>> &b) {
+                      return a.first < b.first;
+                  });
+        int64_t total = 0;
+        for (int32_t v = 0; v < n; ++v) total += length[v];
+        spia_stencils *t = spia__stencils_alloc(n, total);
+        if (!t) return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for %lld stencil weights", (long long)total);
+        size_t next = 0;
+        int64_t pos = 0;
+        for (int32_t v = 0; v < n; ++v) {
+            t->offsets[v] = pos;
+            if (next < spilled.size() && spilled[next].first == v) {
+                for (const Entry &e : spilled[next].second) {
+                    t->indices[pos] = e.first;
+                    t->weights[pos++] = e.second;
+                }
+                ++next;
+            } else {
+                memcpy(t->indices + pos, s->indices + s->offsets[v], sizeof(int32_t) * (size_t)length[v]);
+                memcpy(t->weights + pos, s->weights + s->offsets[v], sizeof(double) * (size_t)length[v]);
+                pos += length[v];
+            }
+        }
+        t->offsets[n] = pos;
+        owner.reset(t);
+        s = t;
+    }
+    spia__stencils_shrink(s);
+    *out = owner.release();
     spia__ok(status);
     return SPIA_OK;
 }

@@ -56,6 +56,9 @@ double spia__now(void);
 /* A table with room for `rows` rows and `nnz` weights (offsets zeroed). */
 spia_stencils *spia__stencils_alloc(int32_t rows, int64_t nnz);
 
+/* Gives back the room of the arrays beyond nnz weights. */
+void spia__stencils_shrink(spia_stencils *s);
+
 /* Sorts the column indices of every row, adds up repeated columns and drops
  * exact zeros, compacting the arrays in place. */
 void spia__stencils_canonicalize(spia_stencils *s);

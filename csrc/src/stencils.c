@@ -62,6 +62,14 @@ void spia__stencils_canonicalize(spia_stencils *s) {
     s->nnz = out;
 }
 
+void spia__stencils_shrink(spia_stencils *s) {
+    const size_t n = (size_t)(s->nnz > 0 ? s->nnz : 1);
+    int32_t *indices = (int32_t *)realloc(s->indices, sizeof(int32_t) * n);
+    if (indices) s->indices = indices;
+    double *weights = (double *)realloc(s->weights, sizeof(double) * n);
+    if (weights) s->weights = weights;
+}
+
 int32_t spia_stencils_row_count(const spia_stencils *s) { return s ? s->rows : 0; }
 
 int64_t spia_stencils_weight_count(const spia_stencils *s) { return s ? s->nnz : 0; }
