@@ -290,8 +290,9 @@ bool exact_limit_rows(Far::TopologyRefiner &sub, int levels, int32_t sub_n, cons
     return true;
 }
 
-spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, spia_stencils **out,
+spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_options *opt, spia_stencils **out,
                   spia_status *status) {
+    const spia_adjacency *adj = adj_lists;
     Prepared p;
     spia_result r = prepare(m, adj, opt, p, status);
     if (r != SPIA_OK) return r;
@@ -328,8 +329,8 @@ spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_opti
 
     // Rows of the adaptive (feature) vertices in OpenSubdiv numbering,
     // filled in any order, then gathered.
-    std::vector<int64_t> row_start((size_t)osd_n, -1);
-    std::vector<int32_t> row_size((size_t)osd_n, 0);
+    std::vector<int64_t> row_start;  // sized when there are feature vertices
+    std::vector<int32_t> row_size;
     std::vector<Far::Index> row_indices;
     std::vector<double> row_weights;
     auto begin_row = [&](int32_t o) { row_start[o] = (int64_t)row_indices.size(); };
@@ -344,7 +345,7 @@ spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_opti
     // Bfr's irregular patch builder in OpenSubdiv 3.5 writes out of bounds on
     // some faces next to non-manifold vertices (seen on the Stanford dragon
     // scan).  The limit point of a smooth vertex is the same from every face.
-    std::vector<int64_t> bfr_corner((size_t)osd_n, -1);
+    std::vector<int32_t> bfr_corner((size_t)osd_n, -1);  // corners fit in int32 (spia__adjacency_build)
     std::vector<char> approx((size_t)osd_n, 0);
     for (int32_t o = 0; o < osd_n; ++o) {
         const float vs = base.GetVertexSharpness(o);
@@ -385,7 +386,7 @@ spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_opti
                 bool clean = true;
                 for (int64_t d = adj->corner_start[f]; d < adj->corner_start[f + 1] && clean; ++d)
                     clean = !base.IsVertexNonManifold(osd_of[m->face_vertices[d]]);
-                if (clean) bfr_corner[o] = c;
+                if (clean) bfr_corner[o] = (int32_t)c;
             }
             adaptive = bfr_corner[o] < 0;
             if (approx[o] && bfr_corner[o] != adj->corner_of[adj->first[v]]) adaptive = true;
@@ -418,7 +419,7 @@ spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_opti
                 for (int64_t d = adj->corner_start[f]; d < adj->corner_start[f + 1] && clean; ++d)
                     clean = !base.IsVertexNonManifold(osd_of[m->face_vertices[d]]);
                 if (clean) {
-                    bfr_corner[o] = c;
+                    bfr_corner[o] = (int32_t)c;
                     break;
                 }
             }
@@ -433,6 +434,8 @@ spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_opti
     //    ring gives their vertices complete neighbourhoods.  Sharpness comes
     //    from the whole mesh.
     if (feature_count > 0) {
+        row_start.assign((size_t)osd_n, -1);
+        row_size.assign((size_t)osd_n, 0);
         std::vector<char> near_vertex((size_t)osd_n, 0), in_sub((size_t)m->face_count, 0);
         for (int32_t o = 0; o < osd_n; ++o) {
             if (!feature[o]) continue;
@@ -620,6 +623,11 @@ spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_opti
             }
         }
     }
+    // From here on only corner_start is needed: the vertex lists make room
+    // for the table.
+    spia__adjacency_release_vertex_lists(adj_lists);
+    adj = nullptr;
+    const int64_t *corner_start = adj_lists->corner_start;
     int64_t capacity = 0;
     for (int32_t v = 0; v < n; ++v) capacity += bound[v];
     spia_stencils *s = spia__stencils_alloc(n, capacity);
@@ -725,7 +733,7 @@ spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_opti
                 for (int32_t f = 0; f < face_count; ++f) {
                     bool initialized = false;
                     const bool q = !level_face.empty() && level_face[f];
-                    for (int64_t c = adj->corner_start[f]; c < adj->corner_start[f + 1]; ++c) {
+                    for (int64_t c = corner_start[f]; c < corner_start[f + 1]; ++c) {
                         const int32_t o = osd_of[m->face_vertices[c]];
                         if (bfr_corner[o] != c) continue;
                         if (!initialized) {
@@ -741,7 +749,7 @@ spia_result build(const spia_mesh *m, const spia_adjacency *adj, const spia_opti
                             srf.GetControlPointIndices(cv.data());
                         }
                         double uv[2];
-                        srf.GetParameterization().GetVertexCoord((int)(c - adj->corner_start[f]), uv);
+                        srf.GetParameterization().GetVertexCoord((int)(c - corner_start[f]), uv);
                         srf.EvaluateStencil(uv, w.data());
                         row.clear();
                         for (size_t k = 0; k < cv.size(); ++k)
@@ -875,7 +883,7 @@ spia_result refine(const spia_mesh *m, const spia_adjacency *adj, const spia_opt
 
 }  // namespace
 
-extern "C" spia_result spia__osd_limit_stencils(const spia_mesh *mesh, const spia_adjacency *adj,
+extern "C" spia_result spia__osd_limit_stencils(const spia_mesh *mesh, spia_adjacency *adj,
                                                     const spia_options *options, spia_stencils **out,
                                                     spia_status *status) {
     *out = nullptr;
