@@ -28,7 +28,6 @@
 
 #include <opensubdiv/bfr/refinerSurfaceFactory.h>
 #include <opensubdiv/bfr/surface.h>
-#include <opensubdiv/bfr/surfaceFactoryCache.h>
 #include <opensubdiv/far/patchTableFactory.h>
 #include <opensubdiv/far/primvarRefiner.h>
 #include <opensubdiv/far/ptexIndices.h>
@@ -42,9 +41,7 @@
 #include <cmath>
 #include <cstring>
 #include <memory>
-#include <mutex>
 #include <new>
-#include <shared_mutex>
 #include <vector>
 
 using namespace OpenSubdiv;
@@ -54,10 +51,6 @@ namespace {
 typedef Far::LimitStencilTableFactoryReal<double> LimitFactory;
 typedef Far::LimitStencilTableReal<double> LimitTable;
 typedef std::pair<int32_t, double> Entry;  // column, weight
-// A Bfr factory whose cache of irregular patches threads can share.
-typedef Bfr::RefinerSurfaceFactory<Bfr::SurfaceFactoryCacheThreaded<
-    std::shared_mutex, std::shared_lock<std::shared_mutex>, std::unique_lock<std::shared_mutex>>>
-    SharedFactory;
 
 const float kInfiniteSharpness = Sdc::Crease::SHARPNESS_INFINITE;  // 10
 
@@ -707,12 +700,13 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
     //     both (closed-form vertices come out the same from Blender's
     //     patches at any level).  Faces are shared out among threads; each
     //     row comes from one face, so the table is the same whatever the
-    //     number of threads.  The factories' caches of irregular patches
-    //     (keyed by topology) are shared between threads.
+    //     number of threads.  Each thread has its own factories and so its
+    //     own cache of irregular patches (keyed by topology): a shared cache
+    //     measured no faster with two threads than with one, its lock
+    //     being taken for every face.
     {
         Bfr::SurfaceFactory::Options qopt;
         qopt.SetApproxLevelSharp(opt->quality).SetApproxLevelSmooth(opt->quality);
-        SharedFactory factory(*refiner, Bfr::SurfaceFactory::Options()), qfactory(*refiner, qopt);
         const int32_t face_count = m->face_count;
         int32_t failed_face = INT32_MAX;  // the first face Bfr failed on
         bool out_of_memory = false, other_failure = false;
@@ -725,6 +719,7 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
             const int thread = 0;
 #endif
             try {
+                Bfr::RefinerSurfaceFactory<> factory(*refiner, Bfr::SurfaceFactory::Options()), qfactory(*refiner, qopt);
                 Bfr::Surface<double> srf;
                 std::vector<Far::Index> cv;
                 std::vector<double> w;
