@@ -36,15 +36,17 @@ static void check(tmesh *m, const char *name, spia_scheme scheme) {
     if (!one || !two || !three) return;
     CHECK(same_table(one, two), "%s: stencils differ between 1 and 2 threads", name);
     CHECK(same_table(one, three), "%s: stencils differ between 1 and 3 threads", name);
+    /* (WPIA's steps are PIA's, with another weight) */
     static const spia_method methods[] = {SPIA_METHOD_AUTO, SPIA_METHOD_PIA, SPIA_METHOD_GS_PIA, SPIA_METHOD_CHEBYSHEV,
-                                          SPIA_METHOD_WPIA, SPIA_METHOD_CG};
+                                          SPIA_METHOD_CG};
     const size_t size = sizeof(float) * 3 * (size_t)m->nv;
     float *c1 = (float *)malloc(size), *c2 = (float *)malloc(size);
     spia_method auto_method = SPIA_METHOD_AUTO;
     for (size_t k = 0; k < sizeof methods / sizeof methods[0]; ++k) {
         spia_options o = spia_options_default();
         o.method = methods[k];
-        o.tolerance = 1e-7;
+        o.tolerance = 1e-5;
+        o.max_iterations = 40;
         spia_report r1, r2;
         memset(&r1, 0, sizeof r1);
         memset(&r2, 0, sizeof r2);
@@ -73,14 +75,57 @@ static void check(tmesh *m, const char *name, spia_scheme scheme) {
     spia_stencils_free(three);
 }
 
+/* The torus of make_torus, with its arrays allocated once (growing them
+ * vertex by vertex takes minutes under AddressSanitizer at this size). */
+static tmesh big_torus(int nu, int nv, int triangles) {
+    tmesh m;
+    memset(&m, 0, sizeof m);
+    m.nv = nu * nv;
+    m.pos = (float *)malloc(sizeof(float) * 3 * (size_t)m.nv);
+    for (int j = 0; j < nv; ++j)
+        for (int i = 0; i < nu; ++i) {
+            double u = 2 * M_PI * i / nu, v = 2 * M_PI * j / nv;
+            float *p = m.pos + 3 * (size_t)(j * nu + i);
+            p[0] = (float)((2 + 0.7 * cos(v)) * cos(u));
+            p[1] = (float)((2 + 0.7 * cos(v)) * sin(u));
+            p[2] = (float)(0.7 * sin(v));
+        }
+    m.nf = nu * nv * (triangles ? 2 : 1);
+    m.nfv = (int64_t)nu * nv * 4 * (triangles ? 6 : 4) / 4;
+    m.sizes = (int32_t *)malloc(sizeof(int32_t) * (size_t)m.nf);
+    m.fv = (int32_t *)malloc(sizeof(int32_t) * (size_t)m.nfv);
+    int64_t k = 0;
+    int32_t f = 0;
+    for (int j = 0; j < nv; ++j)
+        for (int i = 0; i < nu; ++i) {
+            int32_t a = j * nu + i, b = j * nu + (i + 1) % nu, c = ((j + 1) % nv) * nu + (i + 1) % nu,
+                    d = ((j + 1) % nv) * nu + i;
+            if (triangles) {
+                const int32_t t[6] = {a, b, c, a, c, d};
+                for (int q = 0; q < 6; ++q) m.fv[k++] = t[q];
+                m.sizes[f++] = 3;
+                m.sizes[f++] = 3;
+            } else {
+                const int32_t t[4] = {a, b, c, d};
+                for (int q = 0; q < 4; ++q) m.fv[k++] = t[q];
+                m.sizes[f++] = 4;
+            }
+        }
+    return m;
+}
+
 int main(void) {
-    tmesh m = make_torus(320, 170, 0);
+    tmesh m = big_torus(320, 170, 0);
     uint64_t seed = 99;
+    m.edges = (int32_t *)malloc(sizeof(int32_t) * 2 * (size_t)m.nf);
+    m.edge_creases = (float *)malloc(sizeof(float) * (size_t)m.nf);
     for (int32_t f = 0; f < m.nf; ++f) {
         seed = seed * 6364136223846793005ULL + 1442695040888963407ULL;
         if ((seed >> 40) % 10 == 0) {
             const int32_t *q = m.fv + 4 * (int64_t)f;
-            tmesh_edge(&m, q[0], q[1], (seed >> 20) % 2 ? 0.5f : 0.3f);
+            m.edges[2 * m.ne] = q[0];
+            m.edges[2 * m.ne + 1] = q[1];
+            m.edge_creases[m.ne++] = (seed >> 20) % 2 ? 0.5f : 0.3f;
         }
     }
     /* roughen the target so that AUTO takes GS-PIA, as on scans */
@@ -90,7 +135,7 @@ int main(void) {
     }
     check(&m, "creased rough quad torus", SPIA_SCHEME_CATMULL_CLARK);
     tmesh_free(&m);
-    m = make_torus(320, 170, 1);
+    m = big_torus(320, 170, 1);
     check(&m, "smooth triangulated torus (Loop)", SPIA_SCHEME_LOOP);
     tmesh_free(&m);
     TEST_MAIN_END();
