@@ -53,6 +53,8 @@ typedef Far::LimitStencilTableReal<double> LimitTable;
 typedef std::pair<int32_t, double> Entry;  // column, weight
 
 const float kInfiniteSharpness = Sdc::Crease::SHARPNESS_INFINITE;  // 10
+// Feature vertices per adaptive sub-mesh, and the most sub-meshes (step 7).
+const int32_t kFeatureBatch = 250, kMaxFeatureBatches = 64;
 
 // Blender's crease-to-sharpness mapping, in float as Blender computes it.
 inline float crease_to_sharpness(float crease) { return crease * crease * 10.0f; }
@@ -317,7 +319,6 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
     //    creases on scans) holds all of this to 1e-12.
     const Far::TopologyLevel &base = refiner->GetLevel(0);
     std::vector<char> feature((size_t)osd_n, 0);
-    std::vector<Far::Index> feature_faces;
     int32_t feature_count = 0;
 
     // Rows of the adaptive (feature) vertices in OpenSubdiv numbering,
@@ -326,12 +327,6 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
     std::vector<int32_t> row_size;
     std::vector<Far::Index> row_indices;
     std::vector<double> row_weights;
-    auto begin_row = [&](int32_t o) { row_start[o] = (int64_t)row_indices.size(); };
-    auto add_weight = [&](Far::Index j, double w) {
-        row_indices.push_back(j);
-        row_weights.push_back(w);
-    };
-    auto end_row = [&](int32_t o) { row_size[o] = (int32_t)((int64_t)row_indices.size() - row_start[o]); };
 
     // The corner at which Bfr evaluates a smooth vertex: its corner of its
     // first face, or of the first face with no non-manifold vertex, since
@@ -388,8 +383,6 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
         if (adaptive) {
             feature[o] = 1;
             ++feature_count;
-            Far::ConstIndexArray vf = base.GetVertexFaces(o);
-            feature_faces.insert(feature_faces.end(), vf.begin(), vf.end());
         }
     }
     // Closed-form vertices come out the same from any of their faces and at
@@ -426,19 +419,54 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
     //    limit point depends on its incident faces alone, and the second
     //    ring gives their vertices complete neighbourhoods.  Sharpness comes
     //    from the whole mesh.
+    //    The feature vertices are taken in batches of consecutive vertices,
+    //    each with its own sub-mesh, so that OpenSubdiv's tables (which
+    //    hold every refined vertex) stay small, and batches run on the
+    //    threads.  The batches do not depend on the thread count.
     if (feature_count > 0) {
         row_start.assign((size_t)osd_n, -1);
         row_size.assign((size_t)osd_n, 0);
-        std::vector<char> near_vertex((size_t)osd_n, 0), in_sub((size_t)m->face_count, 0);
-        for (int32_t o = 0; o < osd_n; ++o) {
-            if (!feature[o]) continue;
-            int32_t v = vertex_of[o];
-            for (int64_t i = adj->first[v]; i < adj->first[v + 1]; ++i) {
-                int32_t f = adj->face_of_corner[adj->corner_of[i]];
-                for (int64_t c = adj->corner_start[f]; c < adj->corner_start[f + 1]; ++c)
-                    near_vertex[osd_of[m->face_vertices[c]]] = 1;
+        std::vector<int32_t> features;
+        features.reserve((size_t)feature_count);
+        for (int32_t o = 0; o < osd_n; ++o)
+            if (feature[o]) features.push_back(o);
+        const int32_t batch_size = std::max<int32_t>(kFeatureBatch, (feature_count + kMaxFeatureBatches - 1) / kMaxFeatureBatches);
+        const int32_t batches = (feature_count + batch_size - 1) / batch_size;
+        struct BatchRows {
+            std::vector<int32_t> vertex;  // OpenSubdiv numbering, one per row
+            std::vector<int64_t> start;   // rows' first entries, plus the end
+            std::vector<Far::Index> indices;
+            std::vector<double> weights;
+            spia_result code = SPIA_OK;
+            int64_t index = -1;
+            char message[SPIA_MESSAGE_SIZE] = {0};
+        };
+        std::vector<BatchRows> results((size_t)batches);
+        auto run_batch = [&](int32_t b, BatchRows &out) {
+            const int32_t first_feature = b * batch_size;
+            const int32_t batch_count = std::min(feature_count - first_feature, batch_size);
+            const int32_t *batch = features.data() + first_feature;
+            auto failed = [&](spia_result code, int64_t index, const char *text, int value, int value2) {
+                out.code = code;
+                out.index = index;
+                snprintf(out.message, sizeof out.message, text, value, value2);
+            };
+            std::vector<char> batch_feature((size_t)osd_n, 0);
+            std::vector<Far::Index> feature_faces;
+            for (int32_t i = 0; i < batch_count; ++i) {
+                batch_feature[batch[i]] = 1;
+                Far::ConstIndexArray vf = base.GetVertexFaces(batch[i]);
+                feature_faces.insert(feature_faces.end(), vf.begin(), vf.end());
             }
-        }
+            std::vector<char> near_vertex((size_t)osd_n, 0), in_sub((size_t)m->face_count, 0);
+            for (int32_t i = 0; i < batch_count; ++i) {
+                int32_t v = vertex_of[batch[i]];
+                for (int64_t k = adj->first[v]; k < adj->first[v + 1]; ++k) {
+                    int32_t f = adj->face_of_corner[adj->corner_of[k]];
+                    for (int64_t c = adj->corner_start[f]; c < adj->corner_start[f + 1]; ++c)
+                        near_vertex[osd_of[m->face_vertices[c]]] = 1;
+                }
+            }
         for (int32_t o = 0; o < osd_n; ++o) {
             if (!near_vertex[o]) continue;
             int32_t v = vertex_of[o];
@@ -483,7 +511,10 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
                                                                  sub_fv.data(), sub_crease_pairs, sub_crease_weights,
                                                                  sub_corner_indices, sub_corner_weights, scheme, sdc));
         if (!sub)
-            return spia__fail(status, SPIA_ERROR_TOPOLOGY, -1, "OpenSubdiv rejected the topology around sharp features");
+            {
+            failed(SPIA_ERROR_TOPOLOGY, -1, "OpenSubdiv rejected the topology around sharp features", 0, 0);
+            return;
+        }
         for (Far::Index &f : feature_faces) f = sub_face_of[f];
         std::sort(feature_faces.begin(), feature_faces.end());
         feature_faces.erase(std::unique(feature_faces.begin(), feature_faces.end()), feature_faces.end());
@@ -498,9 +529,19 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
             for (float w : sub_crease_weights) sharpest = std::max(sharpest, w < kInfiniteSharpness ? w : 0.0f);
             for (float w : sub_corner_weights) sharpest = std::max(sharpest, w < kInfiniteSharpness ? w : 0.0f);
             const int levels = std::max(1, std::min(10, (int)std::ceil(sharpest)));
-            if (!exact_limit_rows(*sub, levels, sub_n, feature, sub_of, osd_of_sub, osd_n, begin_row, add_weight,
-                                  end_row))
-                return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "OpenSubdiv's limit masks failed");
+            auto begin_batch_row = [&](int32_t o) {
+                out.vertex.push_back(o);
+                out.start.push_back((int64_t)out.indices.size());
+            };
+            auto add_batch_weight = [&](Far::Index j, double w) {
+                out.indices.push_back(j);
+                out.weights.push_back(w);
+            };
+            auto end_batch_row = [&](int32_t) {};
+            if (!exact_limit_rows(*sub, levels, sub_n, batch_feature, sub_of, osd_of_sub, osd_n, begin_batch_row,
+                                  add_batch_weight, end_batch_row))
+                failed(SPIA_ERROR_INTERNAL, -1, "OpenSubdiv's limit masks failed", 0, 0);
+            out.start.push_back((int64_t)out.indices.size());
         } else {
         Far::TopologyRefiner::AdaptiveOptions adaptive(opt->quality);
         adaptive.useInfSharpPatch = true;
@@ -515,10 +556,10 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
         Far::PtexIndices ptex(*sub);
         LimitFactory::LocationArrayVec locations;
         std::vector<int32_t> location_vertex;
-        locations.reserve((size_t)feature_count);
-        location_vertex.reserve((size_t)feature_count);
-        for (int32_t o = 0; o < osd_n; ++o) {
-            if (!feature[o]) continue;
+        locations.reserve((size_t)batch_count);
+        location_vertex.reserve((size_t)batch_count);
+        for (int32_t i = 0; i < batch_count; ++i) {
+            const int32_t o = batch[i];
             int32_t v = vertex_of[o];
             int64_t c = adj->corner_of[adj->first[v]];
             int32_t f = adj->face_of_corner[c];
@@ -545,27 +586,61 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
         limit_options.generate1stDerivatives = false;
         limit_options.generate2ndDerivatives = false;
         std::unique_ptr<const LimitTable> table(LimitFactory::Create(*sub, locations, nullptr, nullptr, limit_options));
-        if (!table || table->GetNumStencils() != feature_count)
-            return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "OpenSubdiv returned %d limit stencils for %d vertices",
-                              table ? table->GetNumStencils() : -1, (int)feature_count);
+        if (!table || table->GetNumStencils() != batch_count) {
+            failed(SPIA_ERROR_INTERNAL, -1, "OpenSubdiv returned %d limit stencils for %d vertices",
+                   table ? table->GetNumStencils() : -1, (int)batch_count);
+            return;
+        }
         const std::vector<int> &sizes = table->GetSizes();
         const std::vector<Far::Index> &offsets = table->GetOffsets();
         const std::vector<Far::Index> &indices = table->GetControlIndices();
         const std::vector<double> &weights = table->GetWeights();
-        for (int32_t i = 0; i < feature_count; ++i) {
+        for (int32_t i = 0; i < batch_count; ++i) {
             int32_t o = location_vertex[i];
-            row_start[o] = (int64_t)row_indices.size();
-            row_size[o] = sizes[i];
+            out.vertex.push_back(o);
+            out.start.push_back((int64_t)out.indices.size());
             for (int k = 0; k < sizes[i]; ++k) {
                 Far::Index j = indices[offsets[i] + k];
-                if (j < 0 || j >= sub_n)
-                    return spia__fail(status, SPIA_ERROR_INTERNAL, vertex_of[o],
-                                      "OpenSubdiv stencil refers to point %d, not a control vertex", (int)j);
-                row_indices.push_back(osd_of_sub[j]);
+                if (j < 0 || j >= sub_n) {
+                    failed(SPIA_ERROR_INTERNAL, vertex_of[o], "OpenSubdiv stencil refers to point %d, not a control vertex",
+                           (int)j, 0);
+                    return;
+                }
+                out.indices.push_back(osd_of_sub[j]);
             }
-            row_weights.insert(row_weights.end(), weights.begin() + offsets[i], weights.begin() + offsets[i] + sizes[i]);
+            out.weights.insert(out.weights.end(), weights.begin() + offsets[i], weights.begin() + offsets[i] + sizes[i]);
         }
+        out.start.push_back((int64_t)out.indices.size());
             }
+            };
+        bool out_of_memory = false;
+        const int batch_threads = std::max(1, std::min(opt->threads, batches));
+#pragma omp parallel for schedule(dynamic, 1) num_threads(batch_threads)
+        for (int32_t b = 0; b < batches; ++b) {
+            try {
+                run_batch(b, results[(size_t)b]);
+            } catch (const std::bad_alloc &) {
+#pragma omp critical(spia_feature_failure)
+                out_of_memory = true;
+            } catch (...) {
+                results[(size_t)b].code = SPIA_ERROR_INTERNAL;
+                snprintf(results[(size_t)b].message, SPIA_MESSAGE_SIZE, "unexpected failure around sharp features");
+            }
+        }
+        if (out_of_memory) throw std::bad_alloc();
+        for (BatchRows &out : results)
+            if (out.code != SPIA_OK) return spia__fail(status, out.code, out.index, "%s", out.message);
+        for (BatchRows &out : results) {
+            for (size_t r = 0; r < out.vertex.size(); ++r) {
+                const int32_t o = out.vertex[r];
+                row_start[o] = (int64_t)row_indices.size();
+                row_size[o] = (int32_t)(out.start[r + 1] - out.start[r]);
+                row_indices.insert(row_indices.end(), out.indices.begin() + out.start[r], out.indices.begin() + out.start[r + 1]);
+                row_weights.insert(row_weights.end(), out.weights.begin() + out.start[r], out.weights.begin() + out.start[r + 1]);
+            }
+            BatchRows().indices.swap(out.indices);
+            std::vector<double>().swap(out.weights);
+        }
     }
 
     // 8. Vertices no face uses keep their position, except that Blender

@@ -247,6 +247,19 @@ int main() {
     compare_all(fin, "grid with a non-manifold fin", {1, 3, 6});
     tmesh_free(&fin);
 
+    // Strips of two quads apart from each other: four smooth corners each,
+    // 480 adaptive rows in all, more than one batch of sub-meshes.
+    tmesh strips;
+    memset(&strips, 0, sizeof strips);
+    for (int k = 0; k < 120; ++k) {
+        int32_t v[6];
+        for (int i = 0; i < 6; ++i) v[i] = tmesh_vertex(&strips, 3.0 * k + (i % 3), i / 3, 0.1 * ((k * 7 + i) % 5));
+        tmesh_quad(&strips, v[0], v[1], v[4], v[3]);
+        tmesh_quad(&strips, v[1], v[2], v[5], v[4]);
+    }
+    compare_all(strips, "120 separate two-quad strips", {1, 3});
+    tmesh_free(&strips);
+
     tmesh t = make_torus(9, 6, 1);
     compare_all(t, "triangulated torus", {1, 3});
     tmesh_free(&t);
