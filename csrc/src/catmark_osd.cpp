@@ -379,7 +379,7 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
                 if (clean) bfr_corner[o] = (int32_t)c;
             }
             adaptive = bfr_corner[o] < 0;
-            if (approx[o] && bfr_corner[o] != adj->corner_of[adj->first[v]]) adaptive = true;
+
         }
         if (adaptive) approx[o] = 0;
         if (adaptive) {
@@ -391,11 +391,44 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
     // any level: where one of their clean faces already gives a vertex at
     // the isolation level, they share its surface instead of costing one
     // more (a sharp face at Bfr's default levels is the dearest of all).
+    //    The same holds for the vertices taken at the isolation level
+    //    (Blender evaluates them on their first face; their limit point is
+    //    the corner their patches share, which test_reference checks with
+    //    the last face as well): each takes a clean face that already gives
+    //    one, else the clean face with the most such vertices, so that
+    //    fewer irregular surfaces are built.
     std::vector<char> level_face;
     if (std::find(approx.begin(), approx.end(), 1) != approx.end()) {
         level_face.assign((size_t)m->face_count, 0);
-        for (int32_t o = 0; o < osd_n; ++o)
-            if (approx[o]) level_face[adj->face_of_corner[bfr_corner[o]]] = 1;
+        auto clean_face = [&](int32_t f) {
+            for (int64_t d = adj->corner_start[f]; d < adj->corner_start[f + 1]; ++d)
+                if (base.IsVertexNonManifold(osd_of[m->face_vertices[d]])) return false;
+            return true;
+        };
+        for (int32_t o = 0; o < osd_n; ++o) {
+            if (!approx[o]) continue;
+            const int32_t v = vertex_of[o];
+            int64_t best = -1;
+            int best_count = -1;
+            for (int64_t i = adj->first[v]; i < adj->first[v + 1]; ++i) {
+                const int64_t c = adj->corner_of[i];
+                const int32_t f = adj->face_of_corner[c];
+                if (!clean_face(f)) continue;
+                int count = 0;
+                if (level_face[f]) {
+                    count = INT32_MAX;
+                } else {
+                    for (int64_t d = adj->corner_start[f]; d < adj->corner_start[f + 1]; ++d)
+                        count += approx[osd_of[m->face_vertices[d]]];
+                }
+                if (count > best_count) {
+                    best_count = count;
+                    best = c;
+                }
+            }
+            bfr_corner[o] = (int32_t)best;  // step 5 found a clean face, so best >= 0
+            level_face[adj->face_of_corner[best]] = 1;
+        }
         for (int32_t o = 0; o < osd_n; ++o) {
             if (approx[o] || bfr_corner[o] < 0 || level_face[adj->face_of_corner[bfr_corner[o]]]) continue;
             const int32_t v = vertex_of[o];
