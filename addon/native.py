@@ -86,7 +86,7 @@ class _Options(ctypes.Structure):
         ("quality", ctypes.c_int32), ("method", ctypes.c_int), ("tolerance", ctypes.c_double),
         ("max_iterations", ctypes.c_int32), ("progress", _PROGRESS), ("progress_user_data", ctypes.c_void_p),
         ("boundary_rule", ctypes.c_int), ("weight", ctypes.c_double), ("staged", ctypes.c_int32),
-        ("shape_parameter", ctypes.c_double), ("face_shape_parameters", _f32p),
+        ("shape_parameter", ctypes.c_double), ("face_shape_parameters", _f32p), ("threads", ctypes.c_int32),
     ]
 
 
@@ -295,7 +295,9 @@ def _enum(value, names, what):
 
 def _options(scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases=True, quality=3, method="AUTO",
              tolerance=1e-6, max_iterations=1000, progress=None, boundary_rule="SMOOTH", weight=0.0, staged=False,
-             shape_parameter=0.5, face_shape_parameters=None):
+             shape_parameter=0.5, face_shape_parameters=None, threads=0):
+    if not (isinstance(threads, (int, np.integer)) and threads >= 0):
+        raise PiaError("INVALID_ARGUMENT", f"threads must be 0 (all processors) or a positive integer, not {threads!r}")
     if not (isinstance(quality, (int, np.integer)) and 1 <= quality <= 10):
         raise PiaError("INVALID_ARGUMENT", f"quality must be an integer from 1 to 10, not {quality!r}")
     if not (tolerance > 0 and np.isfinite(tolerance)):
@@ -316,6 +318,7 @@ def _options(scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases=True, qu
     opts.weight = float(weight)
     opts.staged = 1 if staged else 0
     opts.shape_parameter = float(shape_parameter)
+    opts.threads = int(threads)
     keep = None
     if face_shape_parameters is not None:
         keep = np.ascontiguousarray(face_shape_parameters, dtype=np.float32).ravel()
@@ -467,12 +470,14 @@ def validate(mesh):
 
 
 def limit_stencils(mesh, scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases=True, quality=3, progress=None,
-                   boundary_rule="SMOOTH", shape_parameter=0.5, face_shape_parameters=None):
-    """The limit stencils of ``mesh`` (a :class:`Stencils`)."""
+                   boundary_rule="SMOOTH", shape_parameter=0.5, face_shape_parameters=None, threads=0):
+    """The limit stencils of ``mesh`` (a :class:`Stencils`).  ``threads``: 0 for
+    one per processor; the table does not depend on it."""
     lib = _library()
     opts, _keep = _options(scheme=scheme, boundary_smooth=boundary_smooth, use_creases=use_creases,
                            quality=quality, progress=progress, boundary_rule=boundary_rule,
-                           shape_parameter=shape_parameter, face_shape_parameters=face_shape_parameters)
+                           shape_parameter=shape_parameter, face_shape_parameters=face_shape_parameters,
+                           threads=threads)
     handle = ctypes.c_void_p()
     status = _Status()
     cm = mesh._c()
@@ -490,14 +495,15 @@ def solve(stencils, targets, **options):
 
 def interpolate(mesh, scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases=True, quality=3, method="AUTO",
                 tolerance=1e-6, max_iterations=1000, progress=None, boundary_rule="SMOOTH", weight=0.0,
-                staged=False, shape_parameter=0.5, face_shape_parameters=None):
+                staged=False, shape_parameter=0.5, face_shape_parameters=None, threads=0):
     """A cage whose limit surface passes through the mesh's vertices.
 
     scheme 'LOOP' (triangles only) takes boundary_rule 'SMOOTH' (OpenSubdiv's)
     or 'HOPPE' (the open-mesh paper's); 'DOO_SABIN' (closed meshes) takes
     shape_parameter in (0, 1) or face_shape_parameters (one per face);
     method 'WPIA' takes weight (0: estimated); staged=True solves the
-    boundary first, then the interior.
+    boundary first, then the interior.  ``threads``: 0 for one per
+    processor, 1 for the calling thread only; results do not depend on it.
 
     Returns ``(cage, report)``: cage is an (N, 3) float32 array of new
     control positions, report a :class:`Report`.  Stopping at
@@ -508,7 +514,7 @@ def interpolate(mesh, scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases
     """
     lib = _library()
     opts, _keep = _options(scheme, boundary_smooth, use_creases, quality, method, tolerance, max_iterations, progress,
-                           boundary_rule, weight, staged, shape_parameter, face_shape_parameters)
+                           boundary_rule, weight, staged, shape_parameter, face_shape_parameters, threads)
     cage = np.empty_like(mesh.positions)
     rep, history, unreachable = _report_buffers(opts.max_iterations, mesh.vertex_count)
     status = _Status()

@@ -177,12 +177,22 @@ typedef enum spia_boundary_smooth {
 } spia_boundary_smooth;
 
 typedef enum spia_method {
-    SPIA_METHOD_AUTO = 0,  /* CG where it applies, else CHEBYSHEV                     */
+    /* Chosen before the first step by how far one PIA step would shrink
+     * the residual (probed on a sample of rows): on smooth targets, where it
+     * shrinks to under 0.15 of itself, CG where it applies, else CHEBYSHEV;
+     * on rough ones (scans) GS-PIA where every vertex has a positive weight
+     * on itself, else CHEBYSHEV.  spia_report.method says which. */
+    SPIA_METHOD_AUTO = 0,
     SPIA_METHOD_PIA = 1,   /* V += P - L V (Jacobi-like, the papers' PIA)            */
-    SPIA_METHOD_GS_PIA = 2, /* Gauss-Seidel PIA: vertex by vertex, in place          */
+    /* Gauss-Seidel PIA: vertex by vertex, in place, one stencil product per
+     * iteration.  The error it reports after an iteration (history,
+     * progress) is the largest one met during the sweep, just before each
+     * vertex moved; the full residual is computed when that reaches the
+     * tolerance, and the stopping test always uses the full residual. */
+    SPIA_METHOD_GS_PIA = 2,
     /* PIA with Chebyshev acceleration over the spectrum of L, estimated from
      * the first PIA steps: one stencil product per iteration like PIA, and
-     * far fewer iterations on rough targets.  What AUTO uses. */
+     * far fewer iterations on rough targets. */
     SPIA_METHOD_CHEBYSHEV = 3,
     /* Weighted PIA: V += w (P - L V), with w = spia_options.weight or, when
      * that is 0, w = 2 / (lambda_min + lambda_max) estimated by power
@@ -191,8 +201,7 @@ typedef enum spia_method {
     /* Conjugate gradients on S V = D^-1 P where L = D S with D a positive
      * diagonal and S symmetric (closed meshes of every scheme here; for Loop
      * and Doo-Sabin the papers prove S positive definite; a breakdown falls
-     * back to CHEBYSHEV); refused where L has no such form (boundaries).
-     * What AUTO uses where it applies. */
+     * back to CHEBYSHEV); refused where L has no such form (boundaries). */
     SPIA_METHOD_CG = 5
 } spia_method;
 
@@ -227,6 +236,11 @@ typedef struct spia_options {
      * [0.5], unless face_shape_parameters (face_count floats) is given. */
     double shape_parameter;
     const float *face_shape_parameters;
+    /* Threads for building stencils and for the solvers' sparse products:
+     * 0 = one per processor the system reports, 1 = the calling thread
+     * only.  Results do not depend on it: every row and every sum is
+     * computed in the same order whatever the count. [0] */
+    int32_t threads;
 } spia_options;
 
 /* The defaults, as a value (the same as an all-zero struct). */

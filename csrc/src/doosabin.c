@@ -64,7 +64,7 @@ static spia_result check_input(const spia_mesh *m, const spia_adjacency *a, cons
     return SPIA_OK;
 }
 
-spia_result spia__doosabin_limit_stencils(const spia_mesh *m, const spia_adjacency *a, const spia_options *o,
+spia_result spia__doosabin_limit_stencils(const spia_mesh *m, spia_adjacency *a, const spia_options *o,
                                           spia_stencils **out, spia_status *status) {
     *out = NULL;
     spia_result r = check_input(m, a, o, status);

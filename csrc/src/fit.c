@@ -456,7 +456,7 @@ static spia_result nothing_to_fit(spia_status *status, const char *what, double 
 }
 
 static void evaluate(const spia_scan *scan, fit_buffers *b, const double *V, int64_t S, double diagonal,
-                     double *query_seconds) {
+                     int threads, double *query_seconds) {
     const double t0 = spia__now();
     if (b->evaluated) memcpy(b->X_prev, b->X, sizeof(double) * 3 * (size_t)S);
     rows_apply(b->M, V, b->X);
@@ -468,7 +468,7 @@ static void evaluate(const spia_scan *scan, fit_buffers *b, const double *V, int
             b->radius[s] = (float)((b->d[s] + moved) * (1.0 + 1e-5) + 1e-7 * diagonal);
         }
     spia__scan_closest_points_double(scan, S, b->X, b->evaluated ? b->radius : NULL, b->T, b->N, b->d, NULL,
-                                     b->on_boundary);
+                                     b->on_boundary, threads);
     b->evaluated = 1;
     *query_seconds += spia__now() - t0;
 }
@@ -554,7 +554,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
             r = spia__fail(status, SPIA_ERROR_INTERNAL, -1, "the samples do not match the cage's faces");
             goto done;
         }
-        evaluate(scan, &b, b.V, S, diagonal, &report->query_seconds);
+        evaluate(scan, &b, b.V, S, diagonal, opt.threads, &report->query_seconds);
         report->before = distance_stats(b.d, S, cutoff_abs, diagonal, b.scratch);
         if (report->before.ignored >= S) {
             r = nothing_to_fit(status, "sample of the cage's limit surface", fo.cutoff);
@@ -578,7 +578,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         }
         t0 = spia__now();
         spia_stencils_apply(b.L, b.V0, Y);
-        spia__scan_closest_points_double(scan, n, Y, NULL, closest, NULL, dist, NULL, edge);
+        spia__scan_closest_points_double(scan, n, Y, NULL, closest, NULL, dist, NULL, edge, opt.threads);
         report->query_seconds += spia__now() - t0;
         int32_t pulled = 0;
         for (int32_t v = 0; v < n; ++v) {
@@ -651,7 +651,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
             cutoff_weights(b.d, b.on_boundary, S, cutoff_abs, b.wts);
             report->iterations += least_squares_round(&f, b.T, b.V0, b.V, fo.solver_iterations, CG_TOLERANCE, b.work, b.precond);
             report->solve_seconds += spia__now() - t0;
-            evaluate(scan, &b, b.V, S, diagonal, &report->query_seconds);
+            evaluate(scan, &b, b.V, S, diagonal, opt.threads, &report->query_seconds);
             const double mean = mean_within(b.d, S, cutoff_abs);
             report->rounds = round;
             if (report->history && round < report->history_capacity) {
@@ -688,7 +688,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
 
     /* Distances of the cage written. */
     if (S > 0) {
-        evaluate(scan, &b, b.best, S, diagonal, &report->query_seconds);
+        evaluate(scan, &b, b.best, S, diagonal, opt.threads, &report->query_seconds);
         report->after = distance_stats(b.d, S, cutoff_abs, diagonal, b.scratch);
         if (report->vertex_distances) {
             float *vd = report->vertex_distances;
@@ -713,7 +713,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         }
         t0 = spia__now();
         spia_stencils_apply(b.L, b.best, Y);
-        spia__scan_closest_points_double(scan, n, Y, NULL, NULL, NULL, dist, NULL, NULL);
+        spia__scan_closest_points_double(scan, n, Y, NULL, NULL, NULL, dist, NULL, NULL, opt.threads);
         report->query_seconds += spia__now() - t0;
         report->after = distance_stats(dist, n, cutoff_abs, diagonal, scratch);
         report->sample_count = n;

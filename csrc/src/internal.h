@@ -56,6 +56,9 @@ double spia__now(void);
 /* A table with room for `rows` rows and `nnz` weights (offsets zeroed). */
 spia_stencils *spia__stencils_alloc(int32_t rows, int64_t nnz);
 
+/* Gives back the room of the arrays beyond nnz weights. */
+void spia__stencils_shrink(spia_stencils *s);
+
 /* Sorts the column indices of every row, adds up repeated columns and drops
  * exact zeros, compacting the arrays in place. */
 void spia__stencils_canonicalize(spia_stencils *s);
@@ -71,11 +74,14 @@ typedef struct spia_adjacency {
     int64_t *corner_start;   /* face_count + 1 */
     int32_t *face_of_corner; /* corner_count   */
     int64_t *first;          /* vertex_count + 1 */
-    int64_t *corner_of;      /* corner_count   */
+    int32_t *corner_of;      /* corner_count (at most INT32_MAX corners, as in Blender) */
 } spia_adjacency;
 
 spia_result spia__adjacency_build(const spia_mesh *mesh, spia_adjacency *adj, spia_status *status);
 void spia__adjacency_free(spia_adjacency *adj);
+/* Frees face_of_corner, first and corner_of (a builder that no longer needs
+ * them makes room for the table); corner_start stays. */
+void spia__adjacency_release_vertex_lists(spia_adjacency *adj);
 
 /* The vertices before and after corner c within its face. */
 static inline int32_t spia__corner_prev(const spia_mesh *m, const spia_adjacency *a, int64_t c) {
@@ -101,12 +107,14 @@ int32_t spia__max_corners_per_vertex(const spia_adjacency *adj);
 int32_t spia__vertex_neighbours(const spia_mesh *mesh, const spia_adjacency *adj, int32_t v, int32_t *nb,
                                 int32_t *faces_on_edge, int32_t cap);
 
-/* Fills s->boundary and s->boundary_count. */
-spia_result spia__stencils_mark_boundary(spia_stencils *s, const spia_mesh *mesh, const spia_adjacency *adj);
+/* Fills s->boundary and s->boundary_count from the boundary vertices
+ * (spia__boundary_vertices). */
+void spia__stencils_mark_boundary(spia_stencils *s, const unsigned char *on_boundary);
 
 /* Limit stencils through OpenSubdiv (catmark_osd.cpp): Catmull-Clark exactly
- * as Blender's modifier, and Loop with OpenSubdiv's boundary rules. */
-spia_result spia__osd_limit_stencils(const spia_mesh *mesh, const spia_adjacency *adj, const spia_options *options,
+ * as Blender's modifier, and Loop with OpenSubdiv's boundary rules.  Frees
+ * the adjacency's vertex lists once it no longer needs them. */
+spia_result spia__osd_limit_stencils(const spia_mesh *mesh, spia_adjacency *adj, const spia_options *options,
                                      spia_stencils **out, spia_status *status);
 
 /* Loop refinement with every vertex at its limit (OpenSubdiv's rules, in
@@ -121,14 +129,14 @@ spia_result spia__loop_hoppe_refine_limit(const spia_mesh *mesh, const spia_opti
 /* Two-phase Doo-Sabin (doosabin.c): limit stencils (paper eq. 2) and
  * refinement (phase one, then regular Doo-Sabin); counts only when
  * positions is NULL. */
-spia_result spia__doosabin_limit_stencils(const spia_mesh *mesh, const spia_adjacency *adj,
+spia_result spia__doosabin_limit_stencils(const spia_mesh *mesh, spia_adjacency *adj,
                                           const spia_options *options, spia_stencils **out, spia_status *status);
 spia_result spia__doosabin_refine(const spia_mesh *mesh, const spia_options *options, int32_t levels,
                                   int32_t *vertex_count, int32_t *face_count, int64_t *corner_count, float *positions,
                                   int32_t *face_sizes, int32_t *face_vertices, spia_status *status);
 
 /* Loop limit stencils with Hoppe et al.'s boundary rules (loop.c). */
-spia_result spia__loop_hoppe_limit_stencils(const spia_mesh *mesh, const spia_adjacency *adj,
+spia_result spia__loop_hoppe_limit_stencils(const spia_mesh *mesh, spia_adjacency *adj,
                                             const spia_options *options, spia_stencils **out, spia_status *status);
 
 /* Rejects Loop input that is not all triangles, naming how many faces are not. */
@@ -140,10 +148,11 @@ spia_result spia__osd_surface_stencils(const spia_mesh *mesh, const spia_adjacen
 
 /* Closest points for points in double (scan.c); no argument checks.  radius,
  * when not NULL, bounds each point's distance from above (a search hint;
- * a bound that proves too small falls back to a full search). */
+ * a bound that proves too small falls back to a full search).  threads as
+ * spia_options.threads, resolved (at least 1). */
 void spia__scan_closest_points_double(const spia_scan *scan, int64_t count, const double *points, const float *radius,
                                       float *closest, float *normals, float *distances, int32_t *faces,
-                                      uint8_t *on_boundary);
+                                      uint8_t *on_boundary, int threads);
 
 #ifdef __cplusplus
 }

@@ -4,8 +4,8 @@
 #include <stdlib.h>
 
 /* Scheme dispatch: one line per scheme and boundary rule. */
-typedef spia_result (*stencil_builder)(const spia_mesh *, const spia_adjacency *, const spia_options *,
-                                       spia_stencils **, spia_status *);
+typedef spia_result (*stencil_builder)(const spia_mesh *, spia_adjacency *, const spia_options *, spia_stencils **,
+                                       spia_status *);
 static stencil_builder builder_for(const spia_options *o) {
     switch (o->scheme) {
     case SPIA_SCHEME_CATMULL_CLARK: return spia__osd_limit_stencils;
@@ -34,12 +34,17 @@ spia_result spia_limit_stencils_create(const spia_mesh *mesh, const spia_options
     spia_adjacency adj;
     r = spia__adjacency_build(mesh, &adj, status);
     if (r != SPIA_OK) return r;
-    r = builder_for(&opt)(mesh, &adj, &opt, out, status);
-    if (r == SPIA_OK && spia__stencils_mark_boundary(*out, mesh, &adj) != SPIA_OK) {
-        spia_stencils_free(*out);
-        *out = NULL;
-        r = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory classifying boundary vertices");
+    /* Boundary vertices first: the builder may free the adjacency's vertex
+     * lists to make room for the table. */
+    unsigned char *on_boundary = (unsigned char *)calloc((size_t)mesh->vertex_count + 1, 1);
+    if (!on_boundary || spia__boundary_vertices(mesh, &adj, on_boundary) != SPIA_OK) {
+        free(on_boundary);
+        spia__adjacency_free(&adj);
+        return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory classifying boundary vertices");
     }
+    r = builder_for(&opt)(mesh, &adj, &opt, out, status);
+    if (r == SPIA_OK) spia__stencils_mark_boundary(*out, on_boundary);
+    free(on_boundary);
     spia__adjacency_free(&adj);
     if (r == SPIA_OK && cancelled(&opt)) {
         spia_stencils_free(*out);

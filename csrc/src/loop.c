@@ -77,7 +77,7 @@ static int32_t fan_count(const spia_mesh *m, const spia_adjacency *a, int32_t v,
     return fans;
 }
 
-spia_result spia__loop_hoppe_limit_stencils(const spia_mesh *m, const spia_adjacency *a, const spia_options *opt,
+spia_result spia__loop_hoppe_limit_stencils(const spia_mesh *m, spia_adjacency *a, const spia_options *opt,
                                             spia_stencils **out, spia_status *status) {
     (void)opt;
     *out = NULL;

@@ -439,8 +439,8 @@ static void closest_one(const spia_scan *s, const double p[3], float radius, int
 
 void spia__scan_closest_points_double(const spia_scan *s, int64_t count, const double *points, const float *radius,
                                       float *closest, float *normals, float *distances, int32_t *faces,
-                                      uint8_t *on_boundary) {
-#pragma omp parallel for schedule(dynamic, 256)
+                                      uint8_t *on_boundary, int threads) {
+#pragma omp parallel for schedule(dynamic, 256) num_threads(threads > 0 ? threads : 1)
     for (int64_t i = 0; i < count; ++i)
         closest_one(s, points + 3 * i, radius ? radius[i] : INFINITY, i, closest, normals, distances, faces,
                     on_boundary);

@@ -17,9 +17,13 @@
  * iterates, and so it converges.
  *
  * CG is conjugate gradients on the symmetrized system where the limit
- * matrix allows it (closed meshes, see step_cg).  AUTO uses CG where it
- * applies and else Chebyshev-accelerated PIA (see step_chebyshev), after a
- * few PIA steps that estimate the spectrum.
+ * matrix allows it (closed meshes, see step_cg).  AUTO picks CG or
+ * Chebyshev-accelerated PIA (see step_chebyshev) for smooth targets and
+ * GS-PIA for rough ones (see choose_auto).
+ *
+ * Products with L are shared among threads by rows; sums over rows are
+ * taken per block of BLOCK rows and the blocks added in order, so results
+ * do not depend on the thread count.  GS-PIA's sweep is serial.
  *
  * All stop when max_i |P_i - (L V)_i| <= tolerance * diagonal, at
  * max_iterations, when the error has not fallen for STAGNATION_WINDOW
@@ -43,6 +47,9 @@ enum {
 #define CHEB_A_MIN 0.05
 #define CHEB_A_MAX 0.25
 #define DIVERGENCE_FACTOR 1e4 /* error this many times the initial one */
+/* See choose_auto. */
+#define AUTO_SMOOTH 0.15
+enum { AUTO_PROBE_ROWS = 4096 };
 /* See mark_stuck. */
 #define DRIFT_FACTOR 50.0
 
@@ -50,7 +57,7 @@ typedef struct solver_state {
     const spia_stencils *L;
     int32_t n;
     spia_method method;
-    double *P; /* targets              */
+    const float *P; /* targets (the caller's) */
     double *V; /* current cage         */
     double *R; /* residual P - L V     */
     double *diag;
@@ -68,56 +75,109 @@ typedef struct solver_state {
     double *T;     /* L p */
     double cg_rr[3];
     int32_t cg_steps;
+    int threads;
+    int diag_positive; /* every L_ii > 0 (GS-PIA applies) */
+    /* Per block of BLOCK rows: partial sums, added up in block order so that
+     * the result does not depend on the number of threads. */
+    int64_t blocks;
+    double *partial; /* blocks * PARTS */
 } solver_state;
+
+enum { BLOCK = 2048, PARTS = 4, PARALLEL_ROWS = 50000 };
+
+/* Sums column `part` of the per-block partials in block order. */
+static double block_sum(const solver_state *s, int part) {
+    double t = 0.0;
+    for (int64_t b = 0; b < s->blocks; ++b) t += s->partial[PARTS * b + part];
+    return t;
+}
+static double block_max(const solver_state *s, int part) {
+    double t = 0.0;
+    for (int64_t b = 0; b < s->blocks; ++b) {
+        const double x = s->partial[PARTS * b + part];
+        if (x > t || x != x) t = x != x ? NAN : x;
+    }
+    return t;
+}
 
 static inline int active(const solver_state *s, int32_t r) { return !s->stuck[r] && !s->frozen[r]; }
 
 /* Statistics of R: returns the max distance over all rows and writes the
- * mean over all rows and the max over active rows. */
-static double residual_stats(solver_state *s, double *mean, double *max_active) {
-    double maxd = 0.0, maxa = 0.0, sum = 0.0, norm2 = 0.0;
-    for (int32_t r = 0; r < s->n; ++r) {
-        const double *q = s->R + 3 * (int64_t)r;
-        double d = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]);
-        if (d > maxd || d != d) maxd = d != d ? NAN : d;
-        if (active(s, r)) {
-            if (d > maxa || d != d) maxa = d != d ? NAN : d;
-            norm2 += d * d;
+ * mean over all rows and the max over active rows.  With `product`, first
+ * R = P - L V. */
+static double residual_pass(solver_state *s, int product, double *mean, double *max_active) {
+    const int32_t n = s->n;
+#pragma omp parallel for schedule(static) num_threads(s->threads)
+    for (int64_t b = 0; b < s->blocks; ++b) {
+        double maxd = 0.0, maxa = 0.0, sum = 0.0, norm2 = 0.0;
+        const int32_t end = (int32_t)((b + 1) * BLOCK < n ? (b + 1) * BLOCK : n);
+        for (int32_t r = (int32_t)(b * BLOCK); r < end; ++r) {
+            double *q = s->R + 3 * (int64_t)r;
+            if (product) {
+                double lv[3];
+                spia__row_product(s->L, r, s->V, lv);
+                for (int a = 0; a < 3; ++a) q[a] = s->P[3 * (int64_t)r + a] - lv[a];
+            }
+            double d = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]);
+            if (d > maxd || d != d) maxd = d != d ? NAN : d;
+            if (active(s, r)) {
+                if (d > maxa || d != d) maxa = d != d ? NAN : d;
+                norm2 += d * d;
+            }
+            sum += d;
         }
-        sum += d;
+        double *p = s->partial + PARTS * b;
+        p[0] = maxd;
+        p[1] = maxa;
+        p[2] = sum;
+        p[3] = norm2;
     }
-    *mean = s->n ? sum / s->n : 0.0;
-    *max_active = maxa;
-    s->norm2 = norm2;
-    return maxd;
+    *mean = n ? block_sum(s, 2) / n : 0.0;
+    *max_active = block_max(s, 1);
+    s->norm2 = block_sum(s, 3);
+    return block_max(s, 0);
+}
+
+static double residual_stats(solver_state *s, double *mean, double *max_active) {
+    return residual_pass(s, 0, mean, max_active);
 }
 
 /* R = P - L V, then its statistics as residual_stats. */
 static double residual(solver_state *s, double *mean, double *max_active) {
-    for (int32_t r = 0; r < s->n; ++r) {
-        double lv[3];
-        spia__row_product(s->L, r, s->V, lv);
-        for (int a = 0; a < 3; ++a) s->R[3 * (int64_t)r + a] = s->P[3 * (int64_t)r + a] - lv[a];
-    }
-    return residual_stats(s, mean, max_active);
+    return residual_pass(s, 1, mean, max_active);
 }
 
 static void step_richardson(solver_state *s, double w) {
+#pragma omp parallel for schedule(static) num_threads(s->threads)
     for (int32_t r = 0; r < s->n; ++r)
         if (active(s, r))
             for (int a = 0; a < 3; ++a) s->V[3 * (int64_t)r + a] += w * s->R[3 * (int64_t)r + a];
 }
 
-static void step_gs_pia(solver_state *s) {
+/* One Gauss-Seidel sweep, in vertex order (inherently serial).  Returns the
+ * largest residual met on the way, |P_i - (L V)_i| over active rows just
+ * before row i moves: the error as the sweep found it, which costs no extra
+ * product (the residual after the sweep is smaller where the sweep
+ * converges, and is computed when this says the tolerance is reached). */
+static double step_gs_pia(solver_state *s) {
+    double worst = 0.0;
     for (int32_t r = 0; r < s->n; ++r) {
         if (!active(s, r)) continue;
         double lv[3];
         spia__row_product(s->L, r, s->V, lv);
-        const double *t = s->P + 3 * (int64_t)r;
+        const float *t = s->P + 3 * (int64_t)r;
         double *v = s->V + 3 * (int64_t)r;
         const double inv = 1.0 / s->diag[r];
-        for (int a = 0; a < 3; ++a) v[a] += (t[a] - lv[a]) * inv;
+        double d2 = 0.0;
+        for (int a = 0; a < 3; ++a) {
+            const double g = t[a] - lv[a];
+            d2 += g * g;
+            v[a] += g * inv;
+        }
+        const double d = sqrt(d2);
+        if (d > worst || d != d) worst = d != d ? NAN : d;
     }
+    return worst;
 }
 
 /* Chebyshev semi-iteration for L V = P with the spectrum of L taken as
@@ -140,6 +200,7 @@ static void step_chebyshev(solver_state *s) {
     } else {
         s->cheb_rho = 1.0 / sigma;
     }
+#pragma omp parallel for schedule(static) num_threads(s->threads)
     for (int32_t r = 0; r < s->n; ++r)
         for (int a = 0; a < 3; ++a) {
             const int64_t k = 3 * (int64_t)r + a;
@@ -166,7 +227,7 @@ static double entry(const spia_stencils *L, int32_t j, int32_t r) {
  * along every stencil entry, so c is propagated from 1 at one vertex of
  * each connected part (breadth first) and then every entry is checked.
  * work holds rows ints.  Returns 0 if there is no such scaling. */
-static int symmetric_scaling(const spia_stencils *L, double *c, int32_t *queue) {
+static int symmetric_scaling(const spia_stencils *L, double *c, int32_t *queue, int threads) {
     for (int32_t r = 0; r < L->rows; ++r) c[r] = 0.0;
     for (int32_t root = 0; root < L->rows; ++root) {
         if (c[root] != 0.0) continue;
@@ -185,14 +246,16 @@ static int symmetric_scaling(const spia_stencils *L, double *c, int32_t *queue) 
             }
         }
     }
+    int symmetric = 1;
+#pragma omp parallel for schedule(static) num_threads(threads) reduction(&& : symmetric)
     for (int32_t r = 0; r < L->rows; ++r)
-        for (int64_t k = L->offsets[r]; k < L->offsets[r + 1]; ++k) {
+        for (int64_t k = L->offsets[r]; k < L->offsets[r + 1] && symmetric; ++k) {
             const int32_t j = L->indices[k];
             if (j == r) continue;
             const double a = L->weights[k] / c[r], b = entry(L, j, r) / c[j];
-            if (!(fabs(a - b) <= 1e-12 * fabs(a))) return 0;
+            if (!(fabs(a - b) <= 1e-12 * fabs(a))) symmetric = 0;
         }
-    return 1;
+    return symmetric;
 }
 
 /* Conjugate gradients on S V = c^-1 P, S = c^-1 L symmetric (positive
@@ -205,45 +268,66 @@ static int step_cg(solver_state *s) {
     const int32_t n = s->n;
     const double *c = s->scale;
     if (s->cg_steps == 0) {
-        for (int a = 0; a < 3; ++a) s->cg_rr[a] = 0.0;
-        for (int32_t r = 0; r < n; ++r)
-            for (int a = 0; a < 3; ++a) {
-                const int64_t k = 3 * (int64_t)r + a;
-                const double z = active(s, r) ? s->R[k] / c[r] : 0.0;
-                s->D[k] = z;
-                s->cg_rr[a] += z * z;
-            }
+#pragma omp parallel for schedule(static) num_threads(s->threads)
+        for (int64_t b = 0; b < s->blocks; ++b) {
+            double zz[3] = {0.0, 0.0, 0.0};
+            const int32_t end = (int32_t)((b + 1) * BLOCK < n ? (b + 1) * BLOCK : n);
+            for (int32_t r = (int32_t)(b * BLOCK); r < end; ++r)
+                for (int a = 0; a < 3; ++a) {
+                    const int64_t k = 3 * (int64_t)r + a;
+                    const double z = active(s, r) ? s->R[k] / c[r] : 0.0;
+                    s->D[k] = z;
+                    zz[a] += z * z;
+                }
+            for (int a = 0; a < 3; ++a) s->partial[PARTS * b + a] = zz[a];
+        }
+        for (int a = 0; a < 3; ++a) s->cg_rr[a] = block_sum(s, a);
     }
-    double pq[3] = {0.0, 0.0, 0.0};
-    for (int32_t r = 0; r < n; ++r) {
-        spia__row_product(s->L, r, s->D, s->T + 3 * (int64_t)r);
-        if (active(s, r))
-            for (int a = 0; a < 3; ++a) pq[a] += s->D[3 * (int64_t)r + a] * s->T[3 * (int64_t)r + a] / c[r];
+#pragma omp parallel for schedule(static) num_threads(s->threads)
+    for (int64_t b = 0; b < s->blocks; ++b) {
+        double pq[3] = {0.0, 0.0, 0.0};
+        const int32_t end = (int32_t)((b + 1) * BLOCK < n ? (b + 1) * BLOCK : n);
+        for (int32_t r = (int32_t)(b * BLOCK); r < end; ++r) {
+            spia__row_product(s->L, r, s->D, s->T + 3 * (int64_t)r);
+            if (active(s, r))
+                for (int a = 0; a < 3; ++a) pq[a] += s->D[3 * (int64_t)r + a] * s->T[3 * (int64_t)r + a] / c[r];
+        }
+        for (int a = 0; a < 3; ++a) s->partial[PARTS * b + a] = pq[a];
     }
-    double alpha[3], rr[3] = {0.0, 0.0, 0.0};
+    double alpha[3], beta[3];
     for (int a = 0; a < 3; ++a) {
+        const double pq = block_sum(s, a);
         if (s->cg_rr[a] == 0.0) {
             alpha[a] = 0.0; /* this coordinate is solved */
             continue;
         }
-        if (!(pq[a] > 0.0)) return 0;
-        alpha[a] = s->cg_rr[a] / pq[a];
+        if (!(pq > 0.0)) return 0;
+        alpha[a] = s->cg_rr[a] / pq;
     }
+#pragma omp parallel for schedule(static) num_threads(s->threads)
+    for (int64_t b = 0; b < s->blocks; ++b) {
+        double rr[3] = {0.0, 0.0, 0.0};
+        const int32_t end = (int32_t)((b + 1) * BLOCK < n ? (b + 1) * BLOCK : n);
+        for (int32_t r = (int32_t)(b * BLOCK); r < end; ++r)
+            for (int a = 0; a < 3; ++a) {
+                const int64_t k = 3 * (int64_t)r + a;
+                s->V[k] += alpha[a] * s->D[k];
+                s->R[k] -= alpha[a] * s->T[k];
+                if (active(s, r)) rr[a] += (s->R[k] / c[r]) * (s->R[k] / c[r]);
+            }
+        for (int a = 0; a < 3; ++a) s->partial[PARTS * b + a] = rr[a];
+    }
+    for (int a = 0; a < 3; ++a) {
+        const double rr = block_sum(s, a);
+        beta[a] = s->cg_rr[a] > 0.0 ? rr / s->cg_rr[a] : 0.0;
+        s->cg_rr[a] = rr;
+    }
+#pragma omp parallel for schedule(static) num_threads(s->threads)
     for (int32_t r = 0; r < n; ++r)
         for (int a = 0; a < 3; ++a) {
             const int64_t k = 3 * (int64_t)r + a;
-            s->V[k] += alpha[a] * s->D[k];
-            s->R[k] -= alpha[a] * s->T[k];
-            if (active(s, r)) rr[a] += (s->R[k] / c[r]) * (s->R[k] / c[r]);
+            s->D[k] = active(s, r) ? s->R[k] / c[r] + beta[a] * s->D[k] : 0.0;
         }
-    for (int a = 0; a < 3; ++a) {
-        const double beta = s->cg_rr[a] > 0.0 ? rr[a] / s->cg_rr[a] : 0.0;
-        s->cg_rr[a] = rr[a];
-        for (int32_t r = 0; r < n; ++r) {
-            const int64_t k = 3 * (int64_t)r + a;
-            s->D[k] = active(s, r) ? s->R[k] / c[r] + beta * s->D[k] : 0.0;
-        }
-    }
     ++s->cg_steps;
     return 1;
 }
@@ -310,7 +394,7 @@ static int32_t mark_stuck(solver_state *s, double threshold) {
         if (!active(s, r)) continue;
         const double *q = s->R + 3 * (int64_t)r;
         double *v = s->V + 3 * (int64_t)r;
-        const double *p = s->P + 3 * (int64_t)r;
+        const float *p = s->P + 3 * (int64_t)r;
         double d = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]);
         double moved = sqrt((v[0] - p[0]) * (v[0] - p[0]) + (v[1] - p[1]) * (v[1] - p[1]) + (v[2] - p[2]) * (v[2] - p[2]));
         if ((d > threshold && d > 0.5 * s->initial[r]) || moved > DRIFT_FACTOR * initial_max) {
@@ -322,7 +406,7 @@ static int32_t mark_stuck(solver_state *s, double threshold) {
     return count;
 }
 
-static double bbox_diagonal(const double *P, int32_t n) {
+static double bbox_diagonal(const float *P, int32_t n) {
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (int32_t i = 0; i < n; ++i)
         for (int a = 0; a < 3; ++a) {
@@ -346,6 +430,65 @@ static void report_reset(spia_report *rep) {
     rep->unreachable = flags;
 }
 
+/* The search direction D of Chebyshev, WPIA and CG; returns 0 when out of
+ * memory. */
+static int krylov_arrays(solver_state *s) {
+    if (!s->D) s->D = (double *)malloc(sizeof(double) * 3 * (size_t)s->n);
+    return s->D != NULL;
+}
+
+/* CG's arrays and scaling (see symmetric_scaling): 1 if L has the D S
+ * form, 0 if not, -1 when out of memory. */
+static int cg_scaling(solver_state *s) {
+    if (!krylov_arrays(s)) return -1;
+    if (!s->scale) s->scale = (double *)malloc(sizeof(double) * (size_t)s->n);
+    if (!s->T) s->T = (double *)malloc(sizeof(double) * 3 * (size_t)s->n);
+    if (!s->scale || !s->T) return -1;
+    return symmetric_scaling(s->L, s->scale, (int32_t *)s->T, s->threads);
+}
+
+/* How much a PIA step would shrink the current residual R, without taking
+ * it: |R - L R| / |R| in the 2-norm over every stride-th active row, the
+ * stride chosen so that some thousands of rows are looked at (a small part
+ * of one product with L on large meshes). */
+static double pia_contraction_probe(const solver_state *s) {
+    const int32_t stride = s->n > 4 * AUTO_PROBE_ROWS ? s->n / AUTO_PROBE_ROWS : 1;
+    double num = 0.0, den = 0.0;
+    for (int32_t r = 0; r < s->n; r += stride) {
+        if (!active(s, r)) continue;
+        double lr[3];
+        spia__row_product(s->L, r, s->R, lr);
+        for (int a = 0; a < 3; ++a) {
+            const double q = s->R[3 * (int64_t)r + a];
+            num += (q - lr[a]) * (q - lr[a]);
+            den += q * q;
+        }
+    }
+    return den > 0.0 ? sqrt(num / den) : 0.0;
+}
+
+/* AUTO's choice before its first step, from pia_contraction_probe.  A
+ * contraction below AUTO_SMOOTH means a smooth
+ * target, whose error lies in modes PIA-like methods remove in a few steps
+ * and on which Gauss-Seidel overshoots: CG where L = D S, else Chebyshev.
+ * Otherwise (rough targets, scans) GS-PIA, which needed the fewest
+ * products on every scan measured (bench/bench_perf_dev.py), if every
+ * L_ii > 0; else Chebyshev.  Returns 0 when out of memory. */
+static int choose_auto(solver_state *s, double contraction) {
+    if (contraction < AUTO_SMOOTH) {
+        const int cg = cg_scaling(s);
+        if (cg < 0) return 0;
+        s->method = cg ? SPIA_METHOD_CG : SPIA_METHOD_CHEBYSHEV;
+        return 1;
+    }
+    if (s->diag_positive) {
+        s->method = SPIA_METHOD_GS_PIA;
+        return 1;
+    }
+    s->method = SPIA_METHOD_CHEBYSHEV;
+    return krylov_arrays(s);
+}
+
 /* Iterates on the active rows until their max error is at most threshold.
  * *it counts iterations over all stages (for the history and the limit). */
 static spia_result run_stage(solver_state *s, const spia_options *opt, double threshold, double scale, int32_t *it,
@@ -361,7 +504,14 @@ static spia_result run_stage(solver_state *s, const spia_options *opt, double th
     s->cg_steps = 0;
     while (!(err <= threshold)) {
         if (*it >= opt->max_iterations) return SPIA_MAX_ITERATIONS;
+        if (s->method == SPIA_METHOD_AUTO) {
+            const double probe = pia_contraction_probe(s);
+            if (!choose_auto(s, probe))
+                return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver");
+            if (report) report->method = s->method;
+        }
         int residual_kept = 0;
+        double sweep_error = -1.0;
         switch (s->method) {
         case SPIA_METHOD_CG:
             if (step_cg(s)) {
@@ -374,7 +524,7 @@ static spia_result run_stage(solver_state *s, const spia_options *opt, double th
             step_richardson(s, 1.0);
             break;
         case SPIA_METHOD_GS_PIA:
-            step_gs_pia(s);
+            sweep_error = step_gs_pia(s);
             break;
         case SPIA_METHOD_WPIA:
             step_richardson(s, s->weight);
@@ -402,7 +552,13 @@ static spia_result run_stage(solver_state *s, const spia_options *opt, double th
         }
         ++*it;
         ++steps;
-        err_all = residual_kept ? residual_stats(s, &mean, &err) : residual(s, &mean, &err);
+        if (sweep_error > threshold && *it - it_best < STAGNATION_WINDOW) {
+            /* GS-PIA short of the tolerance and not about to look for
+             * stuck rows: the sweep's own estimate will do */
+            err = err_all = sweep_error;
+        } else {
+            err_all = residual_kept ? residual_stats(s, &mean, &err) : residual(s, &mean, &err);
+        }
         contraction = prev_norm2 > 0.0 ? sqrt(s->norm2 / prev_norm2) : 0.0;
         prev_norm2 = s->norm2;
         if (report && report->history && *it <= report->history_capacity) {
@@ -462,42 +618,49 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
     s.method = opt.method;
     s.L = L;
     s.n = n;
-    s.P = (double *)malloc(sizeof(double) * 3 * (size_t)n);
+    s.P = targets;
     s.V = (double *)malloc(sizeof(double) * 3 * (size_t)n);
     s.R = (double *)malloc(sizeof(double) * 3 * (size_t)n);
     s.diag = (double *)malloc(sizeof(double) * (size_t)n);
     s.initial = (double *)malloc(sizeof(double) * (size_t)n);
     s.stuck = (unsigned char *)calloc((size_t)n, 1);
     s.frozen = (unsigned char *)calloc((size_t)n, 1);
-    s.D = (double *)malloc(sizeof(double) * 3 * (size_t)n);
-    if (s.method == SPIA_METHOD_AUTO || s.method == SPIA_METHOD_CG) {
-        s.scale = (double *)malloc(sizeof(double) * (size_t)n);
-        s.T = (double *)malloc(sizeof(double) * 3 * (size_t)n);
-    }
-    if (!s.P || !s.V || !s.R || !s.diag || !s.initial || !s.stuck || !s.frozen || !s.D ||
-        ((s.method == SPIA_METHOD_AUTO || s.method == SPIA_METHOD_CG) && (!s.scale || !s.T))) {
+    /* Threads pay off on large tables only (a parallel region costs
+     * microseconds, more on a busy machine); the blocks, and so the
+     * results, are the same either way. */
+    s.threads = opt.threads > 0 && n >= PARALLEL_ROWS ? opt.threads : 1;
+    s.blocks = ((int64_t)n + BLOCK - 1) / BLOCK;
+    s.partial = (double *)malloc(sizeof(double) * PARTS * (size_t)s.blocks);
+    if (!s.partial) {
         res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
         goto done;
     }
-    for (int64_t k = 0; k < 3 * (int64_t)n; ++k) s.P[k] = s.V[k] = (double)targets[k];
-    /* AUTO: conjugate gradients where L is a positive diagonal times a
-     * symmetric matrix (closed meshes), else Chebyshev. */
-    if (s.method == SPIA_METHOD_AUTO || s.method == SPIA_METHOD_CG) {
-        if (symmetric_scaling(L, s.scale, (int32_t *)s.T)) {
-            s.method = SPIA_METHOD_CG;
-        } else if (s.method == SPIA_METHOD_CG) {
+    if (!s.V || !s.R || !s.diag || !s.initial || !s.stuck || !s.frozen ||
+        (s.method != SPIA_METHOD_PIA && s.method != SPIA_METHOD_GS_PIA && s.method != SPIA_METHOD_AUTO &&
+         !krylov_arrays(&s))) {
+        res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
+        goto done;
+    }
+    for (int64_t k = 0; k < 3 * (int64_t)n; ++k) s.V[k] = (double)targets[k];
+    if (s.method == SPIA_METHOD_CG) {
+        const int cg = cg_scaling(&s);
+        if (cg < 0) {
+            res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
+            goto done;
+        }
+        if (!cg) {
             res = spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1,
                              "CG needs a limit matrix that is a positive diagonal times a symmetric one, as "
                              "closed meshes have (boundary rules break the symmetry); use AUTO");
             goto done;
-        } else {
-            s.method = SPIA_METHOD_CHEBYSHEV;
         }
     }
+    s.diag_positive = 1;
     for (int32_t r = 0; r < n; ++r) {
         s.diag[r] = 0.0;
         for (int64_t k = L->offsets[r]; k < L->offsets[r + 1]; ++k)
             if (L->indices[k] == r) s.diag[r] = L->weights[k];
+        if (!(s.diag[r] > 0.0)) s.diag_positive = 0;
         if (s.method == SPIA_METHOD_GS_PIA && !(s.diag[r] > 0.0)) {
             res = spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, r,
                              "stencil of vertex %d has weight %g on itself; GS-PIA needs a positive one", (int)r,
@@ -545,6 +708,10 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
     } else {
         res = run_stage(&s, &opt, threshold, scale, &it, &stuck_count, report, status);
     }
+    if (s.method == SPIA_METHOD_AUTO) {
+        s.method = SPIA_METHOD_PIA; /* done before AUTO had to choose */
+        if (report) report->method = s.method;
+    }
     if (res >= 0) {
         /* Write the cage, then measure it as stored (in float). */
         for (int64_t k = 0; k < 3 * (int64_t)n; ++k) {
@@ -584,7 +751,6 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
         report->diagonal = diagonal;
     }
 done:
-    free(s.P);
     free(s.V);
     free(s.R);
     free(s.diag);
@@ -594,6 +760,7 @@ done:
     free(s.D);
     free(s.scale);
     free(s.T);
+    free(s.partial);
     if (report) {
         report->solve_seconds = spia__now() - t0;
         report->result = res;

@@ -2,6 +2,10 @@
 #define _POSIX_C_SOURCE 200809L
 #include "internal.h"
 
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -81,6 +85,16 @@ spia_result spia__resolve_options(const spia_options *in, spia_options *out, spi
     if (o.max_iterations < 0)
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "max_iterations must be positive, got %d",
                           o.max_iterations);
+    if (o.threads < 0)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "threads must be 0 (all) or positive, got %d",
+                          (int)o.threads);
+    if (o.threads == 0) {
+#ifdef _OPENMP
+        o.threads = omp_get_num_procs();
+#else
+        o.threads = 1;
+#endif
+    }
     *out = o;
     spia__ok(status);
     return SPIA_OK;

@@ -62,6 +62,14 @@ void spia__stencils_canonicalize(spia_stencils *s) {
     s->nnz = out;
 }
 
+void spia__stencils_shrink(spia_stencils *s) {
+    const size_t n = (size_t)(s->nnz > 0 ? s->nnz : 1);
+    int32_t *indices = (int32_t *)realloc(s->indices, sizeof(int32_t) * n);
+    if (indices) s->indices = indices;
+    double *weights = (double *)realloc(s->weights, sizeof(double) * n);
+    if (weights) s->weights = weights;
+}
+
 int32_t spia_stencils_row_count(const spia_stencils *s) { return s ? s->rows : 0; }
 
 int64_t spia_stencils_weight_count(const spia_stencils *s) { return s ? s->nnz : 0; }
@@ -80,13 +88,7 @@ spia_result spia_stencils_apply(const spia_stencils *s, const double *cage, doub
     return SPIA_OK;
 }
 
-spia_result spia__stencils_mark_boundary(spia_stencils *s, const spia_mesh *mesh, const spia_adjacency *adj) {
-    unsigned char *on_boundary = (unsigned char *)calloc((size_t)s->rows, 1);
-    if (!on_boundary) return SPIA_ERROR_OUT_OF_MEMORY;
-    if (spia__boundary_vertices(mesh, adj, on_boundary) != SPIA_OK) {
-        free(on_boundary);
-        return SPIA_ERROR_OUT_OF_MEMORY;
-    }
+void spia__stencils_mark_boundary(spia_stencils *s, const unsigned char *on_boundary) {
     s->boundary_count = 0;
     for (int32_t r = 0; r < s->rows; ++r) {
         int closed = on_boundary[r];
@@ -94,6 +96,4 @@ spia_result spia__stencils_mark_boundary(spia_stencils *s, const spia_mesh *mesh
         s->boundary[r] = (unsigned char)closed;
         s->boundary_count += closed;
     }
-    free(on_boundary);
-    return SPIA_OK;
 }

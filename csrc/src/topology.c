@@ -1,6 +1,8 @@
 /* Mesh validation and vertex-to-corner adjacency. */
 #include "internal.h"
 
+#include <stdint.h>
+
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -98,6 +100,15 @@ spia_result spia_mesh_validate(const spia_mesh *m, spia_status *status) {
     return SPIA_OK;
 }
 
+void spia__adjacency_release_vertex_lists(spia_adjacency *a) {
+    free(a->face_of_corner);
+    free(a->first);
+    free(a->corner_of);
+    a->face_of_corner = NULL;
+    a->first = NULL;
+    a->corner_of = NULL;
+}
+
 void spia__adjacency_free(spia_adjacency *a) {
     free(a->corner_start);
     free(a->face_of_corner);
@@ -122,7 +133,12 @@ spia_result spia__adjacency_build(const spia_mesh *m, spia_adjacency *a, spia_st
     a->corner_start[m->face_count] = cc;
     a->corner_count = cc;
     a->face_of_corner = (int32_t *)malloc(sizeof(int32_t) * (size_t)cc);
-    a->corner_of = (int64_t *)malloc(sizeof(int64_t) * (size_t)cc);
+    if (cc > INT32_MAX) {
+        spia__adjacency_free(a);
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1,
+                          "the faces have %lld corners; at most 2147483647 are supported", (long long)cc);
+    }
+    a->corner_of = (int32_t *)malloc(sizeof(int32_t) * (size_t)cc);
     if (!a->face_of_corner || !a->corner_of) goto oom;
     for (int32_t f = 0; f < m->face_count; ++f)
         for (int64_t c = a->corner_start[f]; c < a->corner_start[f + 1]; ++c) a->face_of_corner[c] = f;
@@ -133,7 +149,7 @@ spia_result spia__adjacency_build(const spia_mesh *m, spia_adjacency *a, spia_st
         int64_t *fill = (int64_t *)malloc(sizeof(int64_t) * (size_t)m->vertex_count);
         if (!fill) goto oom;
         memcpy(fill, a->first, sizeof(int64_t) * (size_t)m->vertex_count);
-        for (int64_t c = 0; c < cc; ++c) a->corner_of[fill[m->face_vertices[c]]++] = c;
+        for (int64_t c = 0; c < cc; ++c) a->corner_of[fill[m->face_vertices[c]]++] = (int32_t)c;
         free(fill);
     }
     spia__ok(status);

@@ -151,6 +151,29 @@ static Rows reference_rows(const tmesh &m, int quality, bool preserve_corners, b
     return rows;
 }
 
+// Creases 0.3, 0.5, 0.7 or 1.0 (sharpness 0.9, 2.5, 4.9, infinite) on a
+// fraction of the face edges chosen at random, and 0.4 on a few vertices.
+static void add_random_creases(tmesh *m, double fraction, uint64_t seed) {
+    std::set<std::pair<int, int>> edges;
+    int64_t c = 0;
+    for (int f = 0; f < m->nf; ++f) {
+        for (int k = 0; k < m->sizes[f]; ++k) {
+            int a = m->fv[c + k], b = m->fv[c + (k + 1) % m->sizes[f]];
+            edges.insert(std::make_pair(std::min(a, b), std::max(a, b)));
+        }
+        c += m->sizes[f];
+    }
+    static const float values[4] = {0.3f, 0.5f, 0.7f, 1.0f};
+    auto next = [&seed]() {
+        seed = seed * 6364136223846793005ULL + 1442695040888963407ULL;
+        return (double)(seed >> 11) / 9007199254740992.0;
+    };
+    for (const auto &e : edges)
+        if (next() < fraction) tmesh_edge(m, e.first, e.second, values[(int)(next() * 4) & 3]);
+    for (int v = 0; v < m->nv; ++v)
+        if (next() < 0.02) tmesh_vertex_crease(m, v, 0.4f);
+}
+
 static void compare(const tmesh &m, const std::string &name, int quality, bool preserve, bool creases) {
     Rows ref = reference_rows(m, quality, preserve, creases);
     spia_mesh mesh = tmesh_view(&m);
@@ -224,6 +247,19 @@ int main() {
     compare_all(fin, "grid with a non-manifold fin", {1, 3, 6});
     tmesh_free(&fin);
 
+    // Strips of two quads apart from each other: four smooth corners each,
+    // 480 adaptive rows in all, more than one batch of sub-meshes.
+    tmesh strips;
+    memset(&strips, 0, sizeof strips);
+    for (int k = 0; k < 120; ++k) {
+        int32_t v[6];
+        for (int i = 0; i < 6; ++i) v[i] = tmesh_vertex(&strips, 3.0 * k + (i % 3), i / 3, 0.1 * ((k * 7 + i) % 5));
+        tmesh_quad(&strips, v[0], v[1], v[4], v[3]);
+        tmesh_quad(&strips, v[1], v[2], v[5], v[4]);
+    }
+    compare_all(strips, "120 separate two-quad strips", {1, 3});
+    tmesh_free(&strips);
+
     tmesh t = make_torus(9, 6, 1);
     compare_all(t, "triangulated torus", {1, 3});
     tmesh_free(&t);
@@ -236,6 +272,20 @@ int main() {
         CHECK(read_obj(path.c_str(), &d), "cannot read %s", path.c_str());
         drop_degenerate_faces(&d);
         compare_all(d, n, {1, 3});
+        tmesh_free(&d);
+    }
+    // Random semi-sharp and infinitely sharp creases (a tenth of the edges,
+    // fixed seed) and vertex creases on meshes with extraordinary vertices,
+    // boundaries, triangles and n-gons: the creased vertices go through Bfr
+    // at the isolation level, which must build Blender's patches.
+    static const char *creased[] = {"bunny.obj", "teapot.obj", "mushroom.obj", "double-torus.obj", "catmark_car.obj"};
+    for (const char *n : creased) {
+        tmesh d;
+        std::string path = std::string(SPIA_TEST_DATA_DIR) + "/" + n;
+        CHECK(read_obj(path.c_str(), &d), "cannot read %s", path.c_str());
+        drop_degenerate_faces(&d);
+        add_random_creases(&d, 0.1, 2024);
+        compare_all(d, std::string(n) + " with random creases", {1, 2, 3, 5});
         tmesh_free(&d);
     }
     TEST_MAIN_END();

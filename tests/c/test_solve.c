@@ -73,13 +73,14 @@ static void check_mesh(tmesh *m, const char *name) {
     solve_and_check(m, name, SPIA_METHOD_CHEBYSHEV, 1e-6);
     solve_and_check(m, name, SPIA_METHOD_AUTO, 1e-4);
     printf("%-28s %6d vertices: PIA %3d, GS-PIA %3d, AUTO %3d iterations\n", name, (int)m->nv, (int)pia, (int)gs, (int)aut);
-    /* An iteration costs one product with the stencils for PIA and for
-     * AUTO (Chebyshev), two for GS-PIA (the sweep, then the residual for the
-     * stopping test).  On smooth targets (the tori) PIA needs only a few
-     * iterations and GS-PIA overshoots; on rough ones GS-PIA needs fewer
-     * iterations than PIA.  AUTO must do no more work than either. */
+    /* An iteration costs one product with the stencils for every method
+     * (GS-PIA's sweep gives its own error estimate; the residual is
+     * computed only when that reaches the tolerance).  On smooth targets
+     * (the tori) PIA needs only a few iterations and GS-PIA overshoots; on
+     * rough ones GS-PIA needs fewer iterations than PIA.  AUTO must be
+     * behind neither. */
     CHECK(aut <= pia + 1, "%s: AUTO %d iterations, PIA %d", name, (int)aut, (int)pia);
-    CHECK(aut < 2 * gs, "%s: AUTO %d iterations, GS-PIA %d (two products each)", name, (int)aut, (int)gs);
+    CHECK(aut <= gs, "%s: AUTO %d iterations, GS-PIA %d", name, (int)aut, (int)gs);
 }
 
 int main(void) {

@@ -157,7 +157,8 @@ def test_bad_input_raises_with_code(native, case, code):
 
 
 @pytest.mark.parametrize("option", [dict(quality=0), dict(quality=11), dict(tolerance=-1.0),
-                                    dict(method="NEWTON"), dict(boundary_smooth="SOME"), dict(max_iterations=0)])
+                                    dict(method="NEWTON"), dict(boundary_smooth="SOME"), dict(max_iterations=0),
+                                    dict(threads=-1), dict(threads=1.5)])
 def test_bad_options(native, option):
     P, faces = grid()
     with pytest.raises(native.PiaError):
@@ -193,6 +194,21 @@ def test_every_method_reaches_the_tolerance(native):
         assert report.converged, (method, report)
         err = np.linalg.norm(L @ cage.astype(np.float64) - P, axis=1).max() / d
         assert err <= 1.5e-6, (method, err)
+
+
+def test_thread_count_changes_nothing(native):
+    """The threads option reaches the library (a negative count is refused
+    there too) and neither the stencils nor the cage depend on it."""
+    P, faces, _ = load("bunny")
+    mesh = native.Mesh.from_faces(P, faces)
+    tables = [native.limit_stencils(mesh, threads=t) for t in (1, 2, 0)]
+    for t in tables[1:]:
+        assert np.array_equal(t.offsets, tables[0].offsets) and np.array_equal(t.indices, tables[0].indices)
+        assert np.array_equal(t.weights, tables[0].weights)
+    cages = [native.interpolate(mesh, threads=t)[0] for t in (1, 2)]
+    assert np.array_equal(cages[0], cages[1])
+    opts, _ = native._options(threads=2)
+    assert opts.threads == 2
 
 
 def test_agrees_with_a_sparse_direct_solve(native):

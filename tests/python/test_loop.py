@@ -183,12 +183,12 @@ def test_auto_is_never_behind_pia_or_gs_pia(native, name):
     P, F = mesh_named(name)
     mesh = native.Mesh.from_faces(P, F)
     its = {m: native.interpolate(mesh, scheme="LOOP", method=m)[1].iterations for m in ("AUTO", "PIA", "GS_PIA")}
-    # AUTO (CG on closed meshes, Chebyshev on open ones) and PIA do one
-    # stencil product per iteration, GS-PIA two (the sweep, then the residual
-    # for the stopping test).  On closed Loop meshes GS-PIA and CG are close
-    # (bunny: 7 GS-PIA iterations, 15 CG), hence the 10%.
+    # Every method does one stencil product per iteration (GS-PIA's sweep
+    # estimates its own error and computes the residual only when that
+    # reaches the tolerance).  AUTO takes CG or Chebyshev on smooth targets
+    # and GS-PIA on rough ones.
     assert its["AUTO"] <= its["PIA"] + 1, its
-    assert its["AUTO"] <= 1.1 * 2 * its["GS_PIA"], its
+    assert its["AUTO"] <= its["GS_PIA"], its
 
 
 @pytest.mark.parametrize("rule", ["SMOOTH", "HOPPE"])
