@@ -27,8 +27,9 @@ BOUNDARY_SMOOTH_ITEMS = (
     ('PRESERVE_CORNERS', "Keep Corners", "Smooth boundaries, but corners are kept sharp (as the modifier)"),
 )
 METHOD_ITEMS = (
-    ('AUTO', "Automatic", "The fastest solver the library has for this mesh (conjugate gradients for "
-                        "closed meshes, else Chebyshev-accelerated PIA)"),
+    ('AUTO', "Automatic", "The fastest solver for this mesh, chosen by a probe: conjugate gradients "
+                        "(or Chebyshev-accelerated PIA) on smooth targets, Gauss-Seidel PIA on rough "
+                        "ones such as scans"),
     ('PIA', "PIA", "Plain progressive iterative approximation (Jacobi-like)"),
     ('GS_PIA', "Gauss-Seidel PIA", "Progressive iterative approximation with Gauss-Seidel updates"),
     ('CHEBYSHEV', "Chebyshev PIA", "PIA accelerated with Chebyshev polynomials over the estimated spectrum"),
