@@ -298,10 +298,22 @@ static void invert_sym3(const double a[6], double inv[9]) {
     inv[6] = c02 / det, inv[7] = c12 / det, inv[8] = c22 / det;
 }
 
+/* z = P r with the 3x3 blocks of P (9 per vertex); returns z . r. */
+static double precondition(int32_t n, const double *precond, const double *r, double *z) {
+    double rz = 0.0;
+    for (int32_t v = 0; v < n; ++v) {
+        const double *P = precond + 9 * (int64_t)v, *rv = r + 3 * (int64_t)v;
+        double *zv = z + 3 * (int64_t)v;
+        for (int c = 0; c < 3; ++c) zv[c] = P[3 * c] * rv[0] + P[3 * c + 1] * rv[1] + P[3 * c + 2] * rv[2];
+        rz += zv[0] * rv[0] + zv[1] * rv[1] + zv[2] * rv[2];
+    }
+    return rz;
+}
+
 /* One round: conjugate gradients on A V = b from the current V, with targets
  * T (S * 3 floats).  `work` holds 5 * 3n doubles, `precond` 9n. */
 static int least_squares_round(fit_system *f, const float *T, const double *V0, double *V, int iterations,
-                               double rel_tol, double *work, double *precond) {
+                               double *work, double *precond) {
     const int64_t N3 = 3 * (int64_t)f->n;
     double *b = work, *r = work + N3, *z = work + 2 * N3, *p = work + 3 * N3, *Ap = work + 4 * N3;
     /* b = M^T B T + lambda Lap^T Lap V0 + damping V (the damping anchors the
@@ -351,17 +363,11 @@ static int least_squares_round(fit_system *f, const float *T, const double *V0, 
 
     system_apply(f, V, Ap);
     for (int64_t i = 0; i < N3; ++i) r[i] = f->free_vertex[i / 3] ? b[i] - Ap[i] : 0.0;
-    double rz = 0.0;
-    for (int32_t v = 0; v < f->n; ++v) {
-        const double *P = precond + 9 * (int64_t)v, *rv = r + 3 * (int64_t)v;
-        double *zv = z + 3 * (int64_t)v;
-        for (int c = 0; c < 3; ++c) zv[c] = P[3 * c] * rv[0] + P[3 * c + 1] * rv[1] + P[3 * c + 2] * rv[2];
-        rz += zv[0] * rv[0] + zv[1] * rv[1] + zv[2] * rv[2];
-    }
+    double rz = precondition(f->n, precond, r, z);
     memcpy(p, z, sizeof(double) * (size_t)N3);
     const double rz0 = rz;
     int it = 0;
-    for (; it < iterations && rz > rel_tol * rel_tol * rz0 && rz > 0.0; ++it) {
+    for (; it < iterations && rz > CG_TOLERANCE * CG_TOLERANCE * rz0 && rz > 0.0; ++it) {
         system_apply(f, p, Ap);
         double pAp = 0.0;
         for (int64_t i = 0; i < N3; ++i) pAp += p[i] * Ap[i];
@@ -371,13 +377,7 @@ static int least_squares_round(fit_system *f, const float *T, const double *V0, 
             V[i] += alpha * p[i];
             r[i] -= alpha * Ap[i];
         }
-        double rz_new = 0.0;
-        for (int32_t v = 0; v < f->n; ++v) {
-            const double *P = precond + 9 * (int64_t)v, *rv = r + 3 * (int64_t)v;
-            double *zv = z + 3 * (int64_t)v;
-            for (int c = 0; c < 3; ++c) zv[c] = P[3 * c] * rv[0] + P[3 * c + 1] * rv[1] + P[3 * c + 2] * rv[2];
-            rz_new += zv[0] * rv[0] + zv[1] * rv[1] + zv[2] * rv[2];
-        }
+        const double rz_new = precondition(f->n, precond, r, z);
         const double beta = rz_new / rz;
         rz = rz_new;
         for (int64_t i = 0; i < N3; ++i) p[i] = z[i] + beta * p[i];
@@ -649,7 +649,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         for (int round = 1; round <= fo.max_rounds; ++round) {
             t0 = spia__now();
             cutoff_weights(b.d, b.on_boundary, S, cutoff_abs, b.wts);
-            report->iterations += least_squares_round(&f, b.T, b.V0, b.V, fo.solver_iterations, CG_TOLERANCE, b.work, b.precond);
+            report->iterations += least_squares_round(&f, b.T, b.V0, b.V, fo.solver_iterations, b.work, b.precond);
             report->solve_seconds += spia__now() - t0;
             evaluate(scan, &b, b.V, S, diagonal, opt.threads, &report->query_seconds);
             const double mean = mean_within(b.d, S, cutoff_abs);

@@ -75,17 +75,23 @@ def diagonal(points):
     return float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
 
 
-def evaluated_control_points(obj, count):
-    """First `count` vertices of obj as Blender evaluates it (modifiers applied)."""
+def evaluated_points(obj):
+    """Every vertex of obj as Blender evaluates it (modifiers applied), in object space."""
     depsgraph = bpy.context.evaluated_depsgraph_get()
     depsgraph.update()
     evaluated = obj.evaluated_get(depsgraph)
     mesh = evaluated.to_mesh()
     try:
-        assert len(mesh.vertices) >= count
-        return positions(mesh)[:count].astype(np.float64)
+        return positions(mesh).astype(np.float64)
     finally:
         evaluated.to_mesh_clear()
+
+
+def evaluated_control_points(obj, count):
+    """First `count` vertices of obj as Blender evaluates it (modifiers applied)."""
+    points = evaluated_points(obj)
+    assert len(points) >= count
+    return points[:count]
 
 
 def relative_miss(obj, targets):

@@ -19,7 +19,7 @@ from mathutils.kdtree import KDTree
 import shapes
 import subdiv_pia
 from subdiv_pia import api, native
-from conftest import (DATA, assert_unchanged, evaluated_control_points, expect_error, import_obj,
+from conftest import (DATA, assert_unchanged, evaluated_control_points, evaluated_points, expect_error, import_obj,
                       link_and_activate, link_and_activate_existing, object_from_pydata, positions,
                       run_operator, snapshot)
 
@@ -128,14 +128,7 @@ def test_surface_samples_are_blender_surface_points(make):
     # level 4 holds every sample of every face.
     mod = obj.modifiers.new("Subdivision", 'SUBSURF')
     mod.levels, mod.quality, mod.use_limit_surface = 4, 3, True
-    depsgraph = bpy.context.evaluated_depsgraph_get()
-    depsgraph.update()
-    evaluated = obj.evaluated_get(depsgraph)
-    mesh = evaluated.to_mesh()
-    try:
-        grid = positions(mesh).astype(np.float64)
-    finally:
-        evaluated.to_mesh_clear()
+    grid = evaluated_points(obj)
     tree = KDTree(len(grid))
     for i, p in enumerate(grid):
         tree.insert(p, i)
@@ -232,15 +225,7 @@ def _level3_distances(obj, bvh, diag):
     """Distances of Blender's level-3 limit surface vertices to the scan, relative."""
     mod = obj.modifiers[0]
     mod.levels, mod.quality, mod.use_limit_surface = 3, 3, True
-    depsgraph = bpy.context.evaluated_depsgraph_get()
-    depsgraph.update()
-    evaluated = obj.evaluated_get(depsgraph)
-    mesh = evaluated.to_mesh()
-    try:
-        points = positions(mesh).astype(np.float64)
-    finally:
-        evaluated.to_mesh_clear()
-    return bvh_distances(bvh, points) / diag
+    return bvh_distances(bvh, evaluated_points(obj)) / diag
 
 
 def test_bunny_scan_surface_fit():
