@@ -91,7 +91,7 @@ METHODS = [
 def off_rim_mean(obj, scan):
     """The mean distance again, leaving out the measured points whose closest
     scan point is on the scan's boundary (they lie over a hole, where no fit
-    may pull), by the library's closest points."""
+    may pull), by the library's closest points, in obj's object space."""
     import numpy as np
     pia = ensure_addon()
     dg = bpy.context.evaluated_depsgraph_get()
@@ -100,17 +100,8 @@ def off_rim_mean(obj, scan):
     pts = np.empty(len(me.vertices) * 3, np.float32)
     me.vertices.foreach_get("co", pts)
     ev.to_mesh_clear()
-    pts = pts.reshape(-1, 3) @ np.array(obj.matrix_world)[:3, :3].T + np.array(obj.matrix_world)[:3, 3]
-    sm = scan.evaluated_get(dg).to_mesh()
-    sp = np.empty(len(sm.vertices) * 3, np.float32)
-    sm.vertices.foreach_get("co", sp)
-    sizes = np.array([len(p.vertices) for p in sm.polygons], np.int32)
-    fv = np.empty(len(sm.loops), np.int32)
-    sm.loops.foreach_get("vertex_index", fv)
-    scan.evaluated_get(dg).to_mesh_clear()
-    sp = sp.reshape(-1, 3) @ np.array(scan.matrix_world)[:3, :3].T + np.array(scan.matrix_world)[:3, 3]
-    s = pia.native.Scan(pia.native.Mesh(sp.astype(np.float32), sizes, fv))
-    d, rim = s.closest_points(pts.astype(np.float32), with_boundary=True)[2::2]
+    s = pia.api.make_scan(scan, obj)
+    d, rim = s.closest_points(pts.reshape(-1, 3), with_boundary=True)[2::2]
     kept = d <= CUTOFF * s.diagonal
     return ("over holes (closest point on the scan's rim) %.2g of them; mean without them %s"
             % (np.mean(rim[kept]), sci(d[kept & ~rim].mean() / s.diagonal)))
