@@ -21,10 +21,7 @@
 //    the same stencil directly (see step 5).
 
 #include "internal.h"
-
-#ifdef _OPENMP
-#include <omp.h>
-#endif
+#include "threads.h"
 
 #include <opensubdiv/bfr/refinerSurfaceFactory.h>
 #include <opensubdiv/bfr/surface.h>
@@ -37,11 +34,13 @@
 #include <opensubdiv/far/topologyRefinerFactory.h>
 
 #include <algorithm>
+#include <atomic>
 #include <climits>
 #include <cmath>
 #include <cstring>
 #include <memory>
 #include <new>
+#include <type_traits>
 #include <vector>
 
 using namespace OpenSubdiv;
@@ -57,6 +56,17 @@ const float kInfiniteSharpness = Sdc::Crease::SHARPNESS_INFINITE;  // 10
 const int32_t kFeatureBatch = 250, kMaxFeatureBatches = 64;
 // Faces per Bfr factory (step 10): its cache of irregular patches lives that long.
 const int32_t kFaceBlock = 131072;
+
+// spia__parallel_for with a lambda f(begin, end, thread), which must not throw.
+template <class F>
+void parallel_for(int threads, int64_t count, int64_t grain, F &&f) {
+    typedef typename std::remove_reference<F>::type Fn;
+    spia__parallel_for(threads, count, grain,
+                       [](void *context, int64_t begin, int64_t end, int thread) {
+                           (*static_cast<Fn *>(context))(begin, end, thread);
+                       },
+                       (void *)&f);
+}
 
 // Blender's crease-to-sharpness mapping, in float as Blender computes it.
 inline float crease_to_sharpness(float crease) { return crease * crease * 10.0f; }
@@ -648,20 +658,20 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
         out.start.push_back((int64_t)out.indices.size());
             }
             };
-        bool out_of_memory = false;
+        std::atomic<bool> out_of_memory(false);
         const int batch_threads = std::max(1, std::min(opt->threads, batches));
-#pragma omp parallel for schedule(dynamic, 1) num_threads(batch_threads)
-        for (int32_t b = 0; b < batches; ++b) {
-            try {
-                run_batch(b, results[(size_t)b]);
-            } catch (const std::bad_alloc &) {
-#pragma omp critical(spia_feature_failure)
-                out_of_memory = true;
-            } catch (...) {
-                results[(size_t)b].code = SPIA_ERROR_INTERNAL;
-                snprintf(results[(size_t)b].message, SPIA_MESSAGE_SIZE, "unexpected failure around sharp features");
+        parallel_for(batch_threads, batches, 1, [&](int64_t b0, int64_t b1, int) {
+            for (int64_t b = b0; b < b1; ++b) {
+                try {
+                    run_batch((int32_t)b, results[(size_t)b]);
+                } catch (const std::bad_alloc &) {
+                    out_of_memory = true;
+                } catch (...) {
+                    results[(size_t)b].code = SPIA_ERROR_INTERNAL;
+                    snprintf(results[(size_t)b].message, SPIA_MESSAGE_SIZE, "unexpected failure around sharp features");
+                }
             }
-        }
+        });
         if (out_of_memory) throw std::bad_alloc();
         for (BatchRows &out : results)
             if (out.code != SPIA_OK) return spia__fail(status, out.code, out.index, "%s", out.message);
@@ -821,24 +831,18 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
         Bfr::SurfaceFactory::Options qopt;
         qopt.SetApproxLevelSharp(opt->quality).SetApproxLevelSmooth(opt->quality);
         const int32_t face_count = m->face_count;
-        int32_t failed_face = INT32_MAX;  // the first face Bfr failed on
-        bool out_of_memory = false, other_failure = false;
-        std::vector<std::vector<std::pair<int32_t, std::vector<Entry>>>> spill_of(opt->threads > 0 ? opt->threads : 1);
-#pragma omp parallel num_threads(opt->threads > 0 ? opt->threads : 1)
-        {
-#ifdef _OPENMP
-            const int thread = omp_get_thread_num();
-#else
-            const int thread = 0;
-#endif
+        const int threads = opt->threads > 0 ? opt->threads : 1;
+        std::vector<int32_t> failed_face_of((size_t)threads, INT32_MAX);  // per thread, the first face Bfr failed on
+        std::vector<unsigned char> out_of_memory_of((size_t)threads, 0), other_failure_of((size_t)threads, 0);
+        std::vector<std::vector<std::pair<int32_t, std::vector<Entry>>>> spill_of((size_t)threads);
+        const int32_t blocks = (face_count + kFaceBlock - 1) / kFaceBlock;
+        parallel_for(threads, blocks, 1, [&](int64_t fb0, int64_t fb1, int thread) {
             try {
                 Bfr::Surface<double> srf;
                 std::vector<Far::Index> cv;
                 std::vector<double> w;
                 std::vector<Entry> row;
-                const int32_t blocks = (face_count + kFaceBlock - 1) / kFaceBlock;
-#pragma omp for schedule(dynamic, 1)
-                for (int32_t fb = 0; fb < blocks; ++fb) {
+                for (int32_t fb = (int32_t)fb0; fb < (int32_t)fb1; ++fb) {
                 Bfr::RefinerSurfaceFactory<> factory(*refiner, Bfr::SurfaceFactory::Options()), qfactory(*refiner, qopt);
                 const int32_t f_end = (int32_t)std::min<int64_t>(face_count, (int64_t)(fb + 1) * kFaceBlock);
                 for (int32_t f = fb * kFaceBlock; f < f_end; ++f) {
@@ -850,8 +854,7 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
                         if (!initialized) {
                             if (!(q ? qfactory.InitVertexSurface(f, &srf) : factory.InitVertexSurface(f, &srf)) ||
                                 !srf.IsValid()) {
-#pragma omp critical(spia_bfr_failure)
-                                failed_face = std::min(failed_face, f);
+                                failed_face_of[(size_t)thread] = std::min(failed_face_of[(size_t)thread], f);
                                 break;
                             }
                             initialized = true;
@@ -870,12 +873,17 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
                 }
                 }
             } catch (const std::bad_alloc &) {
-#pragma omp critical(spia_bfr_failure)
-                out_of_memory = true;
+                out_of_memory_of[(size_t)thread] = 1;
             } catch (...) {
-#pragma omp critical(spia_bfr_failure)
-                other_failure = true;
+                other_failure_of[(size_t)thread] = 1;
             }
+        });
+        int32_t failed_face = INT32_MAX;
+        bool out_of_memory = false, other_failure = false;
+        for (int t = 0; t < threads; ++t) {
+            failed_face = std::min(failed_face, failed_face_of[(size_t)t]);
+            out_of_memory = out_of_memory || out_of_memory_of[(size_t)t];
+            other_failure = other_failure || other_failure_of[(size_t)t];
         }
         if (out_of_memory) throw std::bad_alloc();
         if (other_failure) return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "unexpected failure computing limit stencils");

@@ -3,6 +3,7 @@
  * a smooth normal (area-weighted vertex normals interpolated at the closest
  * point) for point-to-plane fitting. */
 #include "internal.h"
+#include "threads.h"
 
 #include <embree3/rtcore.h>
 #include <float.h>
@@ -437,13 +438,32 @@ static void closest_one(const spia_scan *s, const double p[3], float radius, int
     }
 }
 
+typedef struct closest_task {
+    const spia_scan *scan;
+    const double *points_double;
+    const float *points_float;
+    const float *radius;
+    float *closest, *normals, *distances;
+    int32_t *faces;
+    uint8_t *on_boundary;
+} closest_task;
+
+static void closest_range(void *context, int64_t begin, int64_t end, int thread) {
+    (void)thread;
+    const closest_task *t = (const closest_task *)context;
+    for (int64_t i = begin; i < end; ++i) {
+        double p[3];
+        for (int c = 0; c < 3; ++c) p[c] = t->points_double ? t->points_double[3 * i + c] : t->points_float[3 * i + c];
+        closest_one(t->scan, p, t->radius ? t->radius[i] : INFINITY, i, t->closest, t->normals, t->distances,
+                    t->faces, t->on_boundary);
+    }
+}
+
 void spia__scan_closest_points_double(const spia_scan *s, int64_t count, const double *points, const float *radius,
                                       float *closest, float *normals, float *distances, int32_t *faces,
                                       uint8_t *on_boundary, int threads) {
-#pragma omp parallel for schedule(dynamic, 256) num_threads(threads > 0 ? threads : 1)
-    for (int64_t i = 0; i < count; ++i)
-        closest_one(s, points + 3 * i, radius ? radius[i] : INFINITY, i, closest, normals, distances, faces,
-                    on_boundary);
+    closest_task task = {s, points, NULL, radius, closest, normals, distances, faces, on_boundary};
+    spia__parallel_for(threads, count, 256, closest_range, &task);
 }
 
 spia_result spia_scan_closest_points(const spia_scan *scan, int64_t count, const float *points, float *closest,
@@ -456,11 +476,8 @@ spia_result spia_scan_closest_points(const spia_scan *scan, int64_t count, const
         if (!isfinite(points[i]))
             return spia__fail(status, SPIA_ERROR_NONFINITE, i / 3, "query point %lld is not finite",
                               (long long)(i / 3));
-#pragma omp parallel for schedule(dynamic, 256)
-    for (int64_t i = 0; i < count; ++i) {
-        const double p[3] = {points[3 * i], points[3 * i + 1], points[3 * i + 2]};
-        closest_one(scan, p, INFINITY, i, closest, normals, distances, faces, on_boundary);
-    }
+    closest_task task = {scan, NULL, points, NULL, closest, normals, distances, faces, on_boundary};
+    spia__parallel_for(spia__processor_count(), count, 256, closest_range, &task);
     spia__ok(status);
     return SPIA_OK;
 }

@@ -31,6 +31,7 @@
  * boundary vertices are solved first and then frozen.
  */
 #include "internal.h"
+#include "threads.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -105,15 +106,22 @@ static inline int active(const solver_state *s, int32_t r) { return !s->stuck[r]
 /* Statistics of R: returns the max distance over all rows and writes the
  * mean over all rows and the max over active rows.  With `product`, first
  * R = P - L V. */
-static double residual_pass(solver_state *s, int product, double *mean, double *max_active) {
+typedef struct residual_task {
+    solver_state *s;
+    int product;
+} residual_task;
+
+static void residual_blocks(void *context, int64_t b0, int64_t b1, int thread) {
+    (void)thread;
+    const residual_task *task = (const residual_task *)context;
+    solver_state *s = task->s;
     const int32_t n = s->n;
-#pragma omp parallel for schedule(static) num_threads(s->threads)
-    for (int64_t b = 0; b < s->blocks; ++b) {
+    for (int64_t b = b0; b < b1; ++b) {
         double maxd = 0.0, maxa = 0.0, sum = 0.0, norm2 = 0.0;
         const int32_t end = (int32_t)((b + 1) * BLOCK < n ? (b + 1) * BLOCK : n);
         for (int32_t r = (int32_t)(b * BLOCK); r < end; ++r) {
             double *q = s->R + 3 * (int64_t)r;
-            if (product) {
+            if (task->product) {
                 double lv[3];
                 spia__row_product(s->L, r, s->V, lv);
                 for (int a = 0; a < 3; ++a) q[a] = s->P[3 * (int64_t)r + a] - lv[a];
@@ -132,6 +140,12 @@ static double residual_pass(solver_state *s, int product, double *mean, double *
         p[2] = sum;
         p[3] = norm2;
     }
+}
+
+static double residual_pass(solver_state *s, int product, double *mean, double *max_active) {
+    const int32_t n = s->n;
+    residual_task task = {s, product};
+    spia__parallel_for(s->threads, s->blocks, 0, residual_blocks, &task);
     *mean = n ? block_sum(s, 2) / n : 0.0;
     *max_active = block_max(s, 1);
     s->norm2 = block_sum(s, 3);
@@ -147,11 +161,23 @@ static double residual(solver_state *s, double *mean, double *max_active) {
     return residual_pass(s, 1, mean, max_active);
 }
 
+typedef struct richardson_task {
+    solver_state *s;
+    double w;
+} richardson_task;
+
+static void richardson_rows(void *context, int64_t r0, int64_t r1, int thread) {
+    (void)thread;
+    const richardson_task *task = (const richardson_task *)context;
+    solver_state *s = task->s;
+    for (int64_t r = r0; r < r1; ++r)
+        if (active(s, (int32_t)r))
+            for (int a = 0; a < 3; ++a) s->V[3 * r + a] += task->w * s->R[3 * r + a];
+}
+
 static void step_richardson(solver_state *s, double w) {
-#pragma omp parallel for schedule(static) num_threads(s->threads)
-    for (int32_t r = 0; r < s->n; ++r)
-        if (active(s, r))
-            for (int a = 0; a < 3; ++a) s->V[3 * (int64_t)r + a] += w * s->R[3 * (int64_t)r + a];
+    richardson_task task = {s, w};
+    spia__parallel_for(s->threads, s->n, 0, richardson_rows, &task);
 }
 
 /* One Gauss-Seidel sweep, in vertex order (inherently serial).  Returns the
@@ -188,6 +214,24 @@ static double step_gs_pia(solver_state *s) {
  * eigenvalues in (0, 1] (L 1 = 1 as the weights of a row add up to 1); for
  * eigenvalues below the assumed a the polynomial still has modulus below 1,
  * so a too large a slows those modes down but never makes them grow. */
+typedef struct chebyshev_task {
+    solver_state *s;
+    double c1, c2;
+} chebyshev_task;
+
+static void chebyshev_rows(void *context, int64_t r0, int64_t r1, int thread) {
+    (void)thread;
+    const chebyshev_task *task = (const chebyshev_task *)context;
+    solver_state *s = task->s;
+    for (int64_t r = r0; r < r1; ++r)
+        for (int a = 0; a < 3; ++a) {
+            const int64_t k = 3 * r + a;
+            const double previous = s->cheb_steps > 0 ? task->c1 * s->D[k] : 0.0; /* D starts unset */
+            s->D[k] = active(s, (int32_t)r) ? previous + task->c2 * s->R[k] : 0.0;
+            s->V[k] += s->D[k];
+        }
+}
+
 static void step_chebyshev(solver_state *s) {
     const double theta = 0.5 * (1.0 + s->cheb_a), delta = 0.5 * (1.0 - s->cheb_a);
     const double sigma = theta / delta;
@@ -200,14 +244,8 @@ static void step_chebyshev(solver_state *s) {
     } else {
         s->cheb_rho = 1.0 / sigma;
     }
-#pragma omp parallel for schedule(static) num_threads(s->threads)
-    for (int32_t r = 0; r < s->n; ++r)
-        for (int a = 0; a < 3; ++a) {
-            const int64_t k = 3 * (int64_t)r + a;
-            const double previous = s->cheb_steps > 0 ? c1 * s->D[k] : 0.0; /* D starts unset */
-            s->D[k] = active(s, r) ? previous + c2 * s->R[k] : 0.0;
-            s->V[k] += s->D[k];
-        }
+    chebyshev_task task = {s, c1, c2};
+    spia__parallel_for(s->threads, s->n, 0, chebyshev_rows, &task);
     ++s->cheb_steps;
 }
 
@@ -227,6 +265,28 @@ static double entry(const spia_stencils *L, int32_t j, int32_t r) {
  * along every stencil entry, so c is propagated from 1 at one vertex of
  * each connected part (breadth first) and then every entry is checked.
  * work holds rows ints.  Returns 0 if there is no such scaling. */
+typedef struct symmetry_task {
+    const spia_stencils *L;
+    const double *c;
+    unsigned char asymmetric[256]; /* per thread: an entry breaks the symmetry */
+} symmetry_task;
+
+static void symmetry_rows(void *context, int64_t r0, int64_t r1, int thread) {
+    symmetry_task *task = (symmetry_task *)context;
+    const spia_stencils *L = task->L;
+    const double *c = task->c;
+    for (int64_t r = r0; r < r1 && !task->asymmetric[thread]; ++r)
+        for (int64_t k = L->offsets[r]; k < L->offsets[r + 1]; ++k) {
+            const int32_t j = L->indices[k];
+            if (j == r) continue;
+            const double a = L->weights[k] / c[r], b = entry(L, j, (int32_t)r) / c[j];
+            if (!(fabs(a - b) <= 1e-12 * fabs(a))) {
+                task->asymmetric[thread] = 1;
+                break;
+            }
+        }
+}
+
 static int symmetric_scaling(const spia_stencils *L, double *c, int32_t *queue, int threads) {
     for (int32_t r = 0; r < L->rows; ++r) c[r] = 0.0;
     for (int32_t root = 0; root < L->rows; ++root) {
@@ -246,16 +306,12 @@ static int symmetric_scaling(const spia_stencils *L, double *c, int32_t *queue, 
             }
         }
     }
-    int symmetric = 1;
-#pragma omp parallel for schedule(static) num_threads(threads) reduction(&& : symmetric)
-    for (int32_t r = 0; r < L->rows; ++r)
-        for (int64_t k = L->offsets[r]; k < L->offsets[r + 1] && symmetric; ++k) {
-            const int32_t j = L->indices[k];
-            if (j == r) continue;
-            const double a = L->weights[k] / c[r], b = entry(L, j, r) / c[j];
-            if (!(fabs(a - b) <= 1e-12 * fabs(a))) symmetric = 0;
-        }
-    return symmetric;
+    symmetry_task task = {L, c, {0}};
+    const int pieces = threads > 1 ? threads : 1;
+    spia__parallel_for(pieces, L->rows, 0, symmetry_rows, &task);
+    for (int t = 0; t < pieces; ++t)
+        if (task.asymmetric[t]) return 0;
+    return 1;
 }
 
 /* Conjugate gradients on S V = c^-1 P, S = c^-1 L symmetric (positive
@@ -264,70 +320,83 @@ static int symmetric_scaling(const spia_stencils *L, double *c, int32_t *queue, 
  * residual is c^-1 R, so R is kept by the recurrence R -= alpha L p: one
  * product with L per step.  Returns 0 on a breakdown (p.Sp <= 0: S is not
  * positive definite), leaving V unchanged. */
-static int step_cg(solver_state *s) {
+/* The four row passes of one CG step, by block (see step_cg). */
+typedef struct cg_task {
+    solver_state *s;
+    int phase;
+    double alpha[3], beta[3];
+} cg_task;
+
+static void cg_blocks(void *context, int64_t b0, int64_t b1, int thread) {
+    (void)thread;
+    const cg_task *task = (const cg_task *)context;
+    solver_state *s = task->s;
     const int32_t n = s->n;
     const double *c = s->scale;
-    if (s->cg_steps == 0) {
-#pragma omp parallel for schedule(static) num_threads(s->threads)
-        for (int64_t b = 0; b < s->blocks; ++b) {
-            double zz[3] = {0.0, 0.0, 0.0};
-            const int32_t end = (int32_t)((b + 1) * BLOCK < n ? (b + 1) * BLOCK : n);
-            for (int32_t r = (int32_t)(b * BLOCK); r < end; ++r)
-                for (int a = 0; a < 3; ++a) {
-                    const int64_t k = 3 * (int64_t)r + a;
-                    const double z = active(s, r) ? s->R[k] / c[r] : 0.0;
-                    s->D[k] = z;
-                    zz[a] += z * z;
-                }
-            for (int a = 0; a < 3; ++a) s->partial[PARTS * b + a] = zz[a];
-        }
-        for (int a = 0; a < 3; ++a) s->cg_rr[a] = block_sum(s, a);
-    }
-#pragma omp parallel for schedule(static) num_threads(s->threads)
-    for (int64_t b = 0; b < s->blocks; ++b) {
-        double pq[3] = {0.0, 0.0, 0.0};
+    for (int64_t b = b0; b < b1; ++b) {
+        double part[3] = {0.0, 0.0, 0.0};
         const int32_t end = (int32_t)((b + 1) * BLOCK < n ? (b + 1) * BLOCK : n);
         for (int32_t r = (int32_t)(b * BLOCK); r < end; ++r) {
-            spia__row_product(s->L, r, s->D, s->T + 3 * (int64_t)r);
-            if (active(s, r))
-                for (int a = 0; a < 3; ++a) pq[a] += s->D[3 * (int64_t)r + a] * s->T[3 * (int64_t)r + a] / c[r];
+            const int on = active(s, r);
+            double *D = s->D + 3 * (int64_t)r, *R = s->R + 3 * (int64_t)r, *T = s->T + 3 * (int64_t)r;
+            switch (task->phase) {
+            case 0: /* the first direction: p = c^-1 R */
+                for (int a = 0; a < 3; ++a) {
+                    D[a] = on ? R[a] / c[r] : 0.0;
+                    part[a] += D[a] * D[a];
+                }
+                break;
+            case 1: /* T = L p, and p.Sp */
+                spia__row_product(s->L, r, s->D, T);
+                if (on)
+                    for (int a = 0; a < 3; ++a) part[a] += D[a] * T[a] / c[r];
+                break;
+            case 2: /* V += alpha p, R -= alpha L p, and |c^-1 R|^2 */
+                for (int a = 0; a < 3; ++a) {
+                    s->V[3 * (int64_t)r + a] += task->alpha[a] * D[a];
+                    R[a] -= task->alpha[a] * T[a];
+                    if (on) part[a] += (R[a] / c[r]) * (R[a] / c[r]);
+                }
+                break;
+            default: /* the next direction */
+                for (int a = 0; a < 3; ++a) D[a] = on ? R[a] / c[r] + task->beta[a] * D[a] : 0.0;
+                break;
+            }
         }
-        for (int a = 0; a < 3; ++a) s->partial[PARTS * b + a] = pq[a];
+        if (task->phase != 3)
+            for (int a = 0; a < 3; ++a) s->partial[PARTS * b + a] = part[a];
     }
-    double alpha[3], beta[3];
+}
+
+static int step_cg(solver_state *s) {
+    cg_task task;
+    memset(&task, 0, sizeof task);
+    task.s = s;
+    if (s->cg_steps == 0) {
+        task.phase = 0;
+        spia__parallel_for(s->threads, s->blocks, 0, cg_blocks, &task);
+        for (int a = 0; a < 3; ++a) s->cg_rr[a] = block_sum(s, a);
+    }
+    task.phase = 1;
+    spia__parallel_for(s->threads, s->blocks, 0, cg_blocks, &task);
     for (int a = 0; a < 3; ++a) {
         const double pq = block_sum(s, a);
         if (s->cg_rr[a] == 0.0) {
-            alpha[a] = 0.0; /* this coordinate is solved */
+            task.alpha[a] = 0.0; /* this coordinate is solved */
             continue;
         }
         if (!(pq > 0.0)) return 0;
-        alpha[a] = s->cg_rr[a] / pq;
+        task.alpha[a] = s->cg_rr[a] / pq;
     }
-#pragma omp parallel for schedule(static) num_threads(s->threads)
-    for (int64_t b = 0; b < s->blocks; ++b) {
-        double rr[3] = {0.0, 0.0, 0.0};
-        const int32_t end = (int32_t)((b + 1) * BLOCK < n ? (b + 1) * BLOCK : n);
-        for (int32_t r = (int32_t)(b * BLOCK); r < end; ++r)
-            for (int a = 0; a < 3; ++a) {
-                const int64_t k = 3 * (int64_t)r + a;
-                s->V[k] += alpha[a] * s->D[k];
-                s->R[k] -= alpha[a] * s->T[k];
-                if (active(s, r)) rr[a] += (s->R[k] / c[r]) * (s->R[k] / c[r]);
-            }
-        for (int a = 0; a < 3; ++a) s->partial[PARTS * b + a] = rr[a];
-    }
+    task.phase = 2;
+    spia__parallel_for(s->threads, s->blocks, 0, cg_blocks, &task);
     for (int a = 0; a < 3; ++a) {
         const double rr = block_sum(s, a);
-        beta[a] = s->cg_rr[a] > 0.0 ? rr / s->cg_rr[a] : 0.0;
+        task.beta[a] = s->cg_rr[a] > 0.0 ? rr / s->cg_rr[a] : 0.0;
         s->cg_rr[a] = rr;
     }
-#pragma omp parallel for schedule(static) num_threads(s->threads)
-    for (int32_t r = 0; r < n; ++r)
-        for (int a = 0; a < 3; ++a) {
-            const int64_t k = 3 * (int64_t)r + a;
-            s->D[k] = active(s, r) ? s->R[k] / c[r] + beta[a] * s->D[k] : 0.0;
-        }
+    task.phase = 3;
+    spia__parallel_for(s->threads, s->blocks, 0, cg_blocks, &task);
     ++s->cg_steps;
     return 1;
 }

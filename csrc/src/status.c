@@ -1,10 +1,7 @@
 /* Result codes, messages, options and the clock. */
 #define _POSIX_C_SOURCE 200809L
 #include "internal.h"
-
-#ifdef _OPENMP
-#include <omp.h>
-#endif
+#include "threads.h"
 
 #include <math.h>
 #include <stdarg.h>
@@ -88,13 +85,7 @@ spia_result spia__resolve_options(const spia_options *in, spia_options *out, spi
     if (o.threads < 0)
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "threads must be 0 (all) or positive, got %d",
                           (int)o.threads);
-    if (o.threads == 0) {
-#ifdef _OPENMP
-        o.threads = omp_get_num_procs();
-#else
-        o.threads = 1;
-#endif
-    }
+    if (o.threads == 0) o.threads = spia__processor_count();
     *out = o;
     spia__ok(status);
     return SPIA_OK;

@@ -1,0 +1,132 @@
+/* A parallel loop on the platform's own threads (see threads.h). */
+#if !defined(_WIN32) && !defined(_GNU_SOURCE)
+#define _GNU_SOURCE /* sched_getaffinity */
+#endif
+#include "threads.h"
+
+#include <stdlib.h>
+
+#ifdef _WIN32
+#include <process.h>
+#include <windows.h>
+#else
+#include <pthread.h>
+#include <sched.h>
+#include <unistd.h>
+#endif
+
+#if defined(_MSC_VER) && !defined(__clang__)
+typedef volatile long long piece_counter;
+static int64_t take_piece(piece_counter *next) { return (int64_t)InterlockedIncrement64(next) - 1; }
+static void counter_init(piece_counter *next) { *next = 0; }
+#else
+#include <stdatomic.h>
+typedef atomic_llong piece_counter;
+static int64_t take_piece(piece_counter *next) { return (int64_t)atomic_fetch_add(next, 1); }
+static void counter_init(piece_counter *next) { atomic_init(next, 0); }
+#endif
+
+/* More threads than this are never started for one loop. */
+#define MAX_THREADS 256
+
+typedef struct loop {
+    spia__range_fn fn;
+    void *context;
+    int64_t count, grain, pieces;
+    piece_counter next;
+} loop;
+
+typedef struct worker {
+    loop *loop;
+    int thread;
+} worker;
+
+static void work(loop *l, int thread) {
+    const int64_t q = l->grain > 0 ? 0 : l->count / l->pieces, r = l->grain > 0 ? 0 : l->count % l->pieces;
+    for (;;) {
+        const int64_t p = take_piece(&l->next);
+        if (p >= l->pieces) return;
+        int64_t begin, end;
+        if (l->grain > 0) {
+            begin = p * l->grain;
+            end = l->count - begin < l->grain ? l->count : begin + l->grain;
+        } else {
+            begin = p * q + (p < r ? p : r);
+            end = begin + q + (p < r ? 1 : 0);
+        }
+        l->fn(l->context, begin, end, thread);
+    }
+}
+
+#ifdef _WIN32
+typedef HANDLE thread_handle;
+static unsigned __stdcall thread_main(void *arg) {
+    worker *w = (worker *)arg;
+    work(w->loop, w->thread);
+    return 0;
+}
+static int thread_start(thread_handle *h, worker *w) {
+    const uintptr_t t = _beginthreadex(NULL, 0, thread_main, w, 0, NULL);
+    if (t == 0) return 0;
+    *h = (HANDLE)t;
+    return 1;
+}
+static void thread_join(thread_handle h) {
+    WaitForSingleObject(h, INFINITE);
+    CloseHandle(h);
+}
+#else
+typedef pthread_t thread_handle;
+static void *thread_main(void *arg) {
+    worker *w = (worker *)arg;
+    work(w->loop, w->thread);
+    return NULL;
+}
+static int thread_start(thread_handle *h, worker *w) { return pthread_create(h, NULL, thread_main, w) == 0; }
+static void thread_join(thread_handle h) { pthread_join(h, NULL); }
+#endif
+
+void spia__parallel_for(int threads, int64_t count, int64_t grain, spia__range_fn fn, void *context) {
+    if (count <= 0) return;
+    if (threads < 1) threads = 1;
+    if (threads > MAX_THREADS) threads = MAX_THREADS;
+    loop l;
+    l.fn = fn;
+    l.context = context;
+    l.count = count;
+    l.grain = grain;
+    l.pieces = grain > 0 ? (count - 1) / grain + 1 : (threads < count ? threads : count);
+    counter_init(&l.next);
+    if (threads > l.pieces) threads = (int)l.pieces;
+    if (threads == 1) {
+        work(&l, 0);
+        return;
+    }
+    thread_handle handles[MAX_THREADS];
+    worker workers[MAX_THREADS];
+    int started = 0;
+    for (int t = 1; t < threads; ++t) {
+        workers[started].loop = &l;
+        workers[started].thread = started + 1;
+        if (!thread_start(&handles[started], &workers[started])) break; /* the rest is done by those running */
+        ++started;
+    }
+    work(&l, 0);
+    for (int t = 0; t < started; ++t) thread_join(handles[t]);
+}
+
+int spia__processor_count(void) {
+    long n = 0;
+#ifdef _WIN32
+    n = (long)GetActiveProcessorCount(ALL_PROCESSOR_GROUPS);
+#else
+#ifdef __linux__
+    cpu_set_t set;
+    if (sched_getaffinity(0, sizeof set, &set) == 0) n = CPU_COUNT(&set);
+#endif
+    if (n < 1) n = sysconf(_SC_NPROCESSORS_ONLN);
+#endif
+    if (n < 1) n = 1;
+    if (n > MAX_THREADS) n = MAX_THREADS;
+    return (int)n;
+}

@@ -1,0 +1,36 @@
+/* The library's own threads: a parallel loop over a range of items, on
+ * POSIX threads or Windows threads, with no runtime beside the C library's.
+ * (OpenMP would bring libgomp, which cannot be linked statically into a
+ * shared library and which a host program may already hold in another
+ * version.) */
+#ifndef SPIA_THREADS_H
+#define SPIA_THREADS_H
+
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* Work on the items [begin, end), done by thread number `thread`
+ * (0 .. threads - 1; 0 is the calling thread). */
+typedef void (*spia__range_fn)(void *context, int64_t begin, int64_t end, int thread);
+
+/* Calls fn over [0, count) in pieces of `grain` items (the last one
+ * shorter), or with grain <= 0 in `threads` contiguous pieces of nearly
+ * equal size.  Pieces are taken in order by whichever thread is free, the
+ * caller working as thread 0 beside threads - 1 new ones; it returns when
+ * every piece is done.  A thread that cannot be started only leaves its
+ * share to the others, so the loop always completes.  Whatever writes
+ * depend on the piece and not on the thread make results independent of
+ * the thread count. */
+void spia__parallel_for(int threads, int64_t count, int64_t grain, spia__range_fn fn, void *context);
+
+/* The processors this process may run on (at least 1). */
+int spia__processor_count(void);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif
