@@ -1,0 +1,279 @@
+#!/usr/bin/env python3
+"""Builds what is shipped: the self-contained native library and the Blender
+extension zip around it.
+
+    python3 tools/package.py linux     # dist/subdiv_pia-<version>-linux-x64.zip and dist/repo/
+
+The Linux library is built in a Debian 11 (bullseye) chroot, so that it
+needs nothing newer than glibc 2.31, with OpenSubdiv 3.6.0 (the version
+official Blender 4.1 to 5.0 bundle) compiled from Debian's source package
+into a static archive, and the C++ runtime linked in statically (see
+SPIA_PACKAGE in CMakeLists.txt).  The C tests are built and run there too,
+against that library.  The zip is checked by Blender's own extension
+validator in strict mode, and dist/repo/ gets a static repository index
+(Blender's `extension server-generate`) that a user can add as a remote
+repository.
+
+Everything slow (the chroot, the source package, OpenSubdiv's build) is
+kept under build/ and reused while its inputs are the same.
+"""
+import glob
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import zipfile
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import debian  # noqa: E402
+
+ROOT = debian.ROOT
+BUILD = debian.BUILD
+DIST = os.path.join(ROOT, "dist")
+SRC = os.path.join(BUILD, "src")
+OPENSUBDIV_VERSION = "3.6.0"
+OPENSUBDIV_DIR = os.path.join(SRC, "opensubdiv-" + OPENSUBDIV_VERSION)
+# The oldest Debian that can still be fetched sets the glibc floor.
+BUILD_SUITE, GLIBC_FLOOR = "bullseye", "2.31"
+BUILD_PACKAGES = ["g++", "cmake", "make", "file"]
+LIBRARY_NAMES = {"linux-x64": "libsubdiv_pia.so", "windows-x64": "subdiv_pia.dll", "macos-arm64": "libsubdiv_pia.dylib",
+                 "macos-x64": "libsubdiv_pia.dylib"}
+# OpenSubdiv's core only: no OpenMP, TBB, GPU or example code.
+OPENSUBDIV_OPTIONS = ["-D%s=ON" % o for o in (
+    "NO_OMP", "NO_TBB", "NO_CUDA", "NO_OPENCL", "NO_CLEW", "NO_OPENGL", "NO_DX", "NO_METAL", "NO_GLFW",
+    "NO_PTEX", "NO_EXAMPLES", "NO_TUTORIALS", "NO_REGRESSION", "NO_TESTS", "NO_GLTESTS", "NO_DOC",
+    "NO_MACOS_FRAMEWORK")] + ["-DCMAKE_BUILD_TYPE=Release", "-DCMAKE_POSITION_INDEPENDENT_CODE=ON"]
+
+
+def version():
+    """The add-on's version, from its manifest (the one place it is written)."""
+    text = open(os.path.join(ROOT, "addon", "blender_manifest.toml")).read()
+    return re.search(r'^version\s*=\s*"([^"]+)"', text, re.M).group(1)
+
+
+def package_name(platform):
+    return "subdiv_pia-%s-%s.zip" % (version(), platform)
+
+
+# --------------------------------------------------------------------------
+# OpenSubdiv's source, from Debian
+# --------------------------------------------------------------------------
+
+def opensubdiv_source():
+    """Debian's source package of OpenSubdiv 3.6.0, unpacked (with Debian's
+    patches) at build/src/opensubdiv-3.6.0.  Fetched through a private apt
+    sources list, so the machine's own apt setup is left alone."""
+    stamp = os.path.join(OPENSUBDIV_DIR, ".subdiv_pia-unpacked")
+    if os.path.exists(stamp):
+        return OPENSUBDIV_DIR
+    apt = os.path.join(SRC, "apt")
+    for sub in ("lists/partial", "cache/archives/partial"):
+        os.makedirs(os.path.join(apt, sub), exist_ok=True)
+    sources = os.path.join(apt, "sources.list")
+    uri = debian.mirror()
+    with open(sources, "w") as f:
+        # trixie (Debian 13) ships 3.6.0; sid in case it has moved on there.
+        f.write("deb-src %s trixie main\ndeb-src %s sid main\n" % (uri, uri))
+    options = ["-o", "Dir::Etc::SourceList=" + sources, "-o", "Dir::Etc::SourceParts=/dev/null",
+               "-o", "Dir::State::Lists=" + os.path.join(apt, "lists"),
+               "-o", "Dir::Cache=" + os.path.join(apt, "cache"), "-o", "APT::Sandbox::User=root"]
+    debian.run(["apt-get", "-qq"] + options + ["update"])
+    listing = subprocess.run(["apt-cache"] + options + ["showsrc", "opensubdiv"], check=True,
+                             stdout=subprocess.PIPE, text=True).stdout
+    versions = [v for v in re.findall(r"^Version: (\S+)", listing, re.M)
+                if v.split("-")[0] == OPENSUBDIV_VERSION]
+    if not versions:
+        raise RuntimeError("no source package of OpenSubdiv %s on %s (found %s)" % (
+            OPENSUBDIV_VERSION, uri, ", ".join(re.findall(r"^Version: (\S+)", listing, re.M)) or "none"))
+    download = os.path.join(SRC, "download")
+    shutil.rmtree(download, ignore_errors=True)
+    os.makedirs(download)
+    debian.run(["apt-get", "-qq"] + options + ["source", "--download-only", "opensubdiv=" + versions[0]],
+               cwd=download)
+    dsc = glob.glob(os.path.join(download, "opensubdiv_*.dsc"))[0]
+    shutil.rmtree(OPENSUBDIV_DIR, ignore_errors=True)
+    # apt checked the files against the signed Sources index; the .dsc's own
+    # signature would need the uploaders' keyring.
+    debian.run(["dpkg-source", "--no-check", "-x", dsc, OPENSUBDIV_DIR], stdout=subprocess.DEVNULL)
+    with open(stamp, "w") as f:
+        f.write(versions[0] + "\n")
+    return OPENSUBDIV_DIR
+
+
+# --------------------------------------------------------------------------
+# The Linux library
+# --------------------------------------------------------------------------
+
+def build_linux(run_tests=True):
+    """Builds libsubdiv_pia.so in the bullseye chroot; returns its path."""
+    out = os.path.join(BUILD, "package", "linux-x64")
+    os.makedirs(out, exist_ok=True)
+    opensubdiv_source()
+    root = debian.chroot(BUILD_SUITE + "-build", BUILD_SUITE, BUILD_PACKAGES)
+    inner = "/src/build/package/linux-x64"
+    osd_src = "/src/build/src/opensubdiv-" + OPENSUBDIV_VERSION
+    steps = [
+        "set -e",
+        # OpenSubdiv's static core, once.
+        "if [ ! -f {o}/osd/lib/libosdCPU.a ]; then cmake -S {s} -B {o}/osd {opts} >{o}/osd-configure.log"
+        " && cmake --build {o}/osd --target osd_static_cpu --parallel 2 >{o}/osd-build.log; fi",
+        "cmake -S /src -B {o}/cmake -DSPIA_PACKAGE=ON -DCMAKE_BUILD_TYPE=Release -DSPIA_TESTS=ON"
+        " -DOPENSUBDIV_INCLUDE_DIR={s} -DOPENSUBDIV_CPU_LIBRARY={o}/osd/lib/libosdCPU.a >{o}/configure.log",
+        "cmake --build {o}/cmake --parallel 2",
+        "strip --strip-unneeded -o {o}/libsubdiv_pia.so {o}/cmake/libsubdiv_pia.so",
+        # The GCC runtime's licence, for the zip: the copyright file of the
+        # compiler whose libstdc++ and libgcc went into the library.
+        "cp $(ls /usr/share/doc/gcc-*-base/copyright | sort -V | tail -n 1) {o}/gcc-runtime-copyright.txt",
+        "ldd --version | head -n 1 > {o}/glibc.txt",
+    ]
+    if run_tests:
+        steps.append("cd {o}/cmake && ctest --output-on-failure")
+    script = "\n".join(steps).format(o=inner, s=osd_src, opts=" ".join(OPENSUBDIV_OPTIONS))
+    debian.in_chroot(root, script, binds=[(ROOT, "/src")])
+    return os.path.join(out, "libsubdiv_pia.so")
+
+
+# --------------------------------------------------------------------------
+# The zip
+# --------------------------------------------------------------------------
+
+def manifest_for(platform):
+    text = open(os.path.join(ROOT, "addon", "blender_manifest.toml")).read()
+    text, count = re.subn(r"^platforms\s*=.*$", 'platforms = ["%s"]' % platform, text, flags=re.M)
+    assert count == 1, "blender_manifest.toml needs one platforms line"
+    return text
+
+
+def licence_files(platform_dir):
+    """(name in the zip, path) of every licence text the package carries."""
+    files = [("LICENSE", os.path.join(ROOT, "LICENSE")),
+             ("licenses/OpenSubdiv-LICENSE.txt", os.path.join(OPENSUBDIV_DIR, "LICENSE.txt")),
+             ("licenses/OpenSubdiv-NOTICE.txt", os.path.join(OPENSUBDIV_DIR, "NOTICE.txt")),
+             ("licenses/GCC-runtime-copyright.txt", os.path.join(platform_dir, "gcc-runtime-copyright.txt"))]
+    for _name, path in files:
+        if not os.path.isfile(path):
+            raise RuntimeError("licence text missing: %s" % path)
+    return files
+
+
+def assemble(platform, library):
+    """The add-on with `library` inside as subdiv_pia/ in
+    dist/subdiv_pia-<version>-<platform>.zip; returns its path."""
+    platform_dir = os.path.dirname(library)
+    stage = os.path.join(platform_dir, "stage", "subdiv_pia")
+    shutil.rmtree(os.path.dirname(stage), ignore_errors=True)
+    shutil.copytree(os.path.join(ROOT, "addon"), stage,
+                    ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.so", "*.dll", "*.dylib"))
+    with open(os.path.join(stage, "blender_manifest.toml"), "w") as f:
+        f.write(manifest_for(platform))
+    shutil.copy2(library, os.path.join(stage, LIBRARY_NAMES[platform]))
+    for name, path in licence_files(platform_dir):
+        os.makedirs(os.path.dirname(os.path.join(stage, name)), exist_ok=True)
+        shutil.copy2(path, os.path.join(stage, name))
+    os.makedirs(DIST, exist_ok=True)
+    archive = os.path.join(DIST, package_name(platform))
+    with zipfile.ZipFile(archive, "w", zipfile.ZIP_DEFLATED, compresslevel=9) as zf:
+        for folder, dirs, files in os.walk(stage):
+            dirs.sort()
+            for name in sorted(files):
+                path = os.path.join(folder, name)
+                zf.write(path, os.path.relpath(path, os.path.dirname(stage)))
+    return archive
+
+
+# --------------------------------------------------------------------------
+# Blender's extension tools (validator, repository index)
+# --------------------------------------------------------------------------
+
+def python_with_pip():
+    """A Python 3.11 or newer that has pip (Debian's own may not)."""
+    for python in (sys.executable, shutil.which("python3"), shutil.which("python3.11"), shutil.which("python3.13")):
+        if python and subprocess.run([python, "-c", "import sys, pip; assert sys.version_info >= (3, 11)"],
+                                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL).returncode == 0:
+            return python
+    raise RuntimeError("no Python 3.11 or newer with pip to fetch Blender's extension tools (install python3-pip)")
+
+
+def blender_extension_tool():
+    """(python, blender_ext.py, tags.py) from a Blender 4.2 or newer: the
+    machine's, a bpy wheel already unpacked under build/, or the newest bpy
+    wheel for this Python, fetched from PyPI once."""
+    patterns = ["/usr/share/blender/*/scripts/addons_core/bl_pkg/cli/blender_ext.py",
+                os.path.join(BUILD, "bpy", "*", "lib", "python*", "site-packages", "bpy", "*",
+                             "scripts", "addons_core", "bl_pkg", "cli", "blender_ext.py"),
+                os.path.join(BUILD, "wheels", "bpy-tools", "bpy", "*", "scripts", "addons_core", "bl_pkg",
+                             "cli", "blender_ext.py")]
+    found = [p for pattern in patterns for p in glob.glob(pattern)]
+    if not found:
+        wheels = os.path.join(BUILD, "wheels")
+        os.makedirs(wheels, exist_ok=True)
+        if not glob.glob(os.path.join(wheels, "bpy-*.whl")):
+            debian.run([python_with_pip(), "-m", "pip", "download", "-q", "--no-deps", "--only-binary=:all:",
+                        "-d", wheels, "bpy"])
+        wheel = sorted(glob.glob(os.path.join(wheels, "bpy-*.whl")))[-1]
+        with zipfile.ZipFile(wheel) as zf:
+            members = [m for m in zf.namelist()
+                       if m.endswith(("bl_pkg/cli/blender_ext.py", "_bpy_internal/extensions/tags.py"))]
+            zf.extractall(os.path.join(wheels, "bpy-tools"), members)
+        return blender_extension_tool()
+    tool = sorted(found)[-1]
+    scripts = tool.split(os.sep + "addons_core" + os.sep)[0]
+    tags = os.path.join(scripts, "modules", "_bpy_internal", "extensions", "tags.py")
+    python = sys.executable if sys.version_info >= (3, 11) else shutil.which("python3")
+    return python, tool, tags if os.path.isfile(tags) else ""
+
+
+def validate(archive):
+    python, tool, tags = blender_extension_tool()
+    debian.run([python, tool, "validate", "--valid-tags=" + tags, archive])
+
+
+def repository_index(archives):
+    """dist/repo/: the zips and the index Blender reads from a remote repository."""
+    repo = os.path.join(DIST, "repo")
+    shutil.rmtree(repo, ignore_errors=True)
+    os.makedirs(repo)
+    for archive in archives:
+        shutil.copy2(archive, repo)
+    python, tool, _tags = blender_extension_tool()
+    debian.run([python, tool, "server-generate", "--repo-dir=" + repo, "--html"])
+    with open(os.path.join(repo, "index.json")) as f:
+        index = json.load(f)
+    return repo, index
+
+
+def linux(run_tests=True):
+    library = build_linux(run_tests)
+    archive = assemble("linux-x64", library)
+    validate(archive)
+    repo, index = repository_index([archive])
+    size = os.path.getsize(archive)
+    print("package: %s (%.2f MB)\nrepository: %s (%d package%s)" % (
+        archive, size / 1e6, repo, len(index.get("data", [])), "" if len(index.get("data", [])) == 1 else "s"))
+    return archive
+
+
+def main(argv):
+    if argv[:1] == ["linux"]:
+        try:
+            linux(run_tests="--no-tests" not in argv)
+        except (subprocess.CalledProcessError, RuntimeError, OSError) as exc:
+            print("package.py: %s" % (exc if not isinstance(exc, subprocess.CalledProcessError) else
+                                      "a step failed with status %d (its output is above)" % exc.returncode),
+                  file=sys.stderr)
+            return 1
+        return 0
+    if argv[:1] == ["version"]:
+        print(version())
+        return 0
+    if argv[:1] == ["name"] and len(argv) == 2:
+        print(os.path.join(DIST, package_name(argv[1])))
+        return 0
+    print("usage: package.py linux [--no-tests] | version | name PLATFORM", file=sys.stderr)
+    return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
