@@ -1,31 +1,52 @@
 # The front door.  `make demo` and `make test` do everything on a fresh
-# Debian bookworm machine (as root, or with sudo): install what is missing,
-# build, run.
+# Debian 12 (bookworm) or 13 (trixie) machine, as root (or with sudo):
+# install what is missing, build, run.
 
 PYTHON  ?= /usr/bin/python3
 BLENDER ?= blender
 BLENDER_RUN = $(BLENDER) -b --factory-startup --python-exit-code 1
-DEBIAN_PACKAGES = blender libosd-dev libembree-dev cmake g++ make python3-numpy python3-scipy python3-pytest \
-                  python3-matplotlib libsuitesparse-dev
+# What building, testing and packaging need, on either release.  The
+# package is built in a Debian 11 chroot (debootstrap) from Debian's source
+# package of OpenSubdiv (dpkg-source); the machine's OpenSubdiv serves the
+# development build.
+DEBIAN_PACKAGES = blender libosd-dev cmake g++ make binutils python3-numpy python3-scipy python3-pytest \
+                  python3-matplotlib python3-venv libsuitesparse-dev debootstrap dpkg-dev xz-utils
+# Installed where the release has them: the closest-point benchmark compares
+# the library with Embree (3 on Debian 12, 4 on 13).
+OPTIONAL_PACKAGES = libembree-dev
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+VERSION = $(shell $(PYTHON) tools/package.py version)
+PACKAGE = dist/subdiv_pia-$(VERSION)-linux-x64.zip
 
-.PHONY: all deps build test test-c test-asan test-python test-blender demo bench bench-scale clean
+.PHONY: all deps build package test test-c test-asan test-python test-package test-blender blenders demo \
+        bench bench-scale bench-closest clean
 
 all: build
 
 # Installs only the packages that are missing (apt-get update once, first).
 deps:
 	@missing=$$(for p in $(DEBIAN_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || echo $$p; done); \
-	if [ -n "$$missing" ]; then \
-	  echo "installing:" $$missing; \
+	optional=$$(for p in $(OPTIONAL_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || echo $$p; done); \
+	if [ -n "$$missing$$optional" ]; then \
+	  echo "installing:" $$missing $$optional; \
 	  $(SUDO) apt-get update -qq && \
-	  DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq $$missing; \
+	  DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq $$missing && \
+	  for p in $$optional; do \
+	    if apt-cache show $$p >/dev/null 2>&1; then \
+	      DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq $$p; fi; done; \
 	fi
 
+# Development: the library against the machine's OpenSubdiv, the add-on
+# around it in build/addon/subdiv_pia.
 build: deps
 	$(PYTHON) setup.py build
 
-test: build test-c test-asan test-python test-blender
+# What is shipped: dist/subdiv_pia-<version>-linux-x64.zip (Install from
+# Disk) and dist/repo/ (a static extension repository).
+package: deps
+	$(SUDO) $(PYTHON) tools/package.py linux
+
+test: build test-c test-asan test-python test-package test-blender
 
 test-c: build
 	ctest --test-dir build/cmake --output-on-failure
@@ -39,15 +60,25 @@ test-asan: deps
 test-python: build
 	SUBDIV_PIA_ADDON_DIR=build/addon $(PYTHON) -m pytest -q tests/python
 
-test-blender: build
-	$(BLENDER_RUN) --python tests/blender/run.py
+# The package as shipped: ELF audit, loading with the system's libraries
+# hidden or Blender's preloaded, clean Debian 11 and 12/13 chroots.
+test-package: package
+	$(SUDO) $(PYTHON) tests/package/run.py $(PACKAGE)
+
+# The Blender suite against the installed package, in every Blender here:
+# Debian's, the other Debian release's (chroot), PyPI's bpy builds.
+test-blender: package
+	$(SUDO) $(PYTHON) tools/blenders.py test $(PACKAGE)
+
+blenders:
+	$(PYTHON) tools/blenders.py list
 
 demo: build
 	mkdir -p out
 	$(BLENDER_RUN) --python build/addon/subdiv_pia/cli.py -- tests/data/mushroom.obj out/mushroom_interpolated.blend
 	$(BLENDER_RUN) --python bench/render_comparison.py -- tests/data/mushroom.obj out/mushroom_comparison.png
 
-bench: build bench-scale
+bench: build bench-scale bench-closest
 	$(PYTHON) bench/bench_interpolate.py
 	$(PYTHON) bench/bench_loop_papers.py
 	$(PYTHON) bench/bench_doosabin.py

@@ -1,7 +1,9 @@
 """Builds the native library with CMake and assembles the Blender add-on.
 
-    python3 setup.py build     ->  build/addon/subdiv_pia/  (add-on with the library inside)
-                                   dist/subdiv_pia.zip       (installable from Blender's Preferences)
+    python3 setup.py build     ->  build/addon/subdiv_pia/  (for development: the library links the
+                                   machine's OpenSubdiv, so it runs on this machine only)
+    python3 setup.py package   ->  dist/subdiv_pia-<version>-linux-x64.zip and dist/repo/
+                                   (the self-contained package: tools/package.py)
 
 Only the standard library is used, so this runs with Blender's Python as
 well as the system one.
@@ -10,7 +12,6 @@ import os
 import shutil
 import subprocess
 import sys
-import zipfile
 
 ROOT = os.path.dirname(os.path.abspath(__file__))
 BUILD = os.path.join(ROOT, "build")
@@ -37,25 +38,20 @@ def assemble(library):
     shutil.copytree(os.path.join(ROOT, "addon"), ADDON_OUT,
                     ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.so", "*.dll", "*.dylib"))
     shutil.copy2(library, os.path.join(ADDON_OUT, LIBRARY))
-    os.makedirs(DIST, exist_ok=True)
-    archive = os.path.join(DIST, "subdiv_pia.zip")
-    with zipfile.ZipFile(archive, "w", zipfile.ZIP_DEFLATED) as zf:
-        for folder, _dirs, files in os.walk(ADDON_OUT):
-            for name in sorted(files):
-                path = os.path.join(folder, name)
-                zf.write(path, os.path.relpath(path, os.path.dirname(ADDON_OUT)))
-    print(f"add-on: {ADDON_OUT}\narchive: {archive}")
+    print(f"add-on: {ADDON_OUT}")
 
 
 def main(argv):
     command = argv[1] if len(argv) > 1 else "build"
     if command == "build":
         assemble(build_library())
+    elif command == "package":
+        sys.exit(subprocess.call([sys.executable, os.path.join(ROOT, "tools", "package.py"), "linux"]))
     elif command == "clean":
         for path in (BUILD, DIST):
             shutil.rmtree(path, ignore_errors=True)
     else:
-        sys.exit(f"usage: {argv[0]} [build|clean]")
+        sys.exit(f"usage: {argv[0]} [build|package|clean]")
 
 
 if __name__ == "__main__":

@@ -1,0 +1,273 @@
+#!/usr/bin/env python3
+"""The Blenders this machine can test the add-on in, and the Blender test
+suite (tests/blender) run in each of them against the package.
+
+    python3 tools/blenders.py list
+    python3 tools/blenders.py test PACKAGE.zip [-j 2] [--only NAME ...] [-- PYTEST ARGS]
+
+The Blenders:
+- Debian's `blender` on the machine (3.4.1 on Debian 12, 4.3.2 on 13);
+- Debian's `blender` of the other current release (13 on a Debian 12
+  machine, else 12), in a chroot under build/chroots;
+- official builds as Python modules: PyPI's `bpy` wheels, the newest patch
+  of every release PyPI serves for a Python this machine has (bpy 4.2 to 5.0
+  need Python 3.11, 5.1 and newer 3.13), each in a virtual environment
+  under build/bpy/<release>, with the numpy that release's Blender bundles.
+
+Each suite runs with SUBDIV_PIA_PACKAGE=PACKAGE.zip: tests/blender/run.py
+installs the zip the way a user does and the tests use that copy.  Prints a
+table of Blender (and how it was installed) against passed, failed,
+skipped, and exits 1 if any suite failed or did not run.
+"""
+import argparse
+import glob
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
+import xml.etree.ElementTree as ElementTree
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import debian  # noqa: E402
+
+ROOT = debian.ROOT
+BUILD = debian.BUILD
+BPY = os.path.join(BUILD, "bpy")
+RESULTS = os.path.join(BUILD, "blender-results")
+FIRST_BPY = (4, 2)  # the first release with extensions; older bpy wheels are gone from PyPI
+# Python minor version each bpy release needs.
+PYTHON_OF_BPY = [((5, 1), "3.13"), ((4, 1), "3.11")]
+RUN_PY = "tests/blender/run.py"
+
+
+def python_for(release):
+    for first, python in PYTHON_OF_BPY:
+        if release >= first:
+            return python
+    return None
+
+
+def numpy_for(release):
+    """The numpy the official Blender of that release bundles."""
+    return "numpy>=2,<3" if release >= (5, 1) else "numpy>=1.26,<2"
+
+
+def find_python(minor):
+    """An interpreter of Python `minor` (e.g. '3.13') that runs, or None."""
+    names = ["python" + minor]
+    candidates = [shutil.which(n) for n in names] + ["/usr/bin/python" + minor, "/usr/local/bin/python" + minor]
+    pyenv = os.environ.get("PYENV_ROOT", os.path.expanduser("~/.pyenv"))
+    candidates += sorted(glob.glob(os.path.join(pyenv, "versions", minor + ".*", "bin", "python" + minor)), reverse=True)
+    for path in candidates:
+        if not path or not os.path.exists(path):
+            continue
+        try:
+            out = subprocess.run([path, "-c", "import sys, venv; print('%d.%d' % sys.version_info[:2])"],
+                                 stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, timeout=30)
+        except (OSError, subprocess.TimeoutExpired):
+            continue
+        if out.returncode == 0 and out.stdout.strip() == minor:
+            return path
+    return None
+
+
+def served_releases(python):
+    """{(major, minor): newest version} of the bpy wheels PyPI serves for `python`."""
+    out = subprocess.run([python, "-m", "pip", "index", "versions", "bpy"], stdout=subprocess.PIPE,
+                         stderr=subprocess.DEVNULL, text=True)
+    m = re.search(r"Available versions: (.*)", out.stdout)
+    newest = {}
+    for v in (m.group(1).split(", ") if m else []):
+        parts = v.strip().split(".")
+        if len(parts) < 2 or not all(p.isdigit() for p in parts):
+            continue  # pre-releases
+        key = (int(parts[0]), int(parts[1]))
+        if key >= FIRST_BPY and python_for(key) and (key not in newest or
+                                                    tuple(map(int, parts)) > tuple(map(int, newest[key].split(".")))):
+            newest[key] = v.strip()
+    return newest
+
+
+class Blender:
+    def __init__(self, name, how, command, cwd=ROOT, root=None, prepare=None):
+        self.name, self.how, self.command, self.cwd, self.root, self.prepare = name, how, command, cwd, root, prepare
+
+
+def debian_blender_version(command_prefix=()):
+    try:
+        out = subprocess.run(list(command_prefix) + ["blender", "--version"], stdout=subprocess.PIPE,
+                             stderr=subprocess.DEVNULL, text=True, timeout=120)
+    except (OSError, subprocess.TimeoutExpired):
+        return None
+    m = re.search(r"Blender (\d+\.\d+\.\d+)", out.stdout)
+    return m.group(1) if m else None
+
+
+def discover():
+    """Every Blender this machine can test in, and notes on those it cannot."""
+    blenders, notes = [], []
+    host = debian.host_codename()
+    if shutil.which("blender"):
+        v = debian_blender_version()
+        blenders.append(Blender("Blender %s" % v, "Debian %s package `blender`" % host,
+                                ["blender", "-b", "--factory-startup", "--python-exit-code", "1", "--python", RUN_PY]))
+    else:
+        notes.append("no `blender` on PATH")
+    other = "trixie" if host == "bookworm" else "bookworm"
+    blenders.append(Blender("Debian %s's Blender" % other, "Debian %s package `blender`, in a chroot" % other,
+                            ["blender", "-b", "--factory-startup", "--python-exit-code", "1", "--python", RUN_PY],
+                            root=("%s-blender" % other, other)))
+    for minor in sorted({p for _f, p in PYTHON_OF_BPY}):
+        python = find_python(minor)
+        if not python:
+            notes.append("no Python %s here: bpy releases that need it are not tested" % minor)
+            continue
+        for release, version in sorted(served_releases(python).items()):
+            if python_for(release) != minor:
+                continue
+            venv = os.path.join(BPY, "%d.%d" % release)
+            blenders.append(Blender("Blender %s" % version, "PyPI `bpy==%s`, Python %s venv" % (version, minor),
+                                    [os.path.join(venv, "bin", "python"), RUN_PY],
+                                    prepare=(python, venv, version, numpy_for(release))))
+    return blenders, notes
+
+
+def prepare_venv(python, venv, version, numpy_requirement):
+    stamp = os.path.join(venv, ".subdiv_pia-ready")
+    want = "bpy==%s %s pytest" % (version, numpy_requirement)
+    if os.path.exists(stamp) and open(stamp).read().strip() == want:
+        return
+    shutil.rmtree(venv, ignore_errors=True)
+    debian.run([python, "-m", "venv", venv])
+    debian.run([os.path.join(venv, "bin", "python"), "-m", "pip", "install", "-q", "--disable-pip-version-check",
+                "bpy==" + version, numpy_requirement, "pytest"])
+    with open(stamp, "w") as f:
+        f.write(want + "\n")
+
+
+def prepare_chroot(name, suite):
+    path = debian.chroot(name, suite, ["blender", "python3-pytest"])
+    return path
+
+
+def counts(xml_path):
+    try:
+        tree = ElementTree.parse(xml_path)
+    except (OSError, ElementTree.ParseError):
+        return None
+    suites = [tree.getroot()] if tree.getroot().tag == "testsuite" else list(tree.getroot())
+    total = {"tests": 0, "failures": 0, "errors": 0, "skipped": 0}
+    for s in suites:
+        for k in total:
+            total[k] += int(s.get(k, 0))
+    total["passed"] = total["tests"] - total["failures"] - total["errors"] - total["skipped"]
+    return total
+
+
+def start(blender, package, index, extra):
+    """Starts one suite; returns (process, log path, junit path, start time)."""
+    os.makedirs(RESULTS, exist_ok=True)
+    slug = re.sub(r"[^A-Za-z0-9.]+", "-", "%02d-%s-%s" % (index, blender.name, blender.how)).strip("-")
+    log = os.path.join(RESULTS, slug + ".log")
+    junit = os.path.join(RESULTS, slug + ".xml")
+    if os.path.exists(junit):
+        os.remove(junit)
+    if blender.root:
+        inner_junit = "/src/" + os.path.relpath(junit, ROOT)
+        inner_package = "/src/" + os.path.relpath(package, ROOT)
+        command = " ".join(blender.command + ["--", "--junitxml=" + inner_junit] + extra)
+        env_part = "SUBDIV_PIA_PACKAGE=%s" % inner_package
+        script = ("cd /src && %s %s" % (env_part, command))
+        root = blender.chroot_path
+        argv = ["unshare", "--mount", "--propagation", "private", "/bin/sh", "-c",
+                'mount -t proc proc "$R/proc" && mount --rbind /dev "$R/dev" && mount --bind "$S" "$R/src" && '
+                'exec chroot "$R" /usr/bin/env -i PATH=/usr/sbin:/usr/bin:/sbin:/bin HOME=/root LANG=C.UTF-8 '
+                '/bin/sh -c "$C"']
+        os.makedirs(os.path.join(root, "src"), exist_ok=True)
+        env = dict(os.environ, R=root, S=ROOT, C=script)
+    else:
+        argv = blender.command + ["--", "--junitxml=" + junit] + extra
+        env = dict(os.environ, SUBDIV_PIA_PACKAGE=package)
+        env.pop("SUBDIV_PIA_ADDON_DIR", None)
+    with open(log, "w") as out:
+        out.write("$ %s\n" % " ".join(argv))
+    process = subprocess.Popen(argv, cwd=ROOT, env=env, stdout=open(log, "a"), stderr=subprocess.STDOUT)
+    return process, log, junit, time.time()
+
+
+def test(package, jobs, only, extra):
+    blenders, notes = discover()
+    if only:
+        blenders = [b for b in blenders if any(o in b.name or o in b.how for o in only)]
+    rows, ready = [], []
+    for b in blenders:
+        try:
+            if b.prepare:
+                prepare_venv(*b.prepare)
+            if b.root:
+                b.chroot_path = prepare_chroot(*b.root)
+                v = debian_blender_version(["chroot", b.chroot_path])
+                b.name = "Blender %s" % v if v else b.name
+            ready.append(b)
+        except (subprocess.CalledProcessError, RuntimeError, OSError) as exc:
+            rows.append((b, None, "could not be installed: %s" % exc, 0.0))
+    running, queue = [], list(enumerate(ready))
+    while queue or running:
+        while queue and len(running) < jobs:
+            i, b = queue.pop(0)
+            print("starting the suite in %s (%s)" % (b.name, b.how), flush=True)
+            running.append((b,) + start(b, package, i, extra))
+        time.sleep(2)
+        for item in list(running):
+            b, process, log, junit, t0 = item
+            if process.poll() is None:
+                continue
+            running.remove(item)
+            c = counts(junit)
+            status = "exit %d" % process.returncode
+            rows.append((b, c, status if process.returncode or not c else "", time.time() - t0))
+            print("finished %s (%s): %s%s" % (b.name, b.how, c if c else "no results", " " + status), flush=True)
+            if process.returncode or not c or c["failures"] or c["errors"]:
+                print("---- last lines of %s ----" % log)
+                print("".join(open(log, errors="replace").readlines()[-60:]))
+    order = {id(b): i for i, b in enumerate(blenders)}
+    rows.sort(key=lambda r: order.get(id(r[0]), 0))
+    failed = 0
+    print("\n| Blender | installed as | passed | failed | skipped | minutes |\n|---|---|---:|---:|---:|---:|")
+    for b, c, status, seconds in rows:
+        if c:
+            bad = c["failures"] + c["errors"]
+            print("| %s | %s | %d | %d | %d | %.1f |" % (b.name, b.how, c["passed"], bad, c["skipped"], seconds / 60))
+            failed += 1 if bad or status else 0
+        else:
+            print("| %s | %s | - | - | - | %s |" % (b.name, b.how, status or "no results"))
+            failed += 1
+    for note in notes:
+        print("not tested: " + note)
+    return 1 if failed or not rows else 0
+
+
+def main(argv):
+    parser = argparse.ArgumentParser(description="The Blender suite in every Blender this machine has.")
+    sub = parser.add_subparsers(dest="command", required=True)
+    sub.add_parser("list")
+    t = sub.add_parser("test")
+    t.add_argument("package")
+    t.add_argument("-j", "--jobs", type=int, default=2)
+    t.add_argument("--only", action="append", default=[], help="only Blenders whose name or origin contains this")
+    extra = argv[argv.index("--") + 1:] if "--" in argv else []
+    args = parser.parse_args(argv[:argv.index("--")] if "--" in argv else argv)
+    if args.command == "list":
+        blenders, notes = discover()
+        for b in blenders:
+            print("%s: %s" % (b.name, b.how))
+        for note in notes:
+            print("not tested: " + note)
+        return 0
+    return test(os.path.abspath(args.package), args.jobs, args.only, extra)
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
