@@ -29,9 +29,10 @@ import sys
 
 ALLOWED_NEEDED = {"libc.so.6", "libm.so.6", "libpthread.so.0", "libdl.so.2", "librt.so.1", "libgcc_s.so.1",
                   "ld-linux-x86-64.so.2"}
-# Weak references every GCC-built object carries; nothing is bound to them
-# unless the process has a profiler or transactional memory runtime.
-ALLOWED_UNVERSIONED_WEAK = {"__gmon_start__", "_ITM_deregisterTMCloneTable", "_ITM_registerTMCloneTable"}
+# Weak references every GCC-built shared object carries (crtbegin's):
+# unversioned only where the object asks nothing else of the C library.
+ALLOWED_UNVERSIONED_WEAK = {"__gmon_start__", "_ITM_deregisterTMCloneTable", "_ITM_registerTMCloneTable",
+                            "__cxa_finalize"}
 ALLOWED_IMPORT_VERSIONS = re.compile(r"^(GLIBC_[0-9.]+|GCC_[0-9.]+)$")
 
 
