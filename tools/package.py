@@ -3,6 +3,8 @@
 extension zip around it.
 
     python3 tools/package.py linux     # dist/subdiv_pia-<version>-linux-x64.zip and dist/repo/
+    python3 tools/package.py windows   # dist/subdiv_pia-<version>-windows-x64.zip (mingw-w64, Wine)
+    python3 tools/package.py all       # both, and dist/repo/ listing both
 
 The Linux library is built in a Debian 11 (bullseye) chroot, so that it
 needs nothing newer than glibc 2.31, with OpenSubdiv 3.6.0 (the version
@@ -136,6 +138,59 @@ def build_linux(run_tests=True):
 
 
 # --------------------------------------------------------------------------
+# The Windows library (cross-built with mingw-w64, tested under Wine)
+# --------------------------------------------------------------------------
+
+WINDOWS_TOOLCHAIN = os.path.join(ROOT, "cmake", "mingw-w64-x86_64.cmake")
+
+
+def wine_environment():
+    prefix = os.path.join(BUILD, "wine")
+    os.makedirs(prefix, exist_ok=True)
+    return dict(os.environ, WINEPREFIX=prefix, WINEDEBUG="-all", WINEDLLOVERRIDES="mscoree,mshtml=")
+
+
+def build_windows(run_tests=True):
+    """Builds subdiv_pia.dll with the machine's mingw-w64 (the same sources,
+    OpenSubdiv's core from the same source package, the GCC runtime and
+    winpthreads linked in statically) and runs the C tests under Wine;
+    returns the DLL's path."""
+    out = os.path.join(BUILD, "package", "windows-x64")
+    os.makedirs(out, exist_ok=True)
+    src = opensubdiv_source()
+    osd = os.path.join(out, "osd")
+    archive = os.path.join(osd, "lib", "libosdCPU.a")
+    toolchain = "-DCMAKE_TOOLCHAIN_FILE=" + WINDOWS_TOOLCHAIN
+    if not os.path.exists(archive):
+        debian.run(["cmake", "-S", src, "-B", osd, toolchain, "-DCMAKE_CXX_FLAGS=-D_USE_MATH_DEFINES"] +
+                   OPENSUBDIV_OPTIONS, stdout=subprocess.DEVNULL)
+        debian.run(["cmake", "--build", osd, "--target", "osd_static_cpu", "--parallel", "2"],
+                   stdout=subprocess.DEVNULL)
+    cmake = os.path.join(out, "cmake")
+    debian.run(["cmake", "-S", ROOT, "-B", cmake, toolchain, "-DSPIA_PACKAGE=ON", "-DCMAKE_BUILD_TYPE=Release",
+                "-DSPIA_TESTS=ON", "-DOPENSUBDIV_INCLUDE_DIR=" + src, "-DOPENSUBDIV_CPU_LIBRARY=" + archive],
+               stdout=subprocess.DEVNULL)
+    debian.run(["cmake", "--build", cmake, "--parallel", "2"])
+    dll = os.path.join(out, "subdiv_pia.dll")
+    debian.run(["x86_64-w64-mingw32-strip", "--strip-unneeded", "-o", dll, os.path.join(cmake, "subdiv_pia.dll")])
+    gcc = subprocess.run(["x86_64-w64-mingw32-gcc-posix", "--version"], stdout=subprocess.PIPE, text=True).stdout
+    with open(os.path.join(out, "compiler.txt"), "w") as f:
+        f.write(gcc.splitlines()[0] + "\n")
+    # The cross compiler's licence (its runtime is GCC's, with the runtime
+    # library exception), else the native GCC's, which says the same.
+    copyrights = (glob.glob("/usr/share/doc/gcc-mingw-w64-base/copyright") +
+                  sorted(glob.glob("/usr/share/doc/gcc-*-base/copyright")))
+    shutil.copy2(copyrights[0], os.path.join(out, "gcc-runtime-copyright.txt"))
+    winpthreads = "/usr/share/doc/mingw-w64-x86-64-dev/copyright"
+    if os.path.exists(winpthreads):
+        shutil.copy2(winpthreads, os.path.join(out, "mingw-w64-copyright.txt"))
+    if run_tests:
+        env = wine_environment()
+        debian.run(["ctest", "--output-on-failure"], cwd=cmake, env=env)
+    return dll
+
+
+# --------------------------------------------------------------------------
 # The zip
 # --------------------------------------------------------------------------
 
@@ -152,6 +207,8 @@ def licence_files(platform_dir):
              ("licenses/OpenSubdiv-LICENSE.txt", os.path.join(OPENSUBDIV_DIR, "LICENSE.txt")),
              ("licenses/OpenSubdiv-NOTICE.txt", os.path.join(OPENSUBDIV_DIR, "NOTICE.txt")),
              ("licenses/GCC-runtime-copyright.txt", os.path.join(platform_dir, "gcc-runtime-copyright.txt"))]
+    if os.path.exists(os.path.join(platform_dir, "mingw-w64-copyright.txt")):  # winpthreads
+        files.append(("licenses/mingw-w64-copyright.txt", os.path.join(platform_dir, "mingw-w64-copyright.txt")))
     for _name, path in files:
         if not os.path.isfile(path):
             raise RuntimeError("licence text missing: %s" % path)
@@ -244,21 +301,27 @@ def repository_index(archives):
     return repo, index
 
 
-def linux(run_tests=True):
-    library = build_linux(run_tests)
-    archive = assemble("linux-x64", library)
-    validate(archive)
-    repo, index = repository_index([archive])
-    size = os.path.getsize(archive)
-    print("package: %s (%.2f MB)\nrepository: %s (%d package%s)" % (
-        archive, size / 1e6, repo, len(index.get("data", [])), "" if len(index.get("data", [])) == 1 else "s"))
-    return archive
+BUILDERS = {"linux-x64": build_linux, "windows-x64": build_windows}
+
+
+def package(platforms, run_tests=True):
+    archives = []
+    for platform in platforms:
+        archive = assemble(platform, BUILDERS[platform](run_tests))
+        validate(archive)
+        archives.append(archive)
+    repo, index = repository_index(archives)
+    for archive in archives:
+        print("package: %s (%.2f MB)" % (archive, os.path.getsize(archive) / 1e6))
+    print("repository: %s (%d packages)" % (repo, len(index.get("data", []))))
+    return archives
 
 
 def main(argv):
-    if argv[:1] == ["linux"]:
+    platforms = {"linux": ["linux-x64"], "windows": ["windows-x64"], "all": ["linux-x64", "windows-x64"]}
+    if argv[:1] and argv[0] in platforms:
         try:
-            linux(run_tests="--no-tests" not in argv)
+            package(platforms[argv[0]], run_tests="--no-tests" not in argv)
         except (subprocess.CalledProcessError, RuntimeError, OSError) as exc:
             print("package.py: %s" % (exc if not isinstance(exc, subprocess.CalledProcessError) else
                                       "a step failed with status %d (its output is above)" % exc.returncode),
@@ -271,7 +334,7 @@ def main(argv):
     if argv[:1] == ["name"] and len(argv) == 2:
         print(os.path.join(DIST, package_name(argv[1])))
         return 0
-    print("usage: package.py linux [--no-tests] | version | name PLATFORM", file=sys.stderr)
+    print("usage: package.py linux|windows|all [--no-tests] | version | name PLATFORM", file=sys.stderr)
     return 2
 
 
