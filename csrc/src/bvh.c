@@ -798,7 +798,7 @@ spia_result spia__bvh_build(spia__bvh *bvh, const float *positions, int32_t *tri
         for (int i = 0; i < open; ++i) {
             const subtree *st = &subtrees[i];
             spia__bvh_node *dst = bvh->nodes + base;
-            memcpy(dst, st->nodes.v, sizeof(spia__bvh_node) * st->nodes.n);
+            if (st->nodes.n) memcpy(dst, st->nodes.v, sizeof(spia__bvh_node) * st->nodes.n);
             for (uint32_t k = 0; k <= st->nodes.n; ++k) {
                 spia__bvh_node *node = k < st->nodes.n ? dst + k : bvh->nodes + (st->root - top.v);
                 for (uint32_t c = 0; c < node->children; ++c)
