@@ -417,12 +417,13 @@ SPIA_API int64_t spia_surface_sample_count(const spia_mesh *mesh, int32_t sample
 
 /*
  * A scan (any polygon mesh, usually a dense triangle mesh) prepared for
- * closest-point queries: an Embree bounding volume hierarchy over its
- * triangles (polygons are cut into fans; faces that repeat a vertex are left
- * out) and smooth vertex normals (area-weighted).  The positions are copied;
- * `mesh` need not outlive the call.  Only vertex_count, positions,
- * face_count, face_sizes and face_vertices are read.  Fails with
- * SPIA_ERROR_EMPTY_MESH for a scan without faces.  Free with spia_scan_free.
+ * closest-point queries: the library's own bounding volume hierarchy over
+ * its triangles (polygons are cut into fans; faces that repeat a vertex are
+ * left out), built on every processor, about 40 bytes a triangle, and smooth
+ * vertex normals (area-weighted).  The positions are copied; `mesh` need
+ * not outlive the call.  Only vertex_count, positions, face_count,
+ * face_sizes and face_vertices are read.  Fails with SPIA_ERROR_EMPTY_MESH
+ * for a scan without faces.  Free with spia_scan_free.
  */
 typedef struct spia_scan spia_scan;
 SPIA_API spia_result spia_scan_create(const spia_mesh *mesh, spia_scan **out, spia_status *status);
@@ -439,6 +440,10 @@ SPIA_API double spia_scan_diagonal(const spia_scan *scan);
  * polygon it lies on) and on_boundary (count bytes: 1 when the closest point
  * is on the scan's boundary, an edge only one triangle uses or one of its
  * vertices: the query point is then beyond the scan's edge, over a hole).
+ * The closest point is the one a search over every triangle finds: the
+ * least distance (computed in double), and of triangles at equal distance
+ * the first (in the order of the faces and their fans), whatever the
+ * number of threads.
  * Safe to call from several threads on one scan.
  */
 SPIA_API spia_result spia_scan_closest_points(const spia_scan *scan, int64_t count, const float *points,

@@ -1,25 +1,24 @@
-/* Closest points on a scan: Embree 3's point queries over the scan's
- * triangles, the exact point-triangle distance computed here in double, and
- * a smooth normal (area-weighted vertex normals interpolated at the closest
- * point) for point-to-plane fitting. */
+/* Closest points on a scan: the library's bounding volume hierarchy over the
+ * scan's triangles (bvh.c) with the exact point-triangle distance in double,
+ * and a smooth normal (area-weighted vertex normals interpolated at the
+ * closest point) for point-to-plane fitting. */
+#include "bvh.h"
 #include "internal.h"
 #include "threads.h"
 
-#include <embree3/rtcore.h>
 #include <float.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
 struct spia_scan {
-    RTCDevice device;
-    RTCScene scene;
+    spia__bvh bvh;
     int32_t vertex_count;
     int64_t triangle_count;
-    float *positions;      /* vertex_count * 3 (our copy; Embree keeps its own) */
-    float *normals;        /* vertex_count * 3, unit or zero                     */
-    int32_t *triangles;    /* triangle_count * 3                                 */
-    int32_t *polygon_of;   /* triangle -> the scan polygon it was cut from        */
+    float *positions;      /* vertex_count * 3 (our copy)                           */
+    float *normals;        /* vertex_count * 3, unit or zero                        */
+    int32_t *triangles;    /* triangle_count * 3, in the hierarchy's leaf order      */
+    int32_t *polygon_of;   /* triangle -> the scan polygon it was cut from           */
     /* Per triangle, bit k set when its edge k (corner k to corner k + 1) is
      * on the scan's boundary (used by no other triangle); bit 3 + k when
      * corner k is a boundary vertex. */
@@ -30,8 +29,7 @@ struct spia_scan {
 
 static void scan_release(spia_scan *s) {
     if (!s) return;
-    if (s->scene) rtcReleaseScene(s->scene);
-    if (s->device) rtcReleaseDevice(s->device);
+    spia__bvh_free(&s->bvh);
     free(s->positions);
     free(s->normals);
     free(s->triangles);
@@ -198,179 +196,33 @@ spia_result spia_scan_create(const spia_mesh *mesh, spia_scan **out, spia_status
     }
     free(acc);
 
+    /* The hierarchy sorts the triangles into its leaf order; the polygons
+     * they came from follow. */
+    {
+        const spia_result r = spia__bvh_build(&s->bvh, s->positions, s->triangles, tris, spia__processor_count(),
+                                              status);
+        if (r != SPIA_OK) {
+            scan_release(s);
+            return r;
+        }
+        int32_t *polygon_of = malloc(sizeof(int32_t) * (size_t)tris);
+        if (!polygon_of) {
+            scan_release(s);
+            return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the scan");
+        }
+        for (int64_t i = 0; i < tris; ++i) polygon_of[i] = s->polygon_of[s->bvh.order[i]];
+        free(s->polygon_of);
+        s->polygon_of = polygon_of;
+    }
     if (mark_boundary(s) != SPIA_OK) {
         scan_release(s);
         return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the scan's boundary");
-    }
-
-    /* Embree: one triangle geometry, a static scene. */
-    s->device = rtcNewDevice(NULL);
-    if (!s->device) {
-        scan_release(s);
-        return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "Embree could not create a device");
-    }
-    s->scene = rtcNewScene(s->device);
-    RTCGeometry geom = rtcNewGeometry(s->device, RTC_GEOMETRY_TYPE_TRIANGLE);
-    float *vb = rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float),
-                                        (size_t)n);
-    unsigned *ib = rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned),
-                                           (size_t)tris);
-    if (!s->scene || !vb || !ib) {
-        if (geom) rtcReleaseGeometry(geom);
-        scan_release(s);
-        return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "Embree could not allocate the scan's buffers");
-    }
-    memcpy(vb, s->positions, sizeof(float) * 3 * (size_t)n);
-    for (int64_t i = 0; i < 3 * tris; ++i) ib[i] = (unsigned)s->triangles[i];
-    rtcCommitGeometry(geom);
-    rtcAttachGeometry(s->scene, geom);
-    rtcReleaseGeometry(geom);
-    rtcCommitScene(s->scene);
-    const enum RTCError err = rtcGetDeviceError(s->device);
-    if (err != RTC_ERROR_NONE) {
-        scan_release(s);
-        return spia__fail(status, err == RTC_ERROR_OUT_OF_MEMORY ? SPIA_ERROR_OUT_OF_MEMORY : SPIA_ERROR_INTERNAL, -1,
-                          "Embree failed to build the scan's hierarchy (error %d)", (int)err);
     }
     *out = s;
     spia__ok(status);
     return SPIA_OK;
 }
 
-/* The closest point to p on segment ab, as the weight t of b. */
-static double closest_on_segment(const double p[3], const double a[3], const double b[3]) {
-    double ab[3], ap[3];
-    for (int i = 0; i < 3; ++i) ab[i] = b[i] - a[i], ap[i] = p[i] - a[i];
-    const double len2 = ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2];
-    if (!(len2 > 0.0)) return 0.0;
-    const double t = (ab[0] * ap[0] + ab[1] * ap[1] + ab[2] * ap[2]) / len2;
-    return t < 0.0 ? 0.0 : (t > 1.0 ? 1.0 : t);
-}
-
-/* A triangle without area (two corners at one place, or in a line: an
- * unwelded or collapsed scan) is the union of its edges: the nearest point
- * of the three segments. */
-static void closest_on_flat_triangle(const double p[3], const double *v[3], double bary[3]) {
-    double best = INFINITY;
-    for (int k = 0; k < 3; ++k) {
-        const int k1 = (k + 1) % 3;
-        const double t = closest_on_segment(p, v[k], v[k1]);
-        double d2 = 0.0;
-        for (int i = 0; i < 3; ++i) {
-            const double x = (1.0 - t) * v[k][i] + t * v[k1][i] - p[i];
-            d2 += x * x;
-        }
-        if (d2 < best) {
-            best = d2;
-            bary[k] = 1.0 - t, bary[k1] = t, bary[(k + 2) % 3] = 0.0;
-        }
-    }
-}
-
-/* The closest point to p on triangle (a, b, c), as barycentric weights
- * (u, v, w) of a, b, c; by the Voronoi regions of vertices, edges and face. */
-static void closest_on_triangle(const double p[3], const double a[3], const double b[3], const double c[3],
-                                double bary[3]) {
-    double ab[3], ac[3], ap[3];
-    for (int i = 0; i < 3; ++i) {
-        ab[i] = b[i] - a[i];
-        ac[i] = c[i] - a[i];
-        ap[i] = p[i] - a[i];
-    }
-#define DOT(x, y) ((x)[0] * (y)[0] + (x)[1] * (y)[1] + (x)[2] * (y)[2])
-    {
-        const double n[3] = {ab[1] * ac[2] - ab[2] * ac[1], ab[2] * ac[0] - ab[0] * ac[2],
-                             ab[0] * ac[1] - ab[1] * ac[0]};
-        if (!(DOT(n, n) > 1e-24 * DOT(ab, ab) * DOT(ac, ac))) {
-            const double *v[3] = {a, b, c};
-            closest_on_flat_triangle(p, v, bary);
-            return;
-        }
-    }
-    const double d1 = DOT(ab, ap), d2 = DOT(ac, ap);
-    if (d1 <= 0.0 && d2 <= 0.0) {
-        bary[0] = 1.0, bary[1] = 0.0, bary[2] = 0.0;
-        return;
-    }
-    double bp[3], cp[3];
-    for (int i = 0; i < 3; ++i) {
-        bp[i] = p[i] - b[i];
-        cp[i] = p[i] - c[i];
-    }
-    const double d3 = DOT(ab, bp), d4 = DOT(ac, bp);
-    if (d3 >= 0.0 && d4 <= d3) {
-        bary[0] = 0.0, bary[1] = 1.0, bary[2] = 0.0;
-        return;
-    }
-    const double vc = d1 * d4 - d3 * d2;
-    if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) {
-        const double v = d1 / (d1 - d3);
-        bary[0] = 1.0 - v, bary[1] = v, bary[2] = 0.0;
-        return;
-    }
-    const double d5 = DOT(ab, cp), d6 = DOT(ac, cp);
-    if (d6 >= 0.0 && d5 <= d6) {
-        bary[0] = 0.0, bary[1] = 0.0, bary[2] = 1.0;
-        return;
-    }
-    const double vb = d5 * d2 - d1 * d6;
-    if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) {
-        const double w = d2 / (d2 - d6);
-        bary[0] = 1.0 - w, bary[1] = 0.0, bary[2] = w;
-        return;
-    }
-    const double va = d3 * d6 - d5 * d4;
-    if (va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0) {
-        const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-        bary[0] = 0.0, bary[1] = 1.0 - w, bary[2] = w;
-        return;
-    }
-    const double denom = va + vb + vc;
-    const double v = vb / denom, w = vc / denom;
-    bary[0] = 1.0 - v - w, bary[1] = v, bary[2] = w;
-#undef DOT
-}
-
-typedef struct query_state {
-    const spia_scan *scan;
-    double p[3];
-    double best_d2;
-    int64_t best_tri;
-    double best_bary[3];
-    double best_point[3];
-} query_state;
-
-static bool query_triangle(struct RTCPointQueryFunctionArguments *args) {
-    query_state *q = (query_state *)args->userPtr;
-    const spia_scan *s = q->scan;
-    const int32_t *tri = s->triangles + 3 * (int64_t)args->primID;
-    double v[3][3];
-    for (int k = 0; k < 3; ++k)
-        for (int c = 0; c < 3; ++c) v[k][c] = s->positions[3 * (int64_t)tri[k] + c];
-    double bary[3];
-    closest_on_triangle(q->p, v[0], v[1], v[2], bary);
-    double x[3], d2 = 0.0;
-    for (int c = 0; c < 3; ++c) {
-        x[c] = bary[0] * v[0][c] + bary[1] * v[1][c] + bary[2] * v[2][c];
-        d2 += (x[c] - q->p[c]) * (x[c] - q->p[c]);
-    }
-    if (d2 < q->best_d2 || (d2 == q->best_d2 && (int64_t)args->primID < q->best_tri)) {
-        q->best_d2 = d2;
-        q->best_tri = (int64_t)args->primID;
-        memcpy(q->best_bary, bary, sizeof bary);
-        memcpy(q->best_point, x, sizeof x);
-        /* Shrink the search; a hair wider than sqrt(d2) so that float
-         * rounding never culls a triangle at the same distance. */
-        const float r = (float)(sqrt(d2) * (1.0 + 1e-6)) + FLT_MIN;
-        if (r < args->query->radius) {
-            args->query->radius = r;
-            return true;
-        }
-    }
-    return false;
-}
-
-/* One query; writes the outputs for point i. */
 /* Whether barycentric weights (of corners 0, 1, 2) put a point on the scan's
  * boundary: on a boundary edge, or at a boundary vertex. */
 static int on_scan_boundary(unsigned char bits, const double bary[3]) {
@@ -384,45 +236,29 @@ static int on_scan_boundary(unsigned char bits, const double bary[3]) {
     return 0;
 }
 
+/* One query; writes the outputs for point i. */
 static void closest_one(const spia_scan *s, const double p[3], float radius, int64_t i, float *closest,
                         float *normals, float *distances, int32_t *faces, uint8_t *on_boundary) {
-    query_state q;
-    q.scan = s;
-    memcpy(q.p, p, sizeof q.p);
-    q.best_d2 = INFINITY;
-    q.best_tri = -1;
-    struct RTCPointQuery query;
-    query.x = (float)p[0];
-    query.y = (float)p[1];
-    query.z = (float)p[2];
-    query.time = 0.0f;
-    query.radius = radius;
-    struct RTCPointQueryContext context;
-    rtcInitPointQueryContext(&context);
-    rtcPointQuery(s->scene, &query, &context, query_triangle, &q);
-    if (q.best_tri < 0 && radius < INFINITY) { /* the hint was too tight: search everything */
-        query.radius = INFINITY;
-        rtcInitPointQueryContext(&context);
-        rtcPointQuery(s->scene, &query, &context, query_triangle, &q);
-    }
-    if (q.best_tri < 0) { /* cannot happen with a non-empty scene; be safe */
-        q.best_tri = 0;
+    spia__bvh_hit q;
+    spia__bvh_closest(&s->bvh, p, radius, &q);
+    if (q.triangle < 0) { /* a point that is not finite (the internal entry point does not check) */
+        q.triangle = 0;
         const int32_t *tri = s->triangles;
-        for (int c = 0; c < 3; ++c) q.best_point[c] = s->positions[3 * (int64_t)tri[0] + c];
-        q.best_bary[0] = 1.0, q.best_bary[1] = 0.0, q.best_bary[2] = 0.0;
-        q.best_d2 = 0.0;
-        for (int c = 0; c < 3; ++c) q.best_d2 += (q.best_point[c] - p[c]) * (q.best_point[c] - p[c]);
+        for (int c = 0; c < 3; ++c) q.point[c] = s->positions[3 * (int64_t)tri[0] + c];
+        q.bary[0] = 1.0, q.bary[1] = 0.0, q.bary[2] = 0.0;
+        q.d2 = 0.0;
+        for (int c = 0; c < 3; ++c) q.d2 += (q.point[c] - p[c]) * (q.point[c] - p[c]);
     }
     if (closest)
-        for (int c = 0; c < 3; ++c) closest[3 * i + c] = (float)q.best_point[c];
-    if (distances) distances[i] = (float)sqrt(q.best_d2);
-    if (faces) faces[i] = s->polygon_of[q.best_tri];
-    if (on_boundary) on_boundary[i] = (uint8_t)on_scan_boundary(s->boundary_bits[q.best_tri], q.best_bary);
+        for (int c = 0; c < 3; ++c) closest[3 * i + c] = (float)q.point[c];
+    if (distances) distances[i] = (float)sqrt(q.d2);
+    if (faces) faces[i] = s->polygon_of[q.triangle];
+    if (on_boundary) on_boundary[i] = (uint8_t)on_scan_boundary(s->boundary_bits[q.triangle], q.bary);
     if (normals) {
-        const int32_t *tri = s->triangles + 3 * q.best_tri;
+        const int32_t *tri = s->triangles + 3 * q.triangle;
         double nrm[3] = {0.0, 0.0, 0.0};
         for (int k = 0; k < 3; ++k)
-            for (int c = 0; c < 3; ++c) nrm[c] += q.best_bary[k] * s->normals[3 * (int64_t)tri[k] + c];
+            for (int c = 0; c < 3; ++c) nrm[c] += q.bary[k] * s->normals[3 * (int64_t)tri[k] + c];
         double len = sqrt(nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2]);
         if (!(len > 1e-12)) { /* opposite vertex normals cancel: the face's own normal */
             const float *a = s->positions + 3 * (int64_t)tri[0], *b = s->positions + 3 * (int64_t)tri[1],

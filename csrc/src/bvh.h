@@ -1,0 +1,89 @@
+/* A bounding volume hierarchy over triangles, for nearest-triangle queries
+ * (the closest points on a scan, scan.c).  Private to the library. */
+#ifndef SPIA_BVH_H
+#define SPIA_BVH_H
+
+#include "subdiv_pia.h"
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* No tree is deeper than this: below depth 64 (in halvings) the builder
+ * stops looking for good splits and halves each range, which reaches a leaf
+ * within 32 more.  A query's stack is sized from it. */
+#define SPIA__BVH_MAX_DEPTH 128
+
+/* A node of up to four children: their boxes (float, holding their
+ * triangles' vertices exactly), side by side for the four at once, and for
+ * each either a node (count 0: nodes[child]) or a leaf (count > 0: the
+ * triangles child .. child + count - 1 in leaf order).  128 bytes (two
+ * 64-byte lines); node 0 is the root. */
+typedef struct spia__bvh_node {
+    float lo[3][4]; /* lo[axis][child] */
+    float hi[3][4];
+    uint32_t child[4];
+    uint8_t count[4];
+    uint32_t children; /* 1 (a root that is a leaf) to 4 */
+    uint32_t unused[2];
+} spia__bvh_node;
+
+typedef struct spia__bvh {
+    spia__bvh_node *nodes;
+    int64_t node_count;
+    /* order[i] is the index that triangle i (in leaf order) had before the
+     * build: the tie-break among triangles at equal distance. */
+    uint32_t *order;
+    const float *positions;   /* borrowed: 3 floats per vertex                      */
+    const int32_t *triangles; /* borrowed: 3 vertex indices per triangle, leaf order */
+    int64_t triangle_count;
+    int32_t depth;            /* levels of nodes below the root                      */
+    double extent;            /* the largest |coordinate| of a triangle's vertex     */
+    void *node_memory;        /* nodes, before alignment                             */
+} spia__bvh;
+
+/* Builds the hierarchy over triangle_count (>= 1, < 2^32) triangles of
+ * `triangles` (3 indices each into `positions`, 3 finite floats each),
+ * sorting `triangles` in place into leaf order (bvh->order says where each
+ * came from).  Both arrays are borrowed and must outlive the hierarchy.
+ * Binned surface-area heuristic; the top levels and then the subtrees are
+ * built on `threads` threads (the tree does not depend on their number).
+ * Fails only with SPIA_ERROR_OUT_OF_MEMORY; then *bvh is zeroed, the
+ * triangles are in their first order and nothing is left allocated. */
+spia_result spia__bvh_build(spia__bvh *bvh, const float *positions, int32_t *triangles, int64_t triangle_count,
+                            int threads, spia_status *status);
+void spia__bvh_free(spia__bvh *bvh);
+
+/* The bytes the hierarchy holds (nodes and order; not the borrowed arrays). */
+size_t spia__bvh_bytes(const spia__bvh *bvh);
+
+typedef struct spia__bvh_hit {
+    int64_t triangle; /* in leaf order (bvh->triangles + 3 * triangle); -1 if none */
+    double d2;        /* squared distance, as spia__triangle_distance2 computes it */
+    double bary[3];   /* the closest point's weights of the triangle's corners      */
+    double point[3];  /* the closest point                                          */
+} spia__bvh_hit;
+
+/* The triangle nearest to p: the least squared distance computed by
+ * spia__triangle_distance2, and among equal ones the lowest index before the
+ * build; exactly what a search over every triangle finds.  `radius` is a
+ * hint (INFINITY for none): triangles farther than it are not looked at,
+ * and when none is within it every triangle is.  So the hit never depends
+ * on the hint, only the time does.  The hit's triangle is -1 only when p
+ * is not finite. */
+void spia__bvh_closest(const spia__bvh *bvh, const double p[3], double radius, spia__bvh_hit *hit);
+
+/* The closest point to p on triangle (a, b, c): its barycentric weights of
+ * a, b, c, the point, and the squared distance; in double.  A triangle
+ * without area is the union of its edges. */
+double spia__triangle_distance2(const double p[3], const float *a, const float *b, const float *c, double bary[3],
+                                double point[3]);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif
