@@ -253,6 +253,16 @@ def python_with_pip():
     raise RuntimeError("no Python 3.11 or newer with pip to fetch Blender's extension tools (install python3-pip)")
 
 
+def blender_wheel():
+    """The newest official Blender (PyPI's bpy wheel) for this Python, fetched once into build/wheels."""
+    wheels = os.path.join(BUILD, "wheels")
+    os.makedirs(wheels, exist_ok=True)
+    if not glob.glob(os.path.join(wheels, "bpy-*.whl")):
+        debian.run([python_with_pip(), "-m", "pip", "download", "-q", "--no-deps", "--only-binary=:all:",
+                    "-d", wheels, "bpy"])
+    return sorted(glob.glob(os.path.join(wheels, "bpy-*.whl")))[-1]
+
+
 def blender_extension_tool():
     """(python, blender_ext.py, tags.py) from a Blender 4.2 or newer: the
     machine's, a bpy wheel already unpacked under build/, or the newest bpy
@@ -264,12 +274,7 @@ def blender_extension_tool():
                              "cli", "blender_ext.py")]
     found = [p for pattern in patterns for p in glob.glob(pattern)]
     if not found:
-        wheels = os.path.join(BUILD, "wheels")
-        os.makedirs(wheels, exist_ok=True)
-        if not glob.glob(os.path.join(wheels, "bpy-*.whl")):
-            debian.run([python_with_pip(), "-m", "pip", "download", "-q", "--no-deps", "--only-binary=:all:",
-                        "-d", wheels, "bpy"])
-        wheel = sorted(glob.glob(os.path.join(wheels, "bpy-*.whl")))[-1]
+        wheel = blender_wheel()
         with zipfile.ZipFile(wheel) as zf:
             members = [m for m in zf.namelist()
                        if m.endswith(("bl_pkg/cli/blender_ext.py", "_bpy_internal/extensions/tags.py"))]
