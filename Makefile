@@ -6,17 +6,20 @@ PYTHON  ?= /usr/bin/python3
 BLENDER ?= blender
 BLENDER_RUN = $(BLENDER) -b --factory-startup --python-exit-code 1
 # What building, testing and packaging need, on either release.  The
-# package is built in a Debian 11 chroot (debootstrap) from Debian's source
-# package of OpenSubdiv (dpkg-source); the machine's OpenSubdiv serves the
-# development build.
+# Linux package is built in a Debian 11 chroot (debootstrap) from Debian's
+# source package of OpenSubdiv (dpkg-source), the Windows one with mingw-w64
+# and tested under Wine; the machine's OpenSubdiv serves the development
+# build.
 DEBIAN_PACKAGES = blender libosd-dev cmake g++ make binutils python3-numpy python3-scipy python3-pytest \
-                  python3-matplotlib python3-venv libsuitesparse-dev debootstrap dpkg-dev xz-utils
+                  python3-matplotlib python3-venv libsuitesparse-dev debootstrap dpkg-dev xz-utils \
+                  g++-mingw-w64-x86-64 wine64
 # Installed where the release has them: the closest-point benchmark compares
 # the library with Embree (3 on Debian 12, 4 on 13).
 OPTIONAL_PACKAGES = libembree-dev
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 VERSION = $(shell $(PYTHON) tools/package.py version)
 PACKAGE = dist/subdiv_pia-$(VERSION)-linux-x64.zip
+WINDOWS_PACKAGE = dist/subdiv_pia-$(VERSION)-windows-x64.zip
 
 .PHONY: all deps build package test test-c test-asan test-python test-package test-blender blenders demo \
         bench bench-scale bench-closest clean
@@ -41,10 +44,12 @@ deps:
 build: deps
 	$(PYTHON) setup.py build
 
-# What is shipped: dist/subdiv_pia-<version>-linux-x64.zip (Install from
-# Disk) and dist/repo/ (a static extension repository).
+# What is shipped: dist/subdiv_pia-<version>-linux-x64.zip and
+# -windows-x64.zip (Install from Disk), and dist/repo/ (a static extension
+# repository listing both).  The C tests run on each library as it is built
+# (the Windows one under Wine).
 package: deps
-	$(SUDO) $(PYTHON) tools/package.py linux
+	$(SUDO) $(PYTHON) tools/package.py all
 
 test: build test-c test-asan test-python test-package test-blender
 
@@ -60,10 +65,10 @@ test-asan: deps
 test-python: build
 	SUBDIV_PIA_ADDON_DIR=build/addon $(PYTHON) -m pytest -q tests/python
 
-# The package as shipped: ELF audit, loading with the system's libraries
-# hidden or Blender's preloaded, clean Debian 11 and 12/13 chroots.
+# The packages as shipped: ELF and PE audits, loading with the system's
+# libraries hidden or Blender's preloaded, clean Debian 11 and 12/13 chroots.
 test-package: package
-	$(SUDO) $(PYTHON) tests/package/run.py $(PACKAGE)
+	$(SUDO) $(PYTHON) tests/package/run.py $(PACKAGE) $(WINDOWS_PACKAGE)
 
 # The Blender suite against the installed package, in every Blender here:
 # Debian's, the other Debian release's (chroot), PyPI's bpy builds.

@@ -172,7 +172,7 @@ def build_windows(run_tests=True):
                stdout=subprocess.DEVNULL)
     debian.run(["cmake", "--build", cmake, "--parallel", "2"])
     dll = os.path.join(out, "subdiv_pia.dll")
-    debian.run(["x86_64-w64-mingw32-strip", "--strip-unneeded", "-o", dll, os.path.join(cmake, "subdiv_pia.dll")])
+    debian.run(["x86_64-w64-mingw32-strip", "--strip-unneeded", "-o", dll, os.path.join(cmake, "bin", "subdiv_pia.dll")])
     gcc = subprocess.run(["x86_64-w64-mingw32-gcc-posix", "--version"], stdout=subprocess.PIPE, text=True).stdout
     with open(os.path.join(out, "compiler.txt"), "w") as f:
         f.write(gcc.splitlines()[0] + "\n")

@@ -53,7 +53,7 @@ extern "C" {
 #endif
 
 #define SPIA_VERSION_MAJOR 0
-#define SPIA_VERSION_MINOR 1
+#define SPIA_VERSION_MINOR 2
 #define SPIA_VERSION_PATCH 0
 
 /* ------------------------------------------------------------------------ */

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Tests of the package as it is shipped (`make test-package`):
 
-    python3 tests/package/run.py dist/subdiv_pia-<version>-linux-x64.zip
+    python3 tests/package/run.py dist/subdiv_pia-<version>-linux-x64.zip [dist/...-windows-x64.zip]
 
 1. audit: the ELF audit of the library (audit_elf.py).
 2. host: the unpacked package loads and works here (smoke.py).
@@ -14,6 +14,8 @@
    each symbol the library looks up bound to the C library, libm or
    libgcc_s; then with Blender's real copies from official bpy builds (the
    wheel tools/package.py fetched, and those unpacked under build/bpy).
+6. the Windows zip, if given: its manifest, and its DLL imports only
+   Windows system DLLs and exports only the API (audit_pe.py).
 5. Debian 11 and the other current release (13 on a Debian 12 machine, else
    12): clean chroots with Python and numpy only, none of those libraries
    installed; the package loads and works there.
@@ -76,8 +78,8 @@ def system_python():
     return sys.executable
 
 
-def unpack(archive):
-    target = os.path.join(WORK, "unpacked")
+def unpack(archive, folder="unpacked"):
+    target = os.path.join(WORK, folder)
     shutil.rmtree(target, ignore_errors=True)
     with zipfile.ZipFile(archive) as zf:
         zf.extractall(target)
@@ -231,15 +233,40 @@ def test_chroot(suite, parent):
                                "; present: " + ", ".join(map(os.path.basename, present)) if present else ""))
 
 
+def manifest_platforms(parent):
+    text = open(os.path.join(parent, "subdiv_pia", "blender_manifest.toml")).read()
+    m = re.search(r"^platforms\s*=\s*\[([^\]]*)\]", text, re.M)
+    return re.findall(r'"([^"]+)"', m.group(1)) if m else []
+
+
+def test_windows(archive):
+    """The Windows zip: its manifest, its DLL's imports and exports (its C
+    tests ran under Wine when it was built: tools/package.py)."""
+    import audit_pe
+    parent = unpack(archive, "unpacked-windows")
+    names = sorted(os.listdir(os.path.join(parent, "subdiv_pia")))
+    libraries = [n for n in names if n.endswith((".so", ".dll", ".dylib"))]
+    check("windows manifest", manifest_platforms(parent) == ["windows-x64"] and libraries == ["subdiv_pia.dll"],
+          "platforms %s, libraries %s" % (manifest_platforms(parent), libraries))
+    report, problems = audit_pe.audit(os.path.join(parent, "subdiv_pia", "subdiv_pia.dll"), HEADER)
+    check("windows audit", not problems, "; ".join("%s %s" % kv for kv in report.items()) +
+          ("; " + "; ".join(problems) if problems else ""))
+
+
 def main(argv):
-    if len(argv) != 1 or not argv[0].endswith(".zip"):
+    if not argv or not all(a.endswith(".zip") for a in argv):
         print(__doc__)
         return 2
-    archive = os.path.abspath(argv[0])
     os.makedirs(WORK, exist_ok=True)
+    for other in argv[1:]:
+        test_windows(os.path.abspath(other))
+    archive = os.path.abspath(argv[0])
     parent = unpack(archive)
     library = os.path.join(parent, "subdiv_pia", LIBRARY)
     python = system_python()
+    libraries = sorted(n for n in os.listdir(os.path.join(parent, "subdiv_pia")) if n.endswith((".so", ".dll")))
+    check("linux manifest", manifest_platforms(parent) == ["linux-x64"] and libraries == [LIBRARY],
+          "platforms %s, libraries %s" % (manifest_platforms(parent), libraries))
 
     report, problems = audit_elf.audit(library, HEADER, "2.31")
     check("audit", not problems, "; ".join("%s %s" % kv for kv in report.items()) +
