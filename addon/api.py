@@ -764,6 +764,7 @@ def interpolate(obj, *, context=None, name=None, progress=None, **settings):
     nothing is created then and obj is never changed.
     """
     check_source(obj)
+    _require_library()
     if obj.mode == 'EDIT':  # edits live in the edit-mesh until synced
         obj.update_from_editmode()
         check_source(obj)
