@@ -15,7 +15,6 @@ package is imported from here and registered.
 """
 
 import argparse
-import atexit
 import importlib.util
 import os
 import sys
@@ -64,18 +63,20 @@ def _import_package():
             raise
     if getattr(bpy.types, "OBJECT_OT_subdiv_pia_interpolate", None) is None:
         package.register()
-        # Registered here, unregistered here: the bpy module does not exit
-        # while classes of a script are still registered.
-        atexit.register(_unregister, package)
     return package
 
 
-def _unregister(package):
-    if getattr(bpy.types, "OBJECT_OT_subdiv_pia_interpolate", None) is not None:
-        try:
-            package.unregister()
-        except Exception:  # RuntimeError: already unregistered elsewhere
-            pass
+def finish(code=0):
+    """End the script with exit status code. The bpy module is left at once:
+    in Blender 4.2 and 4.3 it crashes on exit once an add-on's classes were
+    registered (even after unregistering them), in 4.5 it never exits while
+    they are registered."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    if _is_module():
+        os._exit(code)
+    if code:
+        sys.exit(code)
 
 
 def pkg_methods():
@@ -304,12 +305,14 @@ def _argv():
 
 
 if __name__ == "__main__":
+    status = 0
     try:
         main(_argv())
-    except SystemExit:
-        raise
+    except SystemExit as exit_:  # argparse: --help, bad options
+        if isinstance(exit_.code, str):
+            print(exit_.code, file=sys.stderr)
+        status = exit_.code if isinstance(exit_.code, int) else int(exit_.code is not None)
     except Exception as error:  # message for the user, non-zero exit
         print("subdiv_pia: error: %s" % error, file=sys.stderr)
-        sys.stdout.flush()
-        sys.stderr.flush()
-        sys.exit(1)
+        status = 1
+    finish(status)

@@ -85,3 +85,4 @@ print("RESULT " + json.dumps({
     "active": bpy.context.view_layer.objects.active.name,
     "source": source.name,
 }), flush=True)
+cli.finish(0)

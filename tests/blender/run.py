@@ -164,6 +164,17 @@ def main():
     return code
 
 
+def finish(code):
+    """Exit with code. The bpy module is left at once: Blender 4.2 and 4.3
+    crash on exit once add-on classes were registered, 4.5 never exits while
+    they are."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    if "bpy" in sys.modules and not IN_EXECUTABLE:
+        os._exit(code)
+    sys.exit(code)
+
+
 if __name__ == "__main__":
     sys.stdout.flush()
-    sys.exit(main())
+    finish(main())
