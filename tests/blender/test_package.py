@@ -46,3 +46,11 @@ def test_the_installed_package_is_in_use():
     assert sys.modules[name] is subdiv_pia
     assert addon_utils.check(name) == (True, True)  # enabled in the preferences, and loaded
     assert name in bpy.context.preferences.addons
+
+
+def test_cli_uses_the_copy_already_loaded():
+    """cli.py inside Blender, with its package loaded (enabled as an add-on or
+    extension, or registered by run.py): that copy, registered once."""
+    registered = bpy.types.OBJECT_OT_subdiv_pia_interpolate
+    assert cli._import_package() is subdiv_pia
+    assert bpy.types.OBJECT_OT_subdiv_pia_interpolate is registered
