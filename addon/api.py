@@ -513,6 +513,9 @@ def limit_arrays(mesh, settings, positions=None):
         raise
 
 
+_LOOP_TOTAL_READ_ONLY = bpy.types.MeshPolygon.bl_rna.properties["loop_total"].is_readonly
+
+
 def limit_mesh(name, points, face_sizes, face_vertices, materials=()):
     """A new smooth-shaded mesh from limit_arrays' output."""
     points = np.ascontiguousarray(points, np.float32).reshape(-1, 3)
@@ -529,10 +532,8 @@ def limit_mesh(name, points, face_sizes, face_vertices, materials=()):
     if count > 1:
         np.cumsum(face_sizes[:-1], out=starts[1:])
     mesh.polygons.foreach_set("loop_start", starts)
-    try:  # read-only (derived from loop_start) in Blender 4
+    if not _LOOP_TOTAL_READ_ONLY:  # 4.0+: derived from loop_start
         mesh.polygons.foreach_set("loop_total", face_sizes)
-    except (AttributeError, TypeError, RuntimeError):
-        pass
     mesh.update(calc_edges=True)
     if hasattr(mesh, "shade_smooth"):  # Blender 4.1+
         mesh.shade_smooth()
@@ -688,6 +689,8 @@ def build_object(source, cage, report, settings, context=None, name=None, mesh=N
         mod.quality = settings["quality"]
         mod.boundary_smooth = settings["boundary_smooth"]
         mod.use_creases = settings["use_creases"]
+        if hasattr(mod, "use_adaptive_subdivision"):  # 5.0+: Cycles' dicing, not the limit surface
+            mod.use_adaptive_subdivision = False
         src_mod = find_subsurf(source)
         if src_mod is not None:
             mod.uv_smooth = src_mod.uv_smooth
@@ -764,6 +767,7 @@ def interpolate(obj, *, context=None, name=None, progress=None, **settings):
     nothing is created then and obj is never changed.
     """
     check_source(obj)
+    _require_library()
     if obj.mode == 'EDIT':  # edits live in the edit-mesh until synced
         obj.update_from_editmode()
         check_source(obj)

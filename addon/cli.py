@@ -2,27 +2,81 @@
 """Command line: make an interpolating cage and save it to a .blend file.
 
     blender -b --python <add-on folder>/cli.py -- INPUT OUTPUT.blend [options]
+    python <add-on folder>/cli.py -- INPUT OUTPUT.blend [options]   (Blender as the bpy module)
 
 INPUT is .obj, .ply, .stl or .blend. Run with -- --help for the options.
 Exit status 0 on success (also when the tolerance was not reached: the
 report says so), 1 with the message on error.
+
+The add-on folder may be anywhere: the build, an installed legacy add-on or
+an installed extension. A copy of the package already loaded from this
+folder (an enabled add-on or extension) is used as it is; otherwise the
+package is imported from here and registered.
 """
 
 import argparse
-import importlib
+import importlib.util
 import os
 import sys
 
-import bpy
+HERE = os.path.dirname(os.path.abspath(__file__))
+if __name__ == "__main__" and sys.path and os.path.abspath(sys.path[0] or ".") == HERE:
+    del sys.path[0]  # run by plain Python: the package's modules are not top-level modules
+
+import bpy  # noqa: E402
+
+
+def _same_file(a, b):
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def _loaded_package():
+    """The copy of this package already imported from this folder, or None."""
+    init = os.path.join(HERE, "__init__.py")
+    for module in list(sys.modules.values()):
+        path = getattr(module, "__file__", None)
+        if path and os.path.basename(path) == "__init__.py" and _same_file(path, init):
+            return module
+    return None
 
 
 def _import_package():
-    """Import the add-on package that contains this file, also when run as a file."""
-    here = os.path.dirname(os.path.abspath(__file__))
-    parent, package = os.path.split(here)
-    if parent not in sys.path:
-        sys.path.insert(0, parent)
-    return importlib.import_module(package)
+    """The add-on package that contains this file: the copy already loaded
+    (as an add-on or extension, or by an earlier call), else imported from
+    this folder and registered, once."""
+    package = _loaded_package()
+    if package is None:
+        name = os.path.basename(HERE)
+        if name in sys.modules:  # another copy holds the name
+            name = "_subdiv_pia_cli_" + name
+        spec = importlib.util.spec_from_file_location(
+            name, os.path.join(HERE, "__init__.py"), submodule_search_locations=[HERE])
+        package = importlib.util.module_from_spec(spec)
+        sys.modules[name] = package
+        try:
+            spec.loader.exec_module(package)
+        except BaseException:
+            del sys.modules[name]
+            raise
+    if getattr(bpy.types, "OBJECT_OT_subdiv_pia_interpolate", None) is None:
+        package.register()
+    return package
+
+
+def finish(code=0):
+    """End the script with exit status code. The bpy module is left at once:
+    in Blender 4.2 and 4.3 it crashes on exit once an add-on's classes were
+    registered (even after unregistering them), in 4.5 it never exits while
+    they are registered."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    if _is_module():
+        os._exit(code)
+    if code:
+        sys.exit(code)
 
 
 def pkg_methods():
@@ -31,7 +85,7 @@ def pkg_methods():
 
 def parse_args(argv):
     parser = argparse.ArgumentParser(
-        prog="blender -b --python cli.py --",
+        prog="python cli.py --" if _is_module() else "blender -b --python cli.py --",
         description="Make a control cage whose subdivision limit surface passes through the "
                     "vertices of INPUT. Catmull-Clark (default): the limit surface of Blender's "
                     "Subdivision Surface modifier with Use Limit Surface; the cage is saved with "
@@ -39,8 +93,11 @@ def parse_args(argv):
                     "surface (refined --levels times) as a child object <cage>_limit. DOO_SABIN "
                     "(two-phase Doo-Sabin, closed meshes): likewise, the child holds the cage "
                     "refined --levels times.")
-    parser.add_argument("input", help="input mesh: .obj, .ply, .stl or .blend")
-    parser.add_argument("output", help="output .blend file")
+    parser.add_argument("--version", action="store_true",
+                        help="print the version, the package's folder and its library, and exit")
+    parser.add_argument("input", nargs="?" if "--version" in argv else None,
+                        help="input mesh: .obj, .ply, .stl or .blend")
+    parser.add_argument("output", nargs="?" if "--version" in argv else None, help="output .blend file")
     parser.add_argument("--object", help="object name to use from a .blend input "
                                          "(default: the active mesh object, else the first)")
     parser.add_argument("--scheme", choices=("CATMULL_CLARK", "LOOP", "DOO_SABIN"),
@@ -87,6 +144,11 @@ def parse_args(argv):
     return parser.parse_args(argv)
 
 
+def _is_module():
+    """Blender runs as the bpy Python module (no blender executable)."""
+    return bool(getattr(bpy.app, "module", False)) or not bpy.app.binary_path
+
+
 def operator_exists(module_name, op_name):
     """bpy.ops.<module>.<name> exists (hasattr on bpy.ops is always True)."""
     try:
@@ -94,13 +156,6 @@ def operator_exists(module_name, op_name):
         return True
     except (AttributeError, KeyError):
         return False
-
-
-def _call_first(names, **kwargs):
-    for module_name, op_name in names:
-        if operator_exists(module_name, op_name):
-            return getattr(getattr(bpy.ops, module_name), op_name)(**kwargs)
-    raise RuntimeError("No importer available (%s)" % ", ".join("%s.%s" % n for n in names))
 
 
 def load_input(path, object_name=None):
@@ -127,17 +182,36 @@ def load_input(path, object_name=None):
     return import_mesh_file(path, object_name)
 
 
+# Importer options that would change the mesh: off where this Blender has
+# them. Since 4.2 the OBJ and STL importers validate by default, which drops
+# duplicate faces (scans have them) and so changes what is interpolated.
+_AS_IS = {"use_split_objects": False, "use_split_groups": False,
+          "validate_meshes": False, "use_mesh_validate": False}
+
+
+def _options(module_name, op_name):
+    known = getattr(getattr(bpy.ops, module_name), op_name).get_rna_type().properties.keys()
+    return {k: v for k, v in _AS_IS.items() if k in known}
+
+
+def _call_first(names, **kwargs):
+    for module_name, op_name in names:
+        if operator_exists(module_name, op_name):
+            options = dict(_options(module_name, op_name), **kwargs)
+            return getattr(getattr(bpy.ops, module_name), op_name)(**options)
+    raise RuntimeError("No importer available (%s)" % ", ".join("%s.%s" % n for n in names))
+
+
 def import_mesh_file(path, object_name=None):
-    """Import a .obj, .ply or .stl file into the current scene; return its mesh object."""
+    """Import a .obj, .ply or .stl file into the current scene, as the file has
+    it (no validation, no splitting); return its mesh object."""
     if not os.path.isfile(path):
         raise ValueError("File not found: %s" % path)
     ext = os.path.splitext(path)[1].lower()
     before = set(bpy.data.objects)
     if ext == ".obj":
         if operator_exists("wm", "obj_import"):  # C++ importer (3.3+): keeps vertex order
-            known = bpy.ops.wm.obj_import.get_rna_type().properties.keys()
-            options = {k: False for k in ("use_split_objects", "use_split_groups") if k in known}
-            bpy.ops.wm.obj_import(filepath=path, **options)
+            _call_first((("wm", "obj_import"),), filepath=path)
         else:
             bpy.ops.import_scene.obj(filepath=path, split_mode='OFF')
     elif ext == ".ply":
@@ -158,7 +232,14 @@ def import_mesh_file(path, object_name=None):
 def main(argv):
     args = parse_args(argv)
     package = _import_package()
+    if args.version:
+        from_file = package.native.library_path() if package.native.available() else None
+        version = package.native.package_info()[0] or ".".join(map(str, package.bl_info["version"]))
+        print("subdiv_pia %s: %s" % (version, os.path.dirname(os.path.abspath(package.__file__))))
+        print("subdiv_pia: library %s" % (from_file or package.native.load_error()))
+        return
     obj = load_input(os.path.abspath(args.input), args.object)
+    package = _import_package()  # a factory reset disables add-ons of the preferences
     settings = {}
     if args.levels is not None:
         settings["levels"] = args.levels
@@ -218,16 +299,20 @@ def main(argv):
 
 
 def _argv():
-    return sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
+    if "--" in sys.argv:
+        return sys.argv[sys.argv.index("--") + 1:]
+    return sys.argv[1:] if _is_module() else []  # plain Python: python cli.py ARGS
 
 
 if __name__ == "__main__":
+    status = 0
     try:
         main(_argv())
-    except SystemExit:
-        raise
+    except SystemExit as exit_:  # argparse: --help, bad options
+        if isinstance(exit_.code, str):
+            print(exit_.code, file=sys.stderr)
+        status = exit_.code if isinstance(exit_.code, int) else int(exit_.code is not None)
     except Exception as error:  # message for the user, non-zero exit
         print("subdiv_pia: error: %s" % error, file=sys.stderr)
-        sys.stdout.flush()
-        sys.stderr.flush()
-        sys.exit(1)
+        status = 1
+    finish(status)

@@ -9,13 +9,16 @@ when they already have the right dtype and layout.
     stencils = limit_stencils(mesh)          # CSR arrays: offsets, indices, weights
 
 The shared library is looked up next to this file (``libsubdiv_pia.so``,
-``subdiv_pia.dll`` or ``libsubdiv_pia.dylib``), or at the path in the
-environment variable ``SUBDIV_PIA_LIBRARY``.  It is loaded on first use; if it
-cannot be, :func:`available` is False and :func:`load_error` says why.
+``subdiv_pia.dll`` or ``libsubdiv_pia.dylib``), or, instead, at the path in
+the environment variable ``SUBDIV_PIA_LIBRARY``.  It is loaded on first use;
+if it cannot be, :func:`available` is False and :func:`load_error` says why
+and what is needed (the package for this platform, a newer glibc, ...).
 """
 
 import ctypes
 import os
+import platform
+import re
 import sys
 from dataclasses import dataclass, field
 
@@ -23,7 +26,7 @@ import numpy as np
 
 __all__ = [
     "Mesh", "Report", "Stencils", "PiaError", "PiaCancelled",
-    "available", "load_error", "version", "validate", "limit_stencils", "solve", "interpolate", "refine",
+    "available", "load_error", "library_path", "platform_tag", "version", "validate", "limit_stencils", "solve", "interpolate", "refine",
     "SCHEMES", "BOUNDARY_SMOOTH", "BOUNDARY_RULES", "METHODS",
 ]
 
@@ -131,17 +134,124 @@ class _FitReport(ctypes.Structure):
 
 
 _lib = None
+_lib_path = None
 _load_error = None
+
+# The library's file name on each operating system (sys.platform's start).
+LIBRARY_NAMES = {"linux": "libsubdiv_pia.so", "win32": "subdiv_pia.dll", "darwin": "libsubdiv_pia.dylib"}
+_SYSTEM_OF_PLATFORM = {"linux": "linux", "win32": "windows", "darwin": "macos"}
+_SYSTEM_NAMES = {"linux": "Linux", "windows": "Windows", "macos": "macOS"}
+_MACHINES = {"x86_64": "x64", "amd64": "x64", "x64": "x64", "aarch64": "arm64", "arm64": "arm64"}
+
+
+def _system():
+    for prefix, system in _SYSTEM_OF_PLATFORM.items():
+        if sys.platform.startswith(prefix):
+            return system
+    return sys.platform
+
+
+def platform_tag():
+    """This system as extension platforms are named: 'linux-x64', 'windows-x64',
+    'windows-arm64', 'macos-x64', 'macos-arm64' (other systems: their own names)."""
+    machine = platform.machine()
+    return "%s-%s" % (_system(), _MACHINES.get(machine.lower(), machine.lower() or "unknown"))
+
+
+def _platform_name(tag):
+    system, _, machine = tag.partition("-")
+    return "%s %s" % (_SYSTEM_NAMES.get(system, system), machine)
+
+
+def library_name():
+    """The library's file name on this system."""
+    for prefix, name in LIBRARY_NAMES.items():
+        if sys.platform.startswith(prefix):
+            return name
+    return LIBRARY_NAMES["linux"]
+
+
+def glibc_version():
+    """(major, minor) of this system's GNU C library, or None (not glibc)."""
+    try:
+        text = os.confstr("CS_GNU_LIBC_VERSION")  # "glibc 2.36"
+    except (AttributeError, ValueError, OSError):
+        return None
+    match = re.search(r"(\d+)\.(\d+)", text or "")
+    return (int(match.group(1)), int(match.group(2))) if match else None
+
+
+def _package_dir():
+    return os.path.dirname(os.path.abspath(__file__))
+
+
+def package_info(folder=None):
+    """(version, platforms) from the blender_manifest.toml beside this file
+    (None, () where it has none)."""
+    path = os.path.join(folder or _package_dir(), "blender_manifest.toml")
+    try:
+        with open(path, encoding="utf-8") as f:
+            text = f.read()
+    except OSError:
+        return None, ()
+    version = re.search(r'^version\s*=\s*"([^"]*)"', text, re.M)
+    platforms = re.search(r"^platforms\s*=\s*\[([^\]]*)\]", text, re.M)
+    return (version.group(1) if version else None,
+            tuple(re.findall(r'"([^"]+)"', platforms.group(1))) if platforms else ())
 
 
 def _library_candidates():
     env = os.environ.get("SUBDIV_PIA_LIBRARY")
-    if env:
+    if env:  # named explicitly: that one or none
         yield env
-    here = os.path.dirname(os.path.abspath(__file__))
-    names = {"win32": ["subdiv_pia.dll"], "darwin": ["libsubdiv_pia.dylib"]}.get(sys.platform, ["libsubdiv_pia.so"])
-    for name in names:
-        yield os.path.join(here, name)
+        return
+    yield os.path.join(_package_dir(), library_name())
+
+
+def explain_load_failure(errors, folder=None, tag=None, glibc=None):
+    """What the user needs, in a few lines, for a library that did not load.
+
+    errors: [(path, loader's message or None when the file is missing)].
+    The first line says what is needed (the package for this platform, a
+    newer glibc, a missing library); the lines after it give the details.
+    """
+    folder = folder or _package_dir()
+    tag = tag or platform_tag()
+    version, platforms = package_info(folder)
+    package = "subdiv_pia-%s-%s.zip" % (version or "<version>", tag)
+    here = _platform_name(tag)
+    details = ["%s: %s" % (path, message or "not found") for path, message in errors]
+    texts = " ".join(message for _, message in errors if message)
+    present = sorted(name for name in LIBRARY_NAMES.values() if os.path.exists(os.path.join(folder, name)))
+
+    needed = re.findall(r"GLIBC_(\d+)\.(\d+)", texts)
+    missing = re.findall(r"([\w.+-]+\.so[\w.]*): cannot open shared object file", texts)
+    missing = sorted(set(m for m in missing if not m.startswith(("libsubdiv_pia", "subdiv_pia"))))
+    if needed:
+        need = max((int(a), int(b)) for a, b in needed)
+        have = glibc_version() if glibc is None else glibc
+        head = "The native library needs glibc %d.%d or newer; this system has %s" % (
+            need + ("glibc %d.%d" % have if have else "an older one",))
+    elif missing:
+        head = "The native library needs %s, which this system lacks" % ", ".join(missing)
+    elif os.environ.get("SUBDIV_PIA_LIBRARY"):
+        head = ("The library that SUBDIV_PIA_LIBRARY names is %s"
+                % ("missing" if not texts else "not a library for this system (%s)" % here))
+    elif platforms and tag not in platforms:
+        head = ("This package is for %s; this system is %s: install %s"
+                % (" and ".join(_platform_name(p) for p in platforms), here, package))
+    elif not texts and present:
+        head = ("This package has the native library for another system (%s); this system is %s: "
+                "install %s" % (", ".join(present), here, package))
+    elif not texts:
+        head = ("The native library (%s) is missing from the package: install %s again"
+                % (library_name(), package))
+    elif re.search(r"wrong ELF class|invalid ELF header|not a valid Win32|mach-o|"
+                   r"incompatible architecture|file too short", texts, re.I):
+        head = "The native library is not built for this system (%s): install %s" % (here, package)
+    else:
+        head = "The native library could not be loaded"
+    return "\n".join([head] + details)
 
 
 def _declare(lib):
@@ -181,23 +291,23 @@ def _declare(lib):
 
 
 def _library():
-    global _lib, _load_error
+    global _lib, _lib_path, _load_error
     if _lib is not None:
         return _lib
     errors = []
     for path in _library_candidates():
         if not os.path.exists(path):
-            errors.append(f"{path}: not found")
+            errors.append((path, None))
             continue
         try:
             lib = ctypes.CDLL(path)
             _declare(lib)
         except (OSError, AttributeError) as exc:
-            errors.append(f"{path}: {exc}")
+            errors.append((path, str(exc)))
             continue
-        _lib, _load_error = lib, None
+        _lib, _lib_path, _load_error = lib, os.path.abspath(path), None
         return lib
-    _load_error = "the subdiv_pia native library could not be loaded (" + "; ".join(errors) + ")"
+    _load_error = explain_load_failure(errors)
     raise PiaError("LIBRARY", _load_error)
 
 
@@ -211,9 +321,16 @@ def available():
 
 
 def load_error():
-    """Why the native library could not be loaded, or None."""
+    """Why the native library could not be loaded, or None: a first line that
+    says what is needed, then one line per file tried."""
     available()
     return _load_error
+
+
+def library_path():
+    """The file the native library was loaded from, or None."""
+    available()
+    return _lib_path
 
 
 def version():

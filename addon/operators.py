@@ -7,6 +7,11 @@ from . import api, native
 from .properties import SETTING_NAMES, settings_annotations
 
 
+def library_missing():
+    """The operators' report when the native library cannot be loaded."""
+    return "Subdivision PIA library not loaded: %s" % native.load_error()
+
+
 class _Progress:
     """Blender's progress indicator, driven by the solver's progress callback."""
 
@@ -123,6 +128,9 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
         draw_fit_settings(layout, self, bool(self.target))
 
     def execute(self, context):
+        if not native.available():  # say what is needed; touch nothing
+            self.report({'ERROR'}, library_missing())
+            return {'CANCELLED'}
         # Also here: scripts call the operator without invoke (EXEC_DEFAULT).
         self._defaults_from_modifier(context)
         settings = {name: getattr(self, name) for name in SETTING_NAMES}
@@ -163,6 +171,9 @@ class OBJECT_OT_subdiv_pia_refresh_limit(bpy.types.Operator):
         return True
 
     def execute(self, context):
+        if not native.available():
+            self.report({'ERROR'}, library_missing())
+            return {'CANCELLED'}
         obj = context.active_object
         try:
             cage = api.limit_cage_of(obj)

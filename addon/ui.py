@@ -1,6 +1,8 @@
 # SPDX-License-Identifier: GPL-2.0-or-later
 """Modifiers-tab panel and Object-menu entry."""
 
+import textwrap
+
 import bpy
 
 from . import api, native
@@ -9,6 +11,15 @@ from .operators import (OBJECT_OT_subdiv_pia_interpolate, OBJECT_OT_subdiv_pia_r
 from .properties import SCENE_SETTING_NAMES
 
 RESULT_KEYS = ("pia_status", "pia_method", "pia_iterations", "pia_max_error", "pia_mean_error")
+
+
+def library_error_lines(width=60):
+    """native.load_error() in lines short enough for a panel: what is needed
+    first, then the files tried."""
+    lines = []
+    for line in str(native.load_error() or "unknown reason").splitlines() or [""]:
+        lines.extend(textwrap.wrap(line, width, break_long_words=False, break_on_hyphens=False) or [""])
+    return lines
 
 
 class DATA_PT_subdiv_pia(bpy.types.Panel):
@@ -33,7 +44,7 @@ class DATA_PT_subdiv_pia(bpy.types.Panel):
         if not native.available():
             box = layout.box()
             box.label(text="Native library not loaded:", icon='ERROR')
-            for line in str(native.load_error() or "unknown reason").splitlines() or [""]:
+            for line in library_error_lines():
                 box.label(text=line)
             return
 

@@ -43,6 +43,23 @@ CASES = {
 }
 
 
+def finish():
+    """Exit; the bpy module at once (Blender 4.2 and 4.3 crash on exit after
+    an add-on registered classes, 4.5 does not exit while they are)."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    if getattr(bpy.app, "module", False):
+        os._exit(0)
+
+
+def script_args():
+    """The script's arguments: after "--" (blender -b --python SCRIPT -- ARGS), or
+    all of them where Blender is the bpy module (python SCRIPT [--] ARGS)."""
+    if "--" in sys.argv:
+        return sys.argv[sys.argv.index("--") + 1:]
+    return sys.argv[1:] if getattr(bpy.app, "module", False) else []
+
+
 def ensure_addon():
     """Register subdiv_pia from build/addon (for methods that call its
     operator); returns the package."""
@@ -240,4 +257,5 @@ def main(argv):
 
 
 if __name__ == "__main__":
-    main(sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else [])
+    main(script_args())
+    finish()

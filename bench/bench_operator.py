@@ -26,6 +26,14 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 
 
+def script_args():
+    """The script's arguments: after "--" (blender -b --python SCRIPT -- ARGS), or
+    all of them where Blender is the bpy module (python SCRIPT [--] ARGS)."""
+    if "--" in sys.argv:
+        return sys.argv[sys.argv.index("--") + 1:]
+    return sys.argv[1:] if getattr(bpy.app, "module", False) else []
+
+
 def build_sphere(k):
     sys.path.insert(0, HERE)
     from meshes import quad_sphere
@@ -37,7 +45,8 @@ def build_sphere(k):
     mesh.loops.foreach_set("vertex_index", fv.ravel())
     mesh.polygons.add(len(fv))
     mesh.polygons.foreach_set("loop_start", np.arange(0, fv.size, 4, dtype=np.int32))
-    mesh.polygons.foreach_set("loop_total", np.full(len(fv), 4, np.int32))
+    if not bpy.types.MeshPolygon.bl_rna.properties["loop_total"].is_readonly:  # 4.0+: from loop_start
+        mesh.polygons.foreach_set("loop_total", np.full(len(fv), 4, np.int32))
     mesh.update(calc_edges=True)
     obj = bpy.data.objects.new("sphere", mesh)
     bpy.context.scene.collection.objects.link(obj)
@@ -61,7 +70,7 @@ def remove_results(keep):
 
 
 def main():
-    argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
+    argv = script_args()
     ap = argparse.ArgumentParser()
     ap.add_argument("--k", type=int, default=408)
     ap.add_argument("--repeats", type=int, default=3)
@@ -157,6 +166,8 @@ def main():
     print(profile)
     print("BENCH_JSON " + json.dumps(out), flush=True)
     subdiv_pia.unregister()
+    from subdiv_pia import cli
+    cli.finish()  # the bpy module of 4.2-4.5 does not exit cleanly after registering
 
 
 if __name__ == "__main__":

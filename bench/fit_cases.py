@@ -27,8 +27,9 @@ DATA = os.path.join(ROOT, "tests", "data")
 # (scan, target_faces, seed).  These are the operator's defaults apart from
 # the explicit seed.
 QUADRIFLOW = dict(use_mesh_symmetry=False, use_preserve_sharp=False,
-                  use_preserve_boundary=False, preserve_paint_mask=False,
-                  smooth_normals=False, mode='FACES')
+                  use_preserve_boundary=False, smooth_normals=False, mode='FACES')
+# preserve_paint_mask was renamed preserve_attributes in Blender 4.1.
+QUADRIFLOW["preserve_attributes" if bpy.app.version >= (4, 1, 0) else "preserve_paint_mask"] = False
 
 # Blender refuses to remesh with QuadriFlow when an edge has all three
 # coordinate differences within this absolute limit (object_remesh.cc,
@@ -50,7 +51,11 @@ def _activate(obj):
 def import_obj(path, name=None):
     """Import an OBJ as one mesh object (Blender's C++ importer, no splitting)."""
     before = set(bpy.data.objects)
-    bpy.ops.wm.obj_import(filepath=path)  # 3.4: one object per OBJ without o/g lines
+    # As the file has it: not split (3.4 has no such option and splits none
+    # without o/g lines), not validated (4.2+ would drop duplicate faces).
+    known = bpy.ops.wm.obj_import.get_rna_type().properties.keys()
+    options = {k: False for k in ("use_split_objects", "use_split_groups", "validate_meshes") if k in known}
+    bpy.ops.wm.obj_import(filepath=path, **options)
     new = [o for o in bpy.data.objects if o not in before and o.type == 'MESH']
     if len(new) != 1:
         raise RuntimeError("expected one mesh object from %s, got %d" % (path, len(new)))

@@ -21,9 +21,18 @@ from subdiv_pia import api, cli  # noqa: E402
 LEVELS = 3
 
 
+def script_args():
+    """The script's arguments: after "--" (blender -b --python SCRIPT -- ARGS), or
+    all of them where Blender is the bpy module (python SCRIPT [--] ARGS)."""
+    if "--" in sys.argv:
+        return sys.argv[sys.argv.index("--") + 1:]
+    return sys.argv[1:] if getattr(bpy.app, "module", False) else []
+
+
 def material(name, rgba, roughness=0.5):
     mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
+    if mat.node_tree is None:  # before 5.0 nodes are switched on; since, always there
+        mat.use_nodes = True
     bsdf = mat.node_tree.nodes["Principled BSDF"]
     bsdf.inputs["Base Color"].default_value = rgba
     bsdf.inputs["Roughness"].default_value = roughness
@@ -80,7 +89,8 @@ def render_row(P, shift_x, out_path):
         light.rotation_euler = (np.arctan2(np.hypot(d[0], d[1]), -d[2]), 0.0, np.arctan2(d[1], d[0]) + np.pi / 2)
         scene.collection.objects.link(light)
     world = bpy.data.worlds.new("world")
-    world.use_nodes = True
+    if world.node_tree is None:
+        world.use_nodes = True
     world.node_tree.nodes["Background"].inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
     world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.6
     scene.world = world
@@ -142,4 +152,5 @@ def main(argv):
 
 
 if __name__ == "__main__":
-    main(sys.argv[sys.argv.index("--") + 1:])
+    main(script_args())
+    cli.finish()

@@ -24,6 +24,14 @@ from subdiv_pia import api, cli, native  # noqa: E402
 LEVELS = 4
 
 
+def script_args():
+    """The script's arguments: after "--" (blender -b --python SCRIPT -- ARGS), or
+    all of them where Blender is the bpy module (python SCRIPT [--] ARGS)."""
+    if "--" in sys.argv:
+        return sys.argv[sys.argv.index("--") + 1:]
+    return sys.argv[1:] if getattr(bpy.app, "module", False) else []
+
+
 def main(argv):
     source = cli.load_input(os.path.abspath(argv[0]))
     arrays = api.mesh_arrays(source.data)
@@ -46,17 +54,7 @@ def main(argv):
                                      face_shape_parameters=w)
         print("subdiv_pia: %s: %s" % (label, report.summary()))
         offset = np.array([i * step, 0.0, 0.0])
-        me = bpy.data.meshes.new(label)
-        me.vertices.add(len(pos))
-        me.vertices.foreach_set("co", (pos + offset).astype(np.float32).ravel())
-        me.loops.add(len(fvs))
-        me.loops.foreach_set("vertex_index", fvs)
-        me.polygons.add(len(fs))
-        me.polygons.foreach_set("loop_start", np.concatenate([[0], np.cumsum(fs)[:-1]]).astype(np.int32))
-        me.polygons.foreach_set("loop_total", fs)
-        me.polygons.foreach_set("use_smooth", np.ones(len(fs), bool))
-        me.update(calc_edges=True)
-        me.materials.append(grey)
+        me = api.limit_mesh(label, pos + offset, fs, fvs, materials=[grey])  # smooth shaded
         bpy.context.scene.collection.objects.link(bpy.data.objects.new(label, me))
         point_markers("points " + label, W, 0.006 * float(np.linalg.norm(W.max(0) - W.min(0))), red, offset)
     render_row(W, 2 * step, argv[1])
@@ -64,4 +62,5 @@ def main(argv):
 
 
 if __name__ == "__main__":
-    main(sys.argv[sys.argv.index("--") + 1:])
+    main(script_args())
+    cli.finish()

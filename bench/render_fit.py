@@ -165,4 +165,5 @@ def main(argv):
 
 
 if __name__ == "__main__":
-    main(sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else [])
+    main(bench_fit.script_args())
+    bench_fit.finish()

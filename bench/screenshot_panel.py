@@ -144,6 +144,10 @@ def crop(full_path, out_path, window):
 
 
 def main():
+    if getattr(bpy.app, "module", False) or bpy.app.background:
+        # The bpy module and background mode have no window to take a picture of.
+        sys.exit("screenshot: needs Blender's window: run the blender executable, not in "
+                 "background mode (under Xvfb without a display)")
     if not bpy.app.use_event_simulate:
         # Resizing areas needs simulated mouse events: start again with them.
         argv = [a for a in sys.argv if a != "--enable-event-simulate"]

@@ -2,6 +2,7 @@
 """Fixtures and helpers for the tests that run inside Blender (see run.py)."""
 
 import os
+import sys
 
 import bpy
 import numpy as np
@@ -16,12 +17,32 @@ DATA = os.path.join(ROOT, "tests", "data")
 MATCH = 1e-5
 
 
+def factory_reset():
+    """An empty factory scene, with the add-on still registered.
+
+    The reset also resets the preferences: an add-on or extension enabled
+    there (an installed package, SUBDIV_PIA_ADDON_MODULE as run.py sets it)
+    is disabled by it, and is enabled again here, as the same module.
+    """
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    if getattr(bpy.types, "OBJECT_OT_subdiv_pia_interpolate", None) is not None:
+        return
+    name = os.environ.get("SUBDIV_PIA_ADDON_MODULE")
+    if name:
+        import addon_utils
+        module = addon_utils.enable(name, default_set=True)
+        assert module is sys.modules["subdiv_pia"], "enabling %s loaded another copy" % name
+    else:
+        sys.modules["subdiv_pia"].register()
+    assert getattr(bpy.types, "OBJECT_OT_subdiv_pia_interpolate", None) is not None
+
+
 @pytest.fixture(autouse=True)
 def empty_scene():
     """Every test starts from an empty factory scene."""
-    bpy.ops.wm.read_factory_settings(use_empty=True)
+    factory_reset()
     yield
-    bpy.ops.wm.read_factory_settings(use_empty=True)
+    factory_reset()
 
 
 def link_and_activate(obj):
@@ -43,18 +64,17 @@ def object_from_pydata(name, vertices, faces, edges=(), validate=True):
     return link_and_activate(bpy.data.objects.new(name, mesh))
 
 
-from subdiv_pia.cli import operator_exists  # noqa: E402  (run.py puts the add-on on sys.path)
+from subdiv_pia.cli import import_mesh_file, operator_exists  # noqa: E402,F401  (run.py makes the add-on importable)
 
 
 def import_obj(path):
+    """The mesh of an OBJ file as the file has it (the importer's validation,
+    on by default since Blender 4.2, would drop the scans' duplicate faces)."""
     before = set(bpy.data.objects)
-    if operator_exists("wm", "obj_import"):
-        bpy.ops.wm.obj_import(filepath=path)
-    else:
-        bpy.ops.import_scene.obj(filepath=path, split_mode='OFF')
+    obj = import_mesh_file(path)
     new = [o for o in bpy.data.objects if o not in before and o.type == 'MESH']
-    assert len(new) == 1, "expected one mesh object from %s" % path
-    return link_and_activate_existing(new[0])
+    assert new == [obj], "expected one mesh object from %s" % path
+    return link_and_activate_existing(obj)
 
 
 def link_and_activate_existing(obj):

@@ -3,6 +3,7 @@
 
 import os
 import subprocess
+import sys
 
 import bpy
 import numpy as np
@@ -70,10 +71,27 @@ def test_api_takes_settings_from_modifier():
 CLI = os.path.join(os.path.dirname(os.path.abspath(subdiv_pia.__file__)), "cli.py")
 
 
+def cli_command():
+    """cli.py run as a user runs it: by the blender executable, or by Python
+    where Blender is the bpy module (no executable)."""
+    if getattr(bpy.app, "module", False) or not bpy.app.binary_path:
+        return [sys.executable, CLI, "--"]
+    return [bpy.app.binary_path, "-b", "--factory-startup", "--python-exit-code", "1",
+            "--python", CLI, "--"]
+
+
 def run_cli(*args):
-    command = [bpy.app.binary_path, "-b", "--factory-startup", "--python-exit-code", "1",
-               "--python", CLI, "--"] + list(args)
-    return subprocess.run(command, capture_output=True, text=True, timeout=120)
+    return subprocess.run(cli_command() + list(args), capture_output=True, text=True, timeout=120)
+
+
+def test_cli_uses_its_own_package():
+    """cli.py beside the package in use imports that package (the installed
+    copy when SUBDIV_PIA_PACKAGE is set) and its library."""
+    result = run_cli("--version")
+    assert result.returncode == 0, result.stdout + result.stderr
+    folder = os.path.dirname(os.path.abspath(subdiv_pia.__file__))
+    assert ": %s\n" % folder in result.stdout, result.stdout
+    assert "library %s\n" % os.path.join(folder, native.library_name()) in result.stdout, result.stdout
 
 
 def test_cli_writes_blend(tmp_path):

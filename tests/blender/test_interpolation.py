@@ -30,6 +30,8 @@ def check_modifier(obj, **expected):
     assert len(mods) == 1
     mod = mods[0]
     assert mod.use_limit_surface
+    # 5.0+: Cycles' adaptive dicing would render another surface than the limit one.
+    assert not getattr(mod, "use_adaptive_subdivision", False)
     for name, value in expected.items():
         assert getattr(mod, name) == value, name
     return mod
@@ -141,5 +143,18 @@ def test_dragon_unreachable_vertices_are_reported():
     faces_per_vertex = np.bincount(corners, minlength=len(targets))
     isolated = on_duplicate[faces_per_vertex[on_duplicate] == 2]  # only the doubled pair
     wrong = missed[~np.isin(missed, isolated)]
-    assert len(wrong) == 0, "missed beyond the unreachable pairs: %s (miss %s of diagonal)" % (
+    message = "missed beyond the unreachable pairs: %s (miss %s of diagonal)" % (
         wrong[:10].tolist(), np.round(miss[wrong[:10]] / diagonal(targets), 7).tolist())
+    if len(wrong) and tuple(bpy.app.opensubdiv.version) >= (3, 7, 0):
+        # Blender 5.1 and newer (OpenSubdiv 3.7) put the limit points of some
+        # vertices of non-manifold edges (duplicated triangles attached to the
+        # surface) elsewhere than the library (OpenSubdiv 3.5's rules, which
+        # Blender 3.4 to 5.0 follow). Every other vertex must still be hit.
+        edges = np.sort(np.stack([triangles, np.roll(triangles, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
+        pairs, uses = np.unique(edges, axis=0, return_counts=True)
+        non_manifold = np.unique(pairs[uses > 2].ravel())
+        assert np.isin(wrong, non_manifold).all(), message
+        pytest.xfail("OpenSubdiv %s: %d vertices of non-manifold edges evaluate elsewhere than the "
+                     "library's limit (%s)" % (".".join(map(str, bpy.app.opensubdiv.version)),
+                                               len(wrong), message))
+    assert len(wrong) == 0, message
