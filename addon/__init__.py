@@ -1,4 +1,4 @@
-# SPDX-License-Identifier: GPL-2.0-or-later
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Subdivision PIA: make a control cage whose Catmull-Clark limit surface
 (as Blender's Subdivision Surface modifier evaluates it with
 "Use Limit Surface") passes through the vertices of a mesh.
@@ -21,7 +21,7 @@ only inside Blender so that ``subdiv_pia.native`` stays importable outside it.
 bl_info = {
     "name": "Subdivision PIA (interpolating cage)",
     "author": "subdiv_pia contributors",
-    "version": (0, 1, 0),
+    "version": (0, 2, 0),
     "blender": (3, 4, 0),
     "location": "Properties > Modifiers > Interpolating Subdivision Cage; View3D > Object menu",
     "description": "New cage whose subdivision limit surface passes through the mesh vertices",

@@ -1,4 +1,4 @@
-# SPDX-License-Identifier: GPL-2.0-or-later
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Script API and the one implementation shared by the operator and cli.py.
 
 Data makes one trip: Blender mesh -> flat numpy arrays (foreach_get) ->

@@ -1,4 +1,4 @@
-# SPDX-License-Identifier: GPL-2.0-or-later
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Command line: make an interpolating cage and save it to a .blend file.
 
     blender -b --python <add-on folder>/cli.py -- INPUT OUTPUT.blend [options]

@@ -1,4 +1,4 @@
-# SPDX-License-Identifier: GPL-2.0-or-later
+# SPDX-License-Identifier: GPL-3.0-or-later
 """The operator: reads the operator settings and reports; the work is in api."""
 
 import bpy

@@ -1,4 +1,4 @@
-# SPDX-License-Identifier: GPL-2.0-or-later
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Settings shared by the operator and the panel (scene.subdiv_pia)."""
 
 import bpy

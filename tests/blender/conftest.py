@@ -1,4 +1,4 @@
-# SPDX-License-Identifier: GPL-2.0-or-later
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Fixtures and helpers for the tests that run inside Blender (see run.py)."""
 
 import os

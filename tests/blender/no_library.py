@@ -1,4 +1,4 @@
-# SPDX-License-Identifier: GPL-2.0-or-later
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Run by test_no_library.py in a Blender whose SUBDIV_PIA_LIBRARY names a
 missing or bogus file:
 

@@ -1,4 +1,4 @@
-# SPDX-License-Identifier: GPL-2.0-or-later
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Run the Blender test suite inside Blender:
 
     blender -b --factory-startup --python-exit-code 1 --python tests/blender/run.py -- [pytest args]

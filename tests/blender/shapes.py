@@ -1,4 +1,4 @@
-# SPDX-License-Identifier: GPL-2.0-or-later
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Generated test shapes. Each function builds one mesh object, links it to the
 scene, makes it active and returns it. Vertices are jittered (fixed seed) so
 the cage differs from the mesh everywhere."""

@@ -1,4 +1,4 @@
-# SPDX-License-Identifier: GPL-2.0-or-later
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Script API (subdiv_pia.interpolate) and the command line (cli.py)."""
 
 import os

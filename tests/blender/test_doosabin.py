@@ -1,4 +1,4 @@
-# SPDX-License-Identifier: GPL-2.0-or-later
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Two-phase Doo-Sabin: Blender has no Doo-Sabin modifier, so the operator
 makes the cage (no modifier) and a child `<cage>_limit` holding the cage
 refined by the library (native.refine). That is a control mesh: its

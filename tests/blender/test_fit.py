@@ -1,4 +1,4 @@
-# SPDX-License-Identifier: GPL-2.0-or-later
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Fitting a cage to a scan (the operator's `target`): surface samples
 against Blender's evaluated modifier, closest points against mathutils'
 BVH tree, the Stanford bunny with a QuadriFlow cage, bad input, the

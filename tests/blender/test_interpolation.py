@@ -1,4 +1,4 @@
-# SPDX-License-Identifier: GPL-2.0-or-later
+# SPDX-License-Identifier: GPL-3.0-or-later
 """The oracle is Blender itself: after the operator, the new object's
 Subdivision Surface modifier (use_limit_surface) must put its first N
 evaluated vertices (the control vertices) on the original vertices."""

@@ -1,4 +1,4 @@
-# SPDX-License-Identifier: GPL-2.0-or-later
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Loop scheme: Blender has no Loop modifier, so the operator makes the cage
 (no modifier) and a child `<cage>_limit` holding the library's Loop limit
 surface (native.refine). Its first N vertices are the limit points of

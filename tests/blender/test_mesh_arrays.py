@@ -1,4 +1,4 @@
-# SPDX-License-Identifier: GPL-2.0-or-later
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Reading a mesh into flat arrays: face order, loops stored out of order,
 creases from Blender's own storage."""
 

@@ -1,4 +1,4 @@
-# SPDX-License-Identifier: GPL-2.0-or-later
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Without a loadable native library (SUBDIV_PIA_LIBRARY naming a missing or
 a bogus file, in a Blender of its own) the panel says what is needed instead
 of its settings, and the operator and the script API refuse, creating

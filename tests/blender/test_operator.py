@@ -1,4 +1,4 @@
-# SPDX-License-Identifier: GPL-2.0-or-later
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Operator behaviour: what it makes, and bad input (clear message, nothing
 created, source unchanged). bpy.ops raises RuntimeError carrying the message
 when the operator reports an error."""

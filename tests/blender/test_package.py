@@ -1,4 +1,4 @@
-# SPDX-License-Identifier: GPL-2.0-or-later
+# SPDX-License-Identifier: GPL-3.0-or-later
 """The tests use the package they are meant to: the installed copy when
 run.py installed SUBDIV_PIA_PACKAGE (an extension in Blender 4.2 and newer,
 a legacy add-on before), else the build; and the library beside it."""

@@ -1,4 +1,4 @@
-# SPDX-License-Identifier: GPL-2.0-or-later
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Panel and menu drawing (through a recording layout: background mode has no
 UI to draw into), and progress/cancel through the script API."""
 
