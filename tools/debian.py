@@ -110,10 +110,18 @@ def chroot(name, suite, packages=()):
     stamp = os.path.join(path, READY)
     try:
         with open(stamp) as f:
-            if json.load(f) == recipe:
-                return path
+            made = json.load(f)
     except (OSError, ValueError):
-        pass
+        made = None
+    if made == recipe:
+        return path
+    if made and made.get("suite") == suite and set(made.get("packages", [])) <= set(packages):
+        # The same release with fewer packages: add the others.
+        in_chroot(path, "apt-get update -qq && apt-get install -y -qq --no-install-recommends %s >/dev/null"
+                  " && apt-get clean" % " ".join(sorted(set(packages) - set(made.get("packages", [])))))
+        with open(stamp, "w") as f:
+            json.dump(recipe, f)
+        return path
     os.makedirs(CHROOTS, exist_ok=True)
     uri = mirror()
     log("making the %s chroot %s (%s)" % (suite, path, uri))
