@@ -853,11 +853,12 @@ done:
  * no triangle in the box can be within best_d2: the float query point and
  * the float arithmetic are off by a few units in the last place of the
  * largest coordinate (margin, 2^-20 of it) and of the distance; 2^-20 is
- * 16 of float's units. */
+ * 16 of float's units.  Never below FLT_MIN, where float squares vanish. */
 static inline float prune_bound(double best_d2, double margin) {
     if (!(best_d2 < INFINITY)) return INFINITY;
     const double r = sqrt(best_d2) * (1.0 + 0x1p-20) + margin;
-    return (float)(r * r);
+    const float bound = (float)(r * r);
+    return bound > FLT_MIN ? bound : FLT_MIN;
 }
 
 /* Squared distances from (x, y, z) to a node's four boxes, in float. */
