@@ -699,7 +699,7 @@ def surface_stencils(mesh, samples_per_edge=4, boundary_smooth="ALL", use_crease
 
 
 class Scan:
-    """A mesh prepared for closest-point queries (Embree)."""
+    """A mesh prepared for closest-point queries (the library's own bounding volume hierarchy)."""
 
     def __init__(self, mesh):
         lib = _library()

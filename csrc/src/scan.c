@@ -41,7 +41,6 @@ static void scan_release(spia_scan *s) {
 void spia_scan_free(spia_scan *scan) { scan_release(scan); }
 
 double spia_scan_diagonal(const spia_scan *scan) { return scan ? scan->diagonal : 0.0; }
-int64_t spia_scan_triangle_count(const spia_scan *scan) { return scan ? scan->triangle_count : 0; }
 
 /* Boundary edges: sort the triangles' edges by (low, high) vertex and find
  * those that occur once. */
