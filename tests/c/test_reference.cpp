@@ -412,7 +412,9 @@ int main() {
         std::string path = std::string(SPIA_TEST_DATA_DIR) + "/" + n;
         CHECK(read_obj(path.c_str(), &d), "cannot read %s", path.c_str());
         drop_degenerate_faces(&d);
-        compare_all(d, n, {1, 3}, {0, 30700});
+        // The version matters only where there are non-manifold vertices.
+        if (std::string(n) == "catmark_nonman_edges.obj") compare_all(d, n, {1, 3}, {0, 30700});
+        else compare_all(d, n, {1, 3});
         tmesh_free(&d);
     }
     // The Stanford dragon scan around its non-manifold edges (the faces
@@ -457,8 +459,10 @@ int main() {
         std::vector<bool> sharpen = off_nonmanifold_creases(cut.nv, cut.nf, cut.sizes, fv);
         const long count = (long)std::count(sharpen.begin(), sharpen.end(), true);
         CHECK(count == 84, "dragon around its non-manifold edges: %ld vertices off creases, not 84", count);
-        for (int osd : {0, 30700})
-            for (int q : {1, 3}) compare(cut, "dragon around its non-manifold edges", q, false, true, osd);
+        // 3.6.0's rule on the whole scan is in the Blender tests; here the
+        // quality the Blender tests use, and 1.
+        compare(cut, "dragon around its non-manifold edges", 3, false, true, 0);
+        for (int q : {1, 3}) compare(cut, "dragon around its non-manifold edges", q, false, true, 30700);
         printf("%-40s matches OpenSubdiv's full adaptive stencils\n", "dragon around its non-manifold edges");
         tmesh_free(&cut);
         tmesh_free(&d);
