@@ -55,6 +55,9 @@ DEFAULT_SETTINGS = {
     "fit_cutoff": 0.02,
     "fit_smoothing": 1e-5,
     "fit_samples": 4,
+    # Catmull-Clark: the OpenSubdiv version whose rules the modifier follows,
+    # e.g. "3.7.0" or (3, 7, 0); empty: this Blender's (bpy.app.opensubdiv).
+    "opensubdiv_version": "",
 }
 
 FIT_MODES = tuple(native.FIT_MODES)
@@ -86,6 +89,27 @@ STORED_SETTINGS = ("scheme", "boundary_rule", "boundary_smooth", "use_creases", 
 
 # Settings that a source Subdivision Surface modifier provides.
 MODIFIER_SETTINGS = ("levels", "render_levels", "quality", "boundary_smooth", "use_creases")
+
+
+def blender_opensubdiv_version():
+    """The OpenSubdiv version this Blender evaluates the modifier with, as a
+    tuple (bpy.app.opensubdiv.version), or None where it does not say."""
+    info = getattr(bpy.app, "opensubdiv", None)
+    version = tuple(getattr(info, "version", ()) or ())
+    if not version or not any(version):
+        return None
+    return version
+
+
+def opensubdiv_version_of(settings):
+    """The OpenSubdiv version the settings ask for, as the library takes it
+    (major * 10000 + minor * 100 + patch): the setting, else this Blender's."""
+    version = settings.get("opensubdiv_version") or blender_opensubdiv_version()
+    return native.opensubdiv_version_number(version)
+
+
+def opensubdiv_version_string(number):
+    return "%d.%d.%d" % (number // 10000, number // 100 % 100, number % 100) if number else ""
 
 
 def find_subsurf(obj):
@@ -180,6 +204,17 @@ def check_settings(settings):
         raise ValueError("fit_smoothing must be zero or a positive number")
     if not 1 <= s["fit_samples"] <= 64:
         raise ValueError("fit_samples must be in 1..64, not %d" % s["fit_samples"])
+    version = s["opensubdiv_version"]
+    if version is None:
+        version = ""
+    if isinstance(version, str):
+        version = version.strip()
+    try:
+        native.opensubdiv_version_number(version)
+    except native.PiaError:
+        raise ValueError("opensubdiv_version must be a version such as '3.7.0' or (3, 7, 0), or empty "
+                         "for this Blender's, not %r" % (version,)) from None
+    s["opensubdiv_version"] = version
     if target and s["fit"] == 'SURFACE' and s["scheme"] != 'CATMULL_CLARK':
         raise ValueError("The Surface fit works on the Catmull-Clark limit surface only: use "
                          "Fit 'Vertices' for %s" % SCHEME_NAMES[s["scheme"]])
@@ -444,7 +479,8 @@ def compute_cage(obj, settings, progress=None, mesh=None, scan=None):
                    use_creases=settings["use_creases"] and scheme != 'DOO_SABIN',
                    quality=settings["quality"], method=settings["method"],
                    tolerance=settings["tolerance"], max_iterations=settings["max_iterations"],
-                   staged=settings["staged"] and scheme == 'LOOP', progress=progress, **shapes)
+                   staged=settings["staged"] and scheme == 'LOOP', progress=progress,
+                   opensubdiv_version=opensubdiv_version_of(settings), **shapes)
     try:
         if scan is not None:
             return native.fit(native_mesh(data), scan, mode=settings["fit"],
@@ -710,6 +746,10 @@ def build_object(source, cage, report, settings, context=None, name=None, mesh=N
             value = settings[key]
             new_obj["pia_" + key] = value if isinstance(value, (bool, int, float, str)) else str(value)
     new_obj["pia_requested_method"] = str(settings["method"])
+    if settings["scheme"] == 'CATMULL_CLARK':
+        # Which OpenSubdiv's rules the cage was made for (Blender 5.1 and
+        # later differ from earlier ones at some non-manifold vertices).
+        new_obj["pia_opensubdiv_version"] = opensubdiv_version_string(opensubdiv_version_of(settings))
 
     if limit is not None:
         set_limit_object(new_obj, limit, context=context)
@@ -736,8 +776,12 @@ def interpolate(obj, *, context=None, name=None, progress=None, **settings):
     ('SMOOTH' or 'HOPPE') and triangulate (use a triangulated copy of a mesh
     that has quads or n-gons); for Doo-Sabin (closed meshes) shape_parameter
     in (0, 1) and shape_attribute (a float FACE attribute whose per-face
-    values replace shape_parameter where the mesh has it). Settings not given
-    are taken from obj's
+    values replace shape_parameter where the mesh has it); for Catmull-Clark
+    opensubdiv_version (e.g. '3.7.0'; empty: this Blender's), the OpenSubdiv
+    whose rules the modifier that shows the cage follows: Blender 5.1 and
+    later (3.7.0) evaluate some non-manifold vertices differently from
+    earlier Blenders, so a cage is exact in the Blenders of its version.
+    Settings not given are taken from obj's
     Subdivision Surface modifier if it has one, else the defaults.
 
     Loop: the cage has no modifier; its child ``<cage>_limit`` (find it

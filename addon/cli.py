@@ -123,6 +123,12 @@ def parse_args(argv):
     parser.add_argument("--quality", type=int, help="modifier quality 1..10 (default 3)")
     parser.add_argument("--boundary-smooth", choices=("ALL", "PRESERVE_CORNERS"))
     parser.add_argument("--no-creases", action="store_true", help="ignore edge and vertex creases")
+    parser.add_argument("--opensubdiv-version", metavar="X.Y.Z",
+                        help="Catmull-Clark: make the cage for Blenders with this OpenSubdiv (5.1 and "
+                             "later have 3.7.0, 4.1 to 5.0 have 3.6.0), which differ at some "
+                             "non-manifold vertices (default: this Blender's, %s)"
+                        % (".".join(map(str, bpy.app.opensubdiv.version))
+                           if getattr(bpy.app, "opensubdiv", None) else "unknown"))
     parser.add_argument("--method", choices=pkg_methods())
     parser.add_argument("--tolerance", type=float,
                         help="max error relative to the bounding-box diagonal (default 1e-6)")
@@ -247,7 +253,7 @@ def main(argv):
     if args.render_levels is not None:
         settings["render_levels"] = args.render_levels
     for name in ("scheme", "boundary_rule", "quality", "boundary_smooth", "method", "tolerance",
-                 "max_iterations", "shape_parameter", "shape_attribute"):
+                 "max_iterations", "shape_parameter", "shape_attribute", "opensubdiv_version"):
         value = getattr(args, name)
         if value is not None:
             settings[name] = value

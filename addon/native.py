@@ -26,7 +26,7 @@ import numpy as np
 
 __all__ = [
     "Mesh", "Report", "Stencils", "PiaError", "PiaCancelled",
-    "available", "load_error", "library_path", "platform_tag", "version", "validate", "limit_stencils", "solve", "interpolate", "refine",
+    "available", "load_error", "library_path", "platform_tag", "version", "opensubdiv_version_number", "validate", "limit_stencils", "solve", "interpolate", "refine",
     "SCHEMES", "BOUNDARY_SMOOTH", "BOUNDARY_RULES", "METHODS",
 ]
 
@@ -90,6 +90,7 @@ class _Options(ctypes.Structure):
         ("max_iterations", ctypes.c_int32), ("progress", _PROGRESS), ("progress_user_data", ctypes.c_void_p),
         ("boundary_rule", ctypes.c_int), ("weight", ctypes.c_double), ("staged", ctypes.c_int32),
         ("shape_parameter", ctypes.c_double), ("face_shape_parameters", _f32p), ("threads", ctypes.c_int32),
+        ("opensubdiv_version", ctypes.c_int32),
     ]
 
 
@@ -410,9 +411,36 @@ def _enum(value, names, what):
         raise PiaError("INVALID_ARGUMENT", f"{what} must be one of {', '.join(names)}, not {value!r}") from None
 
 
+def opensubdiv_version_number(version):
+    """OpenSubdiv's version as the library takes it (major * 10000 + minor *
+    100 + patch) from a tuple such as bpy.app.opensubdiv.version, a string
+    such as "3.7.0", or that number; None or 0 is 0 (OpenSubdiv 3.6.0's
+    rules)."""
+    if version is None:
+        return 0
+    parts = version
+    if isinstance(version, str):
+        try:
+            parts = [int(p) for p in version.strip().split(".")] if version.strip() else [0]
+        except ValueError:
+            parts = None
+    if isinstance(parts, (int, np.integer)) and not isinstance(parts, bool):
+        number = int(parts)
+    elif (isinstance(parts, (tuple, list)) and 1 <= len(parts) <= 3
+          and all(isinstance(p, (int, np.integer)) and not isinstance(p, bool) and 0 <= p <= 99 for p in parts)):
+        major, minor, patch = (list(parts) + [0, 0])[:3]
+        number = major * 10000 + minor * 100 + patch
+    else:
+        number = -1
+    if not 0 <= number <= 2**31 - 1:
+        raise PiaError("INVALID_ARGUMENT", "opensubdiv_version must be a version such as (3, 7, 0) or "
+                       f"'3.7.0', or major * 10000 + minor * 100 + patch, not {version!r}")
+    return number
+
+
 def _options(scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases=True, quality=3, method="AUTO",
              tolerance=1e-6, max_iterations=1000, progress=None, boundary_rule="SMOOTH", weight=0.0, staged=False,
-             shape_parameter=0.5, face_shape_parameters=None, threads=0):
+             shape_parameter=0.5, face_shape_parameters=None, threads=0, opensubdiv_version=None):
     if not (isinstance(threads, (int, np.integer)) and threads >= 0):
         raise PiaError("INVALID_ARGUMENT", f"threads must be 0 (all processors) or a positive integer, not {threads!r}")
     if not (isinstance(quality, (int, np.integer)) and 1 <= quality <= 10):
@@ -436,6 +464,7 @@ def _options(scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases=True, qu
     opts.staged = 1 if staged else 0
     opts.shape_parameter = float(shape_parameter)
     opts.threads = int(threads)
+    opts.opensubdiv_version = opensubdiv_version_number(opensubdiv_version)
     keep = None
     if face_shape_parameters is not None:
         keep = np.ascontiguousarray(face_shape_parameters, dtype=np.float32).ravel()
@@ -587,14 +616,18 @@ def validate(mesh):
 
 
 def limit_stencils(mesh, scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases=True, quality=3, progress=None,
-                   boundary_rule="SMOOTH", shape_parameter=0.5, face_shape_parameters=None, threads=0):
+                   boundary_rule="SMOOTH", shape_parameter=0.5, face_shape_parameters=None, threads=0,
+                   opensubdiv_version=None):
     """The limit stencils of ``mesh`` (a :class:`Stencils`).  ``threads``: 0 for
-    one per processor; the table does not depend on it."""
+    one per processor; the table does not depend on it.  ``opensubdiv_version``
+    (Catmull-Clark): that of the Blender to match, e.g.
+    ``bpy.app.opensubdiv.version``; None: OpenSubdiv 3.6.0's rules (Blender
+    up to 5.0), which differ from later ones at some non-manifold vertices."""
     lib = _library()
     opts, _keep = _options(scheme=scheme, boundary_smooth=boundary_smooth, use_creases=use_creases,
                            quality=quality, progress=progress, boundary_rule=boundary_rule,
                            shape_parameter=shape_parameter, face_shape_parameters=face_shape_parameters,
-                           threads=threads)
+                           threads=threads, opensubdiv_version=opensubdiv_version)
     handle = ctypes.c_void_p()
     status = _Status()
     cm = mesh._c()
@@ -612,7 +645,7 @@ def solve(stencils, targets, **options):
 
 def interpolate(mesh, scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases=True, quality=3, method="AUTO",
                 tolerance=1e-6, max_iterations=1000, progress=None, boundary_rule="SMOOTH", weight=0.0,
-                staged=False, shape_parameter=0.5, face_shape_parameters=None, threads=0):
+                staged=False, shape_parameter=0.5, face_shape_parameters=None, threads=0, opensubdiv_version=None):
     """A cage whose limit surface passes through the mesh's vertices.
 
     scheme 'LOOP' (triangles only) takes boundary_rule 'SMOOTH' (OpenSubdiv's)
@@ -621,6 +654,7 @@ def interpolate(mesh, scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases
     method 'WPIA' takes weight (0: estimated); staged=True solves the
     boundary first, then the interior.  ``threads``: 0 for one per
     processor, 1 for the calling thread only; results do not depend on it.
+    ``opensubdiv_version``: see :func:`limit_stencils`.
 
     Returns ``(cage, report)``: cage is an (N, 3) float32 array of new
     control positions, report a :class:`Report`.  Stopping at
@@ -631,7 +665,8 @@ def interpolate(mesh, scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases
     """
     lib = _library()
     opts, _keep = _options(scheme, boundary_smooth, use_creases, quality, method, tolerance, max_iterations, progress,
-                           boundary_rule, weight, staged, shape_parameter, face_shape_parameters, threads)
+                           boundary_rule, weight, staged, shape_parameter, face_shape_parameters, threads,
+                           opensubdiv_version)
     cage = np.empty_like(mesh.positions)
     rep, history, unreachable = _report_buffers(opts.max_iterations, mesh.vertex_count)
     status = _Status()
@@ -680,14 +715,17 @@ def refine(mesh, levels, scheme="LOOP", boundary_rule="SMOOTH", boundary_smooth=
 FIT_MODES = ["SURFACE", "VERTICES"]
 
 
-def surface_stencils(mesh, samples_per_edge=4, boundary_smooth="ALL", use_creases=True, quality=3):
+def surface_stencils(mesh, samples_per_edge=4, boundary_smooth="ALL", use_creases=True, quality=3,
+                     opensubdiv_version=None):
     """Catmull-Clark limit stencils at samples_per_edge**2 points inside each
     ptex face (a quad, or each corner's sub-quad of another polygon), at the
     centres of a regular (s, t) grid: row ``(ptex * k + j) * k + i`` is at
     ``((i + 0.5) / k, (j + 0.5) / k)``.  A :class:`Stencils` with
-    ``mesh.vertex_count`` columns."""
+    ``mesh.vertex_count`` columns.  ``opensubdiv_version``: see
+    :func:`limit_stencils`."""
     lib = _library()
-    opts, _keep = _options(boundary_smooth=boundary_smooth, use_creases=use_creases, quality=quality)
+    opts, _keep = _options(boundary_smooth=boundary_smooth, use_creases=use_creases, quality=quality,
+                           opensubdiv_version=opensubdiv_version)
     handle = ctypes.c_void_p()
     status = _Status()
     cm = mesh._c()

@@ -241,6 +241,22 @@ typedef struct spia_options {
      * only.  Results do not depend on it: every row and every sum is
      * computed in the same order whatever the count. [0] */
     int32_t threads;
+    /* Catmull-Clark: the OpenSubdiv version (major * 10000 + minor * 100 +
+     * patch, e.g. 30700 for 3.7.0) of the Blender whose modifier to match,
+     * as Blender reports it in bpy.app.opensubdiv.version.  OpenSubdiv
+     * versions differ in one rule that changes limit points: a non-manifold
+     * vertex with exactly two non-manifold edges, no boundary edge and more
+     * faces than edges is taken as a vertex on a non-manifold crease and
+     * left smooth; up to 3.6.0 that is all, later versions (3.7.0, bundled
+     * with Blender 5.1 and later) also require every manifold fan of faces
+     * around it to run from one of the two edges to the other, and make
+     * the vertex infinitely sharp (its limit point is itself) otherwise.
+     * That happens where double-sided fins (a triangle and its reversed
+     * twin) hang from two edges of a vertex, as in scans.  0, or any value
+     * up to 30600: the rule of OpenSubdiv 3.5 and 3.6.0 (Blender 3.x to
+     * 5.0); above 30600: the later rule.  Loop and Doo-Sabin ignore it.
+     * [0] */
+    int32_t opensubdiv_version;
 } spia_options;
 
 /* The defaults, as a value (the same as an all-zero struct). */

@@ -18,7 +18,9 @@
 //    sharp patches, limit evaluated at the control vertex's corner of the
 //    first face (in face order) that uses it;
 //  - where Blender's patches give the exact limit point anyway, Bfr gives
-//    the same stencil directly (see step 5).
+//    the same stencil directly (see step 5);
+//  - with spia_options.opensubdiv_version above 30600, the non-manifold
+//    vertices that OpenSubdiv after 3.6.0 sharpens are sharpened (step 4b).
 
 #include "internal.h"
 #include "threads.h"
@@ -100,6 +102,76 @@ Far::TopologyRefiner *create_refiner(int32_t vertex_count, int32_t face_count, c
     desc.cornerWeights = corner_weights.empty() ? nullptr : corner_weights.data();
     typedef Far::TopologyRefinerFactory<Far::TopologyDescriptor> RefinerFactory;
     return RefinerFactory::Create(desc, RefinerFactory::Options(scheme, sdc));
+}
+
+// OpenSubdiv 3.6.0 leaves a non-manifold vertex smooth when it has exactly
+// two non-manifold edges, no boundary edge and more faces than edges,
+// taking it for a vertex on a non-manifold crease (sheets meeting along a
+// line); later versions (3.7.0, Blender 5.1 and later) sharpen it unless it
+// really is one: the two edges have as many faces, every other edge has
+// two, and the faces around the vertex form fans each running, face to
+// face across manifold edges, from one of the two edges to the other.  A
+// fan that returns to the edge it started from (a double-sided fin hanging
+// from one edge) fails the test.  This is OpenSubdiv's test
+// (Vtr::Level::testVertexNonManifoldCrease), walked on the refiner's base
+// level, whose edge and face orders are the ones it walks.
+bool on_nonmanifold_crease(const Far::TopologyLevel &base, Far::Index v) {
+    Far::Index crease[2] = {-1, -1};
+    Far::ConstIndexArray ve = base.GetVertexEdges(v);
+    for (int i = 0; i < ve.size(); ++i) {
+        if (base.IsEdgeNonManifold(ve[i])) {
+            if (crease[1] >= 0) return false;
+            crease[crease[0] >= 0] = ve[i];
+        } else if (base.GetEdgeFaces(ve[i]).size() != 2) {
+            return false;
+        }
+    }
+    if (crease[1] < 0 || base.GetEdgeFaces(crease[0]).size() != base.GetEdgeFaces(crease[1]).size()) return false;
+    int walked = 0;
+    for (int i = 0; i < 2; ++i) {
+        const Far::Index start = crease[i], end = crease[1 - i];
+        Far::ConstIndexArray ef = base.GetEdgeFaces(start);
+        Far::ConstLocalIndexArray in_face = base.GetEdgeFaceLocalIndices(start);
+        for (int j = 0; j < ef.size(); ++j) {
+            // Each fan is walked from the end where its edge leaves the vertex.
+            if (base.GetFaceVertices(ef[j])[in_face[j]] != v) continue;
+            Far::Index e = start, f = ef[j];
+            while (e != end) {
+                if (e != start) {
+                    Far::ConstIndexArray pair = base.GetEdgeFaces(e);
+                    f = pair[pair[0] == f ? 1 : 0];
+                }
+                ++walked;
+                Far::ConstIndexArray fe = base.GetFaceEdges(f);
+                int k = 0;
+                while (k < fe.size() && fe[k] != e) ++k;
+                if (k == fe.size()) return false;  // not expected
+                e = fe[k ? k - 1 : fe.size() - 1];  // the face's other edge at v
+                if (e == start) return false;
+            }
+        }
+    }
+    return walked == base.GetVertexFaces(v).size();
+}
+
+// The vertices that OpenSubdiv after 3.6.0 makes infinitely sharp and 3.6.0
+// does not (see on_nonmanifold_crease).
+std::vector<int32_t> sharpened_after_360(const Far::TopologyLevel &base) {
+    std::vector<int32_t> out;
+    for (Far::Index v = 0; v < base.GetNumVertices(); ++v) {
+        if (!base.IsVertexNonManifold(v) || base.GetVertexSharpness(v) >= kInfiniteSharpness) continue;
+        Far::ConstIndexArray ve = base.GetVertexEdges(v);
+        int non_manifold = 0, boundary = 0;
+        for (int i = 0; i < ve.size(); ++i) {
+            non_manifold += base.IsEdgeNonManifold(ve[i]) ? 1 : 0;
+            boundary += base.GetEdgeFaces(ve[i]).size() < 2 ? 1 : 0;
+        }
+        // 3.6.0's own condition for leaving the vertex smooth (the vertex is
+        // not infinitely sharp, so it held), checked again all the same.
+        const bool taken_for_crease = non_manifold == 2 && boundary == 0 && base.GetVertexFaces(v).size() > ve.size();
+        if (taken_for_crease && !on_nonmanifold_crease(base, v)) out.push_back((int32_t)v);
+    }
+    return out;
 }
 
 // Steps 1 to 4 below, shared by the stencils and by refinement: the
@@ -226,6 +298,31 @@ spia_result prepare(const spia_mesh *m, const spia_adjacency *adj, const spia_op
     p.refiner.reset(create_refiner(osd_n, m->face_count, m->face_sizes, fv, crease_pairs, crease_weights,
                                    corner_indices, corner_weights, scheme, sdc));
     if (!p.refiner) return spia__fail(status, SPIA_ERROR_TOPOLOGY, -1, "OpenSubdiv rejected the mesh topology");
+
+    // 4b. Blender with OpenSubdiv after 3.6.0: the non-manifold vertices
+    //     that version sharpens and this one (3.5 or 3.6.0) does not get
+    //     infinite sharpness of their own, and the refiner is made again.
+    //     The vertices stay non-manifold, so their rows come from adaptive
+    //     patches (step 5), where their limit point is the vertex itself.
+    if (blender && opt->opensubdiv_version > 30600) {
+        const std::vector<int32_t> sharpened = sharpened_after_360(p.refiner->GetLevel(0));
+        if (!sharpened.empty()) {
+            std::vector<int32_t> corner_of((size_t)osd_n, -1);
+            for (size_t k = 0; k < corner_indices.size(); ++k) corner_of[(size_t)corner_indices[k]] = (int32_t)k;
+            for (int32_t o : sharpened) {
+                if (corner_of[(size_t)o] >= 0) {
+                    corner_weights[(size_t)corner_of[(size_t)o]] = kInfiniteSharpness;
+                } else {
+                    corner_indices.push_back(o);
+                    corner_weights.push_back(kInfiniteSharpness);
+                }
+            }
+            p.refiner.reset(create_refiner(osd_n, m->face_count, m->face_sizes, fv, crease_pairs, crease_weights,
+                                           corner_indices, corner_weights, scheme, sdc));
+            if (!p.refiner)
+                return spia__fail(status, SPIA_ERROR_TOPOLOGY, -1, "OpenSubdiv rejected the mesh topology");
+        }
+    }
     p.osd_n = osd_n;
     p.osd_of.swap(osd_of);
     p.vertex_of.swap(vertex_of);

@@ -86,6 +86,10 @@ spia_result spia__resolve_options(const spia_options *in, spia_options *out, spi
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "threads must be 0 (all) or positive, got %d",
                           (int)o.threads);
     if (o.threads == 0) o.threads = spia__processor_count();
+    if (o.opensubdiv_version < 0)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1,
+                          "opensubdiv_version must be 0 or major * 10000 + minor * 100 + patch, got %d",
+                          (int)o.opensubdiv_version);
     *out = o;
     spia__ok(status);
     return SPIA_OK;

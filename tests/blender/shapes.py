@@ -138,6 +138,19 @@ def fin():
     return jitter(object_from_pydata("Fin", verts, faces))
 
 
+def double_sided_fins():
+    """Non-manifold: double-sided triangle fins (a triangle and its reversed
+    twin, as scans have them) hanging from two edges of the centre of a 2 x 2
+    grid. OpenSubdiv 3.6.0 leaves the centre smooth, 3.7.0 (Blender 5.1 and
+    later) makes it infinitely sharp."""
+    verts = [(x, y, 0.1 * ((3 * x + 5 * y) % 3)) for y in range(3) for x in range(3)]
+    verts += [(1.5, 1.2, 1.0), (0.8, 1.5, 0.9)]
+    faces = [(0, 1, 4, 3), (1, 2, 5, 4), (3, 4, 7, 6), (4, 5, 8, 7),
+             (4, 5, 9), (4, 9, 5), (4, 10, 7), (4, 7, 10)]
+    # Not validated: that would take the twins for duplicates and drop them.
+    return jitter(object_from_pydata("DoubleSidedFins", verts, faces, validate=False))
+
+
 def mixed():
     """Triangles, quads and an n-gon in one open surface."""
     verts = [(0, 0, 0), (1, 0, 0), (2, 0, 0), (0, 1, 0), (1, 1, 0.3), (2, 1, 0),
@@ -148,4 +161,4 @@ def mixed():
 
 
 ALL = (cube, uv_sphere, ico_sphere, ngon_cylinder, open_grid, edge_creases,
-       vertex_creases, loose_parts, fin, mixed)
+       vertex_creases, loose_parts, fin, double_sided_fins, mixed)

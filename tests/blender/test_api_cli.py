@@ -12,8 +12,8 @@ import pytest
 import shapes
 import subdiv_pia
 from subdiv_pia import native
-from conftest import (DATA, MATCH, assert_unchanged, operator_exists, positions,
-                      relative_miss, snapshot)
+from conftest import (DATA, MATCH, assert_unchanged, diagonal, evaluated_control_points, operator_exists,
+                      positions, relative_miss, snapshot)
 
 
 def test_api_returns_object_and_report():
@@ -118,6 +118,40 @@ def test_cli_help():
     result = run_cli("--help")
     assert result.returncode == 0
     assert "--boundary-smooth" in result.stdout
+
+
+@pytest.mark.parametrize("version", ("this", "other"))
+def test_cli_opensubdiv_version(tmp_path, version):
+    """--opensubdiv-version makes the cage for Blenders of another OpenSubdiv
+    (default: this Blender's); they differ at the fins' centre (vertex 4)."""
+    source = shapes.double_sided_fins()
+    targets = positions(source.data).astype(np.float64)
+    path = str(tmp_path / "fins.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path, copy=True)
+    this = tuple(bpy.app.opensubdiv.version)
+    other = "3.6.0" if this > (3, 6, 0) else "3.7.0"
+    output = str(tmp_path / "out.blend")
+    extra = ["--opensubdiv-version", other] if version == "other" else []
+    result = run_cli(path, output, "--levels", "1", *extra)
+    assert result.returncode == 0, result.stdout + result.stderr
+    with bpy.data.libraries.load(output) as (data_from, data_to):
+        data_to.objects = ["DoubleSidedFins_pia"]
+    cage = data_to.objects[0]
+    bpy.context.scene.collection.objects.link(cage)
+    assert cage["pia_opensubdiv_version"] == ("%d.%d.%d" % this if version == "this" else other)
+    miss = np.abs(evaluated_control_points(cage, len(targets)) - targets).max(axis=1) / diagonal(targets)
+    if version == "this":
+        assert miss.max() <= MATCH, miss
+    else:
+        assert miss[4] > 1e-3 and np.delete(miss, 4).max() <= MATCH, miss
+
+
+def test_cli_bad_opensubdiv_version(tmp_path):
+    output = str(tmp_path / "never.blend")
+    result = run_cli(os.path.join(DATA, "mushroom.obj"), output, "--opensubdiv-version", "three")
+    assert result.returncode == 1
+    assert "opensubdiv_version" in result.stderr
+    assert not os.path.exists(output)
 
 
 def _export(kind, path):

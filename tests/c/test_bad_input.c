@@ -146,6 +146,9 @@ int main(void) {
     bad = o;
     bad.boundary_smooth = (spia_boundary_smooth)4;
     expect_code(&m, &bad, SPIA_ERROR_INVALID_ARGUMENT, "unknown boundary_smooth");
+    bad = o;
+    bad.opensubdiv_version = -30700;
+    expect_code(&m, &bad, SPIA_ERROR_INVALID_ARGUMENT, "negative opensubdiv_version");
 
     /* Cancellation, before the stencils and during the solve. */
     int calls = 0;

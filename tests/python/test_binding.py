@@ -158,7 +158,9 @@ def test_bad_input_raises_with_code(native, case, code):
 
 @pytest.mark.parametrize("option", [dict(quality=0), dict(quality=11), dict(tolerance=-1.0),
                                     dict(method="NEWTON"), dict(boundary_smooth="SOME"), dict(max_iterations=0),
-                                    dict(threads=-1), dict(threads=1.5)])
+                                    dict(threads=-1), dict(threads=1.5), dict(opensubdiv_version="3.x"),
+                                    dict(opensubdiv_version=-1), dict(opensubdiv_version=(3, 7, 0, 1)),
+                                    dict(opensubdiv_version=True)])
 def test_bad_options(native, option):
     P, faces = grid()
     with pytest.raises(native.PiaError):
@@ -209,6 +211,46 @@ def test_thread_count_changes_nothing(native):
     assert np.array_equal(cages[0], cages[1])
     opts, _ = native._options(threads=2)
     assert opts.threads == 2
+
+
+def test_opensubdiv_version(native):
+    """Versions as Blender gives them (a tuple), as strings or as the number;
+    after 3.6.0 the centre of two double-sided fins is infinitely sharp (its
+    row is the vertex alone), up to 3.6.0 it is not; elsewhere, and for
+    meshes without such vertices, the rule changes nothing."""
+    number = native.opensubdiv_version_number
+    assert number(None) == number(0) == number("") == 0
+    assert number((3, 7, 0)) == number([3, 7]) == number("3.7.0") == number("3.7") == number(30700) == 30700
+    assert number((3, 6, 0)) == 30600 and number("3") == 30000
+    opts, _ = native._options(opensubdiv_version=(3, 7, 0))
+    assert opts.opensubdiv_version == 30700
+    P = [(x, y, 0.1 * ((3 * x + 5 * y) % 3)) for y in range(3) for x in range(3)]
+    P = np.array(P + [(1.5, 1.2, 1.0), (0.8, 1.5, 0.9)], np.float32)
+    faces = [[0, 1, 4, 3], [1, 2, 5, 4], [3, 4, 7, 6], [4, 5, 8, 7],
+             [4, 5, 9], [4, 9, 5], [4, 10, 7], [4, 7, 10]]
+    mesh = native.Mesh.from_faces(P, faces)
+    rows = {v: native.limit_stencils(mesh, opensubdiv_version=v).to_scipy().toarray()
+            for v in (None, "3.5.0", "3.6.0", "3.7.0", (5, 0, 0))}
+    for v in ("3.5.0", "3.6.0"):
+        assert np.array_equal(rows[v], rows[None])
+    for v in ("3.7.0", (5, 0, 0)):
+        centre = np.zeros(len(P))
+        centre[4] = 1.0
+        assert np.array_equal(rows[v][4], centre)
+        assert np.array_equal(np.delete(rows[v], 4, axis=0), np.delete(rows[None], 4, axis=0))
+    assert not np.array_equal(rows[None][4], rows["3.7.0"][4])
+    # Loop ignores it.
+    tri = [f for f in faces if len(f) == 3] + [[0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4], [3, 4, 7], [3, 7, 6],
+                                                [4, 5, 8], [4, 8, 7]]
+    tri_mesh = native.Mesh.from_faces(P, tri)
+    loop = [native.limit_stencils(tri_mesh, scheme="LOOP", opensubdiv_version=v).to_scipy().toarray()
+            for v in (None, "3.7.0")]
+    assert np.array_equal(loop[0], loop[1])
+    # A scan's cage for either version interpolates in that version's terms.
+    P2, faces2, _ = load("bunny")
+    mesh2 = native.Mesh.from_faces(P2, faces2)
+    assert np.array_equal(native.limit_stencils(mesh2, opensubdiv_version="3.7.0").weights,
+                          native.limit_stencils(mesh2).weights)
 
 
 def test_agrees_with_a_sparse_direct_solve(native):
