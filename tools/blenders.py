@@ -185,6 +185,16 @@ def test_files(extra):
     return files, options
 
 
+def clean_environment():
+    """The caller's environment without what a Python version manager put in
+    it: an interpreter first on PATH makes Debian's Blender take that
+    Python's standard library instead of the system's."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PYENV")}
+    env["PATH"] = os.pathsep.join(p for p in env.get("PATH", "").split(os.pathsep)
+                                  if os.sep + ".pyenv" + os.sep + "versions" + os.sep not in p + os.sep)
+    return env
+
+
 def command_for(blender, package, selection, junit):
     """argv and environment running run.py on `selection` in `blender`."""
     if blender.root:

@@ -278,7 +278,7 @@ def blender_extension_tool():
         with zipfile.ZipFile(wheel) as zf:
             members = [m for m in zf.namelist()
                        if m.endswith(("bl_pkg/cli/blender_ext.py", "_bpy_internal/extensions/tags.py"))]
-            zf.extractall(os.path.join(wheels, "bpy-tools"), members)
+            zf.extractall(os.path.join(BUILD, "wheels", "bpy-tools"), members)
         return blender_extension_tool()
     tool = sorted(found)[-1]
     scripts = tool.split(os.sep + "addons_core" + os.sep)[0]
