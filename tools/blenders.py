@@ -240,8 +240,10 @@ def test(package, jobs, only, extra):
     blenders, notes = discover()
     if only:
         blenders = [b for b in blenders if any(o in b.name or o in b.how for o in only)]
-    rows, ready = {}, []
-    for b in blenders:
+    rows = {}
+
+    def prepare(b):
+        """Installs b's Blender (venv or chroot); None when it is ready."""
         try:
             if b.prepare:
                 prepare_venv(*b.prepare)
@@ -249,12 +251,11 @@ def test(package, jobs, only, extra):
                 b.chroot_path = prepare_chroot(*b.root)
                 v = debian_blender_version(["chroot", b.chroot_path])
                 b.name = "Blender %s" % v if v else b.name
-            ready.append(b)
+            return None
         except (subprocess.CalledProcessError, RuntimeError, OSError) as exc:
-            rows[id(b)] = (b, None, ["could not be installed: %s" % exc], 0.0)
+            return "could not be installed: %s" % exc
 
-    def one(item):
-        i, b = item
+    def one(i, b):
         print("starting the suite in %s (%s)" % (b.name, b.how), flush=True)
         c, problems, seconds, log = run_suite(i, b, package, extra)
         print("finished %s (%s): %s%s" % (b.name, b.how, c, "; " + "; ".join(problems) if problems else ""),
@@ -262,11 +263,20 @@ def test(package, jobs, only, extra):
         if problems or c["failed"]:
             print("---- last lines of %s ----\n%s" % (log, "".join(open(log, errors="replace").readlines()[-60:])),
                   flush=True)
-        return b, c, problems, seconds
+        rows[id(b)] = (b, c, problems, seconds)
 
+    # Installing (mostly downloading) goes on in this thread while the
+    # suites of the Blenders already installed run in the pool.
     with concurrent.futures.ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
-        for b, c, problems, seconds in pool.map(one, list(enumerate(ready))):
-            rows[id(b)] = (b, c, problems, seconds)
+        running = []
+        for i, b in enumerate(blenders):
+            problem = prepare(b)
+            if problem:
+                rows[id(b)] = (b, None, [problem], 0.0)
+            else:
+                running.append(pool.submit(one, i, b))
+        for future in running:
+            future.result()
     failed = 0
     print("\n| Blender | installed as | passed | failed | skipped | expected failures | minutes |\n"
           "|---|---|---:|---:|---:|---:|---:|")

@@ -164,12 +164,17 @@ def test_dragon_unreachable_vertices_are_reported():
     """The 100k-vertex scan has isolated pairs of duplicated triangles: each
     vertex of such a pair has the triangle's centroid as its limit, so no
     cage reaches them all. Everything else must be hit, and the result must
-    say it did not converge."""
+    say it did not converge.
+
+    Quality 1: Blender builds the modifier's stencil table for the whole
+    scan, 15 s at quality 1 against 80 s at quality 3 (other tests judge
+    quality 3 on smaller meshes)."""
     source = import_obj(os.path.join(DATA, "dragon_res2.obj"))
     before = snapshot(source)
     targets = positions(source.data).astype(np.float64)
-    assert run_operator(levels=1) == {'FINISHED'}
+    assert run_operator(levels=1, quality=1) == {'FINISHED'}
     new_obj = bpy.context.active_object
+    check_modifier(new_obj, levels=1, quality=1)
     assert_unchanged(source, before)
     assert new_obj["pia_status"] in ('STAGNATED', 'MAX_ITERATIONS')
     miss = np.abs(evaluated_control_points(new_obj, len(targets)) - targets).max(axis=1)
