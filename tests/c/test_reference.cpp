@@ -308,7 +308,14 @@ static void compare_all(const tmesh &m, const std::string &name, std::initialize
     printf("%-40s matches OpenSubdiv's full adaptive stencils\n", name.c_str());
 }
 
-int main() {
+int main(int argc, char **argv) {
+    // --sanitized: the subset the sanitizer build runs, where the reference
+    // side is some fifteen times slower: the meshes of up to 1,700 vertices
+    // (not the triangulated bunny, not the dragon cut), random creases at
+    // qualities 1 and 3.  The plain build and the package's build run
+    // everything.
+    const bool sanitized = argc > 1 && std::string(argv[1]) == "--sanitized";
+    const int32_t largest = sanitized ? 1700 : INT32_MAX;
     // Semi-sharp edge creases 0.3, 0.5, 0.9, 1.0 along a line, a dart, a
     // vertex crease, and a corner crease through the two-edge rule.
     tmesh g = make_grid(8, 6);
@@ -412,6 +419,10 @@ int main() {
         std::string path = std::string(SPIA_TEST_DATA_DIR) + "/" + n;
         CHECK(read_obj(path.c_str(), &d), "cannot read %s", path.c_str());
         drop_degenerate_faces(&d);
+        if (d.nv > largest) {
+            tmesh_free(&d);
+            continue;
+        }
         // The version matters only where there are non-manifold vertices.
         if (std::string(n) == "catmark_nonman_edges.obj") compare_all(d, n, {1, 3}, {0, 30700});
         else compare_all(d, n, {1, 3});
@@ -422,7 +433,7 @@ int main() {
     // fins on the surface, edges with four and six faces.  84 of its
     // vertices are off non-manifold creases by OpenSubdiv 3.7's test: the
     // 84 where Blender 5.1 and 5.0 disagree.
-    {
+    if (!sanitized) {
         tmesh d, cut;
         std::string path = std::string(SPIA_TEST_DATA_DIR) + "/dragon_res2.obj";
         CHECK(read_obj(path.c_str(), &d), "cannot read %s", path.c_str());
@@ -477,8 +488,13 @@ int main() {
         std::string path = std::string(SPIA_TEST_DATA_DIR) + "/" + n;
         CHECK(read_obj(path.c_str(), &d), "cannot read %s", path.c_str());
         drop_degenerate_faces(&d);
+        if (d.nv > largest) {
+            tmesh_free(&d);
+            continue;
+        }
         add_random_creases(&d, 0.1, 2024);
-        compare_all(d, std::string(n) + " with random creases", {1, 2, 3, 5});
+        if (sanitized) compare_all(d, std::string(n) + " with random creases", {1, 3});
+        else compare_all(d, std::string(n) + " with random creases", {1, 2, 3, 5});
         tmesh_free(&d);
     }
     TEST_MAIN_END();
