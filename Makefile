@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 # The front door.  `make demo` and `make test` do everything on a fresh
 # Debian 12 (bookworm) or 13 (trixie) machine, as root (or with sudo):
 # install what is missing, build, run.

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Builds the native library with CMake and assembles the Blender add-on.
 
     python3 setup.py build     ->  build/addon/subdiv_pia/  (for development: the library links the

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 """ctypes binding to the subdiv_pia C library.
 
 This module imports no ``bpy``: it runs in plain Python with numpy as well as

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 /* Closest points on a scan: the library's bounding volume hierarchy
  * (csrc/src/bvh.c) against Embree's point query, side by side on the same
  * triangles and query points.

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Two-phase Doo-Sabin interpolation as the paper measures it: stop at
 0.01% of the bounding-box diagonal, for the closed meshes in tests/data and
 shape parameters 0.4, 0.5, 0.8 and 0.99, with PIA (the paper's) and GS-PIA

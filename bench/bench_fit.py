@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 """How close a subdivided cage comes to the scan it was made from.
 
     blender -b --factory-startup --python-exit-code 1 --python bench/bench_fit.py -- \

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Benchmark: stencils and solve for generated quad spheres of about 10k,
 100k and 1M vertices and for the shipped scans, with AUTO, PIA and GS-PIA.
 

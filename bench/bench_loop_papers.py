@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Benchmark: Loop-surface interpolation of the shipped triangle meshes, set
 beside the numbers of the Loop PIA papers.
 

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 """The whole operator in Blender on a big quad sphere, from the call to the new
 object, with the time split between the library and the Blender side.
 

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Benchmark for speed and scale, everything side by side in one run:
 
 1. scaling: Catmull-Clark quad spheres of about 10k to 4M vertices (radial

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Sparse direct solvers for the limit system L V = P, for the benchmarks.
 
 - splu: scipy's SuperLU on L (COLAMD ordering).

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Cages for fitting benchmarks and the distance from a subdivided surface to a scan.
 
 Importable inside Blender (bpy, numpy, scipy):

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Meshes for the benchmarks: generated quad spheres and the shipped scans."""
 import os
 import sys

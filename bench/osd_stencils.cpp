@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // OpenSubdiv's own limit stencils for every vertex of a mesh, timed, for
 // bench/bench_scale.py to set beside the library's.
 //

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Renders the README picture with Blender in background mode (Cycles, CPU).
 
     blender -b --factory-startup --python bench/render_comparison.py -- INPUT OUTPUT.png

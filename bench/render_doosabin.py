@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 """The README's two-phase Doo-Sabin picture, after the paper's Figure 1,
 rendered by Blender (Cycles, CPU) in background mode:
 

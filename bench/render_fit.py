@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Picture of a fitting case: the scan, then each surface coloured by its
 distance to the scan (Workbench, background mode).
 

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Screenshot of the add-on's panel in Blender's interface (for the README).
 
     xvfb-run -a -s "-screen 0 1600x900x24" blender --factory-startup \

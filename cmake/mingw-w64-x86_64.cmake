@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 # Cross-compiling for Windows x64 with Debian's mingw-w64 (g++-mingw-w64-x86-64).
 # The -posix compilers: their C++ runtime has threads (winpthreads), which
 # OpenSubdiv's core and the library's own threads use.  Tests run under

@@ -1,4 +1,5 @@
 #!/usr/bin/env python3
+# SPDX-License-Identifier: GPL-3.0-or-later
 """The Blenders this machine can test the add-on in, and the Blender test
 suite (tests/blender) run in each of them against the package.
 

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Clean Debian userlands for building and testing: debootstrap chroots
 under build/chroots, kept from one run to the next, and commands run inside
 them in a private mount namespace (its mounts vanish with the process).

@@ -1,4 +1,5 @@
 #!/usr/bin/env python3
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Builds what is shipped: the self-contained native library and the Blender
 extension zip around it.
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 /*
  * subdiv_pia: subdivision surfaces that pass through the points you gave them.
  *

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 /* A bounding volume hierarchy over triangles and the nearest-triangle query
  * (see bvh.h).
  *

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 /* A bounding volume hierarchy over triangles, for nearest-triangle queries
  * (the closest points on a scan, scan.c).  Private to the library. */
 #ifndef SPIA_BVH_H

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // The library's only C++ file: limit stencils from OpenSubdiv.  Catmull-Clark
 // is set up exactly as Blender's Subdivision Surface modifier sets it up when
 // "Use Limit Surface" is on, so that the limit points these stencils give

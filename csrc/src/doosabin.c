@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 /* Two-phase Doo-Sabin subdivision (Cheng et al.): limit stencils and
  * refinement.
  *

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 /* Fitting a cage's limit surface to a scan.
  *
  * SURFACE: samples X = M V of the limit surface (M: the sample stencils) are

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 /* Private declarations shared by the library's source files. */
 #ifndef SPIA_INTERNAL_H
 #define SPIA_INTERNAL_H

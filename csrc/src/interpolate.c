@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 /* Entry points that tie validation, stencils and solvers together. */
 #include "internal.h"
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 /* Loop limit stencils with the boundary rules of Hoppe et al. 1994, as the
  * open-mesh Loop PIA paper uses them.
  *

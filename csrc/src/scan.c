@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 /* Closest points on a scan: the library's bounding volume hierarchy over the
  * scan's triangles (bvh.c) with the exact point-triangle distance in double,
  * and a smooth normal (area-weighted vertex normals interpolated at the

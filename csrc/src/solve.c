@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 /* Solvers on a limit stencil table L: find V with L V = P.
  *
  * PIA (the papers' progressive iterative approximation) is the Richardson

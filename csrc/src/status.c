@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 /* Result codes, messages, options and the clock. */
 #define _POSIX_C_SOURCE 200809L
 #include "internal.h"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 /* The CSR stencil table shared by every scheme: storage, access, product. */
 #include "internal.h"
 

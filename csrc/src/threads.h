@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 /* The library's own threads: a parallel loop over a range of items, on
  * POSIX threads or Windows threads, with no runtime beside the C library's.
  * (OpenMP would bring libgomp, which cannot be linked statically into a

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 /* Mesh validation and vertex-to-corner adjacency. */
 #include "internal.h"
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 /* bvh.c built with an allocator that fails when test_bvh.c asks it to:
  * every failure must come back as SPIA_ERROR_OUT_OF_MEMORY with nothing
  * left allocated. */

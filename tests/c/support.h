@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 /* Test support: a growable mesh, generated shapes, an OBJ reader, checks. */
 #ifndef SPIA_TEST_SUPPORT_H
 #define SPIA_TEST_SUPPORT_H

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 /* Every bad input comes back as its result code with a message; nothing is
  * written to the caller's buffers and nothing is printed. */
 #include "support.h"

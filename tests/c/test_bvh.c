@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 /* The scan's bounding volume hierarchy (csrc/src/bvh.c) against a search
  * over every triangle: on the bunny scan and a piece of the dragon, with
  * query points from the QuadriFlow cage and random ones in and beyond the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 /* Scans and fitting: closest points against a brute-force search over every
  * triangle, a fit that brings a coarse torus cage onto a fine torus, and the
  * bad inputs (codes, messages, buffers untouched). */

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 /* Closed-form limit masks (Blender's modifier matches them, see
  * ../shared facts): the library's Catmull-Clark stencils must equal
  *   interior vertex of valence n, all faces quads:

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // The oracle: OpenSubdiv's full adaptive limit stencils, computed here the
 // way Blender's Subdivision Surface modifier sets OpenSubdiv up (every face
 // adaptively isolated at `quality`, infinitely sharp patches, limit at the

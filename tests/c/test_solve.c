@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 /* Solvers: convergence to the tolerance for every method, L V = P checked
  * with the stencils independently of the solver's own report, GS-PIA
  * faster than PIA, max_iterations, unreachable vertices. */

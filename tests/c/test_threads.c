@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 /* Thread counts: the stencil table and every solver's cage must be the same,
  * to the bit, whatever spia_options.threads says.  The meshes are large
  * enough (over 50,000 rows) for the solvers to share their products, and

@@ -1,4 +1,5 @@
 #!/usr/bin/env python3
+# SPDX-License-Identifier: GPL-3.0-or-later
 """ELF audit of the shipped library: what it needs from the system and what
 it shows a host process.
 

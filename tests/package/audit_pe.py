@@ -1,4 +1,5 @@
 #!/usr/bin/env python3
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Audit of the shipped Windows library (a PE DLL): what it imports and
 what it exports.
 

@@ -1,4 +1,5 @@
 #!/usr/bin/env python3
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Tests of the package as it is shipped (`make test-package`):
 
     python3 tests/package/run.py dist/subdiv_pia-<version>-linux-x64.zip [dist/...-windows-x64.zip]

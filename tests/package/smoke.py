@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 """The installed package loads and works, outside Blender:
 
     python3 smoke.py PACKAGE_PARENT MESH.obj

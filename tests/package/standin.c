@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 /* A stand-in for a library that a host process already holds (Blender
  * loads Embree 4, TBB and OpenSubdiv 3.6.0 at start): it exports the same
  * names, and any call of them writes the name to the file named by

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Plain-Python tests of the binding: the built add-on package is imported
 from build/addon (or SUBDIV_PIA_ADDON_DIR) without Blender."""
 import os

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Independent Loop limit matrices from the papers' formulas (numpy/scipy).
 
 Interior vertex of valence n: beta_n on itself, (1 - beta_n) / n on each

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Plain OBJ reading for the tests (positions and faces, OpenSubdiv 't crease' tags)."""
 import numpy as np
 

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 """The package's ELF audit (tests/package/audit_elf.py) tells a library that
 could be shipped from one that could not: it is run here on small libraries
 built for the purpose and on the development build, which links the

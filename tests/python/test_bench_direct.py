@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 """The benchmark's direct solvers (bench/direct.py) solve what they claim to:
 SuperLU, UMFPACK and CHOLMOD (through ctypes) against scipy's spsolve on the
 limit stencils of a small sphere, and the diagonal D of L = D S against the

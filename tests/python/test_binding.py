@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 """The binding on every mesh shipped in tests/data, checked with scipy."""
 import subprocess
 import sys

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Two-phase Doo-Sabin: the library against the paper's eq. (2) built here
 with numpy, the centroid property of its refinement, convergence for every
 shape parameter the paper allows, local shape control, bad input."""

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Surface samples, closest points and fitting a cage to a scan, checked
 against independent computations: the bicubic B-spline on regular faces,
 numpy geometry on spheres, and the library's own limit stencils."""

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 """What the add-on says when its native library cannot be loaded: the
 package for another platform, a glibc older than the library needs, a
 missing dependency, a missing or bogus file (plain Python, no library

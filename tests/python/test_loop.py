@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 """Loop subdivision: the library's stencils against the papers' formulas
 built here (loop_oracle.py), interpolation, solvers, the staged procedure."""
 import numpy as np

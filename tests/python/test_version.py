@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 """The version is written in the manifest and repeated in bl_info, the CMake
 project and the C header: they, and the built library, must agree (the
 package's file name comes from the manifest)."""
