@@ -5,8 +5,6 @@
 #include "threads.h"
 
 #include <math.h>
-#include <stdarg.h>
-#include <stdio.h>
 #include <string.h>
 #include <time.h>
 
@@ -32,26 +30,6 @@ const char *spia_result_name(spia_result code) {
 
 int spia_version(void) {
     return SPIA_VERSION_MAJOR * 10000 + SPIA_VERSION_MINOR * 100 + SPIA_VERSION_PATCH;
-}
-
-spia_result spia__fail(spia_status *status, spia_result code, int64_t index, const char *fmt, ...) {
-    if (status) {
-        va_list ap;
-        status->code = code;
-        status->index = index;
-        va_start(ap, fmt);
-        vsnprintf(status->message, sizeof status->message, fmt, ap);
-        va_end(ap);
-    }
-    return code;
-}
-
-void spia__ok(spia_status *status) {
-    if (status) {
-        status->code = SPIA_OK;
-        status->index = -1;
-        status->message[0] = '\0';
-    }
 }
 
 spia_options spia_options_default(void) {

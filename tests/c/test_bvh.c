@@ -14,25 +14,7 @@
 #include "internal.h"
 #include "threads.h"
 
-#include <stdarg.h>
 #include <stdatomic.h>
-
-/* The library's message helpers, for bvh.c (status.c is not linked in: the
- * public functions in it come from the library). */
-spia_result spia__fail(spia_status *status, spia_result code, int64_t index, const char *fmt, ...) {
-    if (status) {
-        va_list ap;
-        status->code = code;
-        status->index = index;
-        va_start(ap, fmt);
-        vsnprintf(status->message, sizeof status->message, fmt, ap);
-        va_end(ap);
-    }
-    return code;
-}
-void spia__ok(spia_status *status) {
-    if (status) status->code = SPIA_OK, status->index = -1, status->message[0] = '\0';
-}
 
 /* The allocator of bvh_counted.c: counts calls and live blocks, and fails
  * call number fail_at. */
