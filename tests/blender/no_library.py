@@ -22,33 +22,8 @@ spec = importlib.util.spec_from_file_location("subdiv_pia_cli_check", os.path.jo
 cli = importlib.util.module_from_spec(spec)
 spec.loader.exec_module(cli)
 package = cli._import_package()
-
-
-class Recorder:
-    def __init__(self, log):
-        self.log = log
-        self.enabled = True
-        self.use_property_split = False
-        self.use_property_decorate = True
-
-    def _child(self, *args, **kwargs):
-        return Recorder(self.log)
-
-    column = row = box = _child
-
-    def prop(self, data, name, **kwargs):
-        self.log.append(["prop", name])
-
-    def label(self, text="", **kwargs):
-        self.log.append(["label", text])
-
-    def separator(self, **kwargs):
-        pass
-
-    def operator(self, idname, **kwargs):
-        self.log.append(["operator", idname])
-        return type("Props", (), {})()
-
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from layout import Recorder  # noqa: E402
 
 bpy.ops.wm.read_factory_settings(use_empty=True)
 package = cli._import_package()

@@ -6,37 +6,9 @@ import bpy
 import pytest
 
 import shapes
+from layout import Recorder
 import subdiv_pia
 from subdiv_pia import native, ui
-
-
-class Recorder:
-    """Stands in for bpy.types.UILayout and records what is drawn."""
-
-    def __init__(self, log=None):
-        self.log = [] if log is None else log
-        self.enabled = True
-        self.use_property_split = False
-        self.use_property_decorate = True
-
-    def _child(self, *args, **kwargs):
-        return Recorder(self.log)
-
-    column = row = box = _child
-
-    def prop(self, data, name, **kwargs):
-        assert hasattr(data, name), name
-        self.log.append(("prop", name))
-
-    def label(self, text="", **kwargs):
-        self.log.append(("label", text))
-
-    def separator(self, **kwargs):
-        pass
-
-    def operator(self, idname, **kwargs):
-        self.log.append(("operator", idname))
-        return type("Props", (), {})()
 
 
 def draw_panel():
