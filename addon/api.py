@@ -27,6 +27,9 @@ any transforms. The new object carries the distances as a point attribute
 (``pia_distance``) and a heat-map colour attribute (``pia_distance_color``).
 """
 
+import os
+import sys
+
 import bmesh
 import numpy as np
 import bpy
@@ -460,6 +463,67 @@ def make_scan(target, cage_obj, context=None):
     return native.Scan(native.Mesh(positions, face_sizes, face_vertices))
 
 
+def machine_memory():
+    """The machine's physical memory in bytes, or None where it cannot be told."""
+    try:
+        if sys.platform == "win32":
+            import ctypes
+
+            class _Status(ctypes.Structure):
+                _fields_ = [("length", ctypes.c_uint32), ("load", ctypes.c_uint32),
+                            ("total_phys", ctypes.c_uint64), ("avail_phys", ctypes.c_uint64),
+                            ("total_page", ctypes.c_uint64), ("avail_page", ctypes.c_uint64),
+                            ("total_virtual", ctypes.c_uint64), ("avail_virtual", ctypes.c_uint64),
+                            ("avail_extended", ctypes.c_uint64)]
+            status = _Status()
+            status.length = ctypes.sizeof(_Status)
+            if ctypes.windll.kernel32.GlobalMemoryStatusEx(ctypes.byref(status)):
+                return int(status.total_phys)
+            return None
+        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+# Bytes per stored weight (a 4-byte column and an 8-byte weight), and how
+# much more than the finished table building it takes at its peak.
+_BYTES_PER_WEIGHT = 12
+_BUILD_FACTOR = 4
+
+
+def stencil_memory_estimate(face_sizes, vertex_count, settings, scan=None):
+    """Bytes the library needs, at its peak, for the stencil table of a mesh
+    with these face sizes: a vertex's limit stencil spans the faces around
+    it (1 + sum of (size - 2) over them: 9 for a regular quad vertex, 7 for
+    a regular triangle one); a surface fit's samples span 16 vertices each."""
+    sizes = np.asarray(face_sizes, dtype=np.int64)
+    weights = int(vertex_count) + int(np.sum(sizes * np.maximum(sizes - 2, 0)))
+    rows = int(vertex_count)
+    if scan is not None and settings.get("fit") == 'SURFACE':
+        k = int(settings.get("fit_samples", 4))
+        samples = int(np.sum(np.where(sizes == 4, 1, sizes))) * k * k
+        weights += 16 * samples
+        rows += samples
+    return _BUILD_FACTOR * (_BYTES_PER_WEIGHT * weights + 8 * rows)
+
+
+def check_memory(data, settings, scan=None):
+    """Refuses up front a mesh whose stencils would not fit in the machine's memory."""
+    total = machine_memory()
+    if not total:
+        return
+    n = len(data.polygons)
+    sizes = np.empty(n, np.int32)
+    data.polygons.foreach_get("loop_total", sizes)
+    need = stencil_memory_estimate(sizes, len(data.vertices), settings, scan)
+    if need > total:
+        raise native.PiaError(
+            'OUT_OF_MEMORY',
+            "its stencil table would need about %.1f GB (%d vertices, %d faces), more than this "
+            "machine's %.1f GB of memory; try a lower quality or a smaller mesh"
+            % (need / 2.0 ** 30, len(data.vertices), n, total / 2.0 ** 30))
+
+
 def compute_cage(obj, settings, progress=None, mesh=None, scan=None):
     """Run the solver on obj's mesh data (not its modifiers), or on mesh if given.
     With scan (a native.Scan), fit the cage to it instead (native.fit).
@@ -481,6 +545,7 @@ def compute_cage(obj, settings, progress=None, mesh=None, scan=None):
                    tolerance=settings["tolerance"], max_iterations=settings["max_iterations"],
                    staged=settings["staged"] and scheme == 'LOOP', progress=progress,
                    opensubdiv_version=opensubdiv_version_of(settings), **shapes)
+    check_memory(data, settings, scan)
     try:
         if scan is not None:
             return native.fit(native_mesh(data), scan, mode=settings["fit"],
