@@ -34,7 +34,7 @@ import bmesh
 import numpy as np
 import bpy
 
-from . import native
+from . import cleanup, native
 
 # Names follow the Subdivision Surface modifier where one exists.
 DEFAULT_SETTINGS = {
@@ -61,6 +61,9 @@ DEFAULT_SETTINGS = {
     # Catmull-Clark: the OpenSubdiv version whose rules the modifier follows,
     # e.g. "3.7.0" or (3, 7, 0); empty: this Blender's (bpy.app.opensubdiv).
     "opensubdiv_version": "",
+    # Interpolate a cleaned copy of the mesh (cleanup.clean); distance relative to the diagonal.
+    "cleanup": False,
+    "cleanup_distance": cleanup.DEFAULT_DISTANCE,
 }
 
 FIT_MODES = tuple(native.FIT_MODES)
@@ -88,7 +91,9 @@ LIMIT_SUFFIX = "_limit"
 LIMIT_MARK = "pia_limit_surface"   # on the child that holds the limit surface
 STORED_SETTINGS = ("scheme", "boundary_rule", "boundary_smooth", "use_creases", "triangulate", "staged",
                    "levels", "render_levels", "quality", "method", "tolerance", "max_iterations",
-                   "shape_parameter", "shape_attribute")
+                   "shape_parameter", "shape_attribute", "cleanup", "cleanup_distance")
+# What the cleanup did, stored on the cage as pia_cleanup_<name> (cleanup.STAT_NAMES).
+CLEANUP_PREFIX = "pia_cleanup_"
 
 # Settings that a source Subdivision Surface modifier provides.
 MODIFIER_SETTINGS = ("levels", "render_levels", "quality", "boundary_smooth", "use_creases")
@@ -166,6 +171,14 @@ def check_settings(settings):
     s["max_iterations"] = int(s["max_iterations"])
     s["tolerance"] = float(s["tolerance"])
     s["use_creases"] = bool(s["use_creases"])
+    s["cleanup"] = bool(s["cleanup"])
+    try:
+        s["cleanup_distance"] = float(s["cleanup_distance"])
+    except (TypeError, ValueError):
+        s["cleanup_distance"] = float("nan")
+    if not (s["cleanup_distance"] >= 0.0 and np.isfinite(s["cleanup_distance"])):
+        raise ValueError("cleanup_distance must be zero or a positive number (a fraction of the "
+                         "bounding-box diagonal), not %r" % (settings.get("cleanup_distance"),))
     if not 0 <= s["levels"] <= 11 or not 0 <= s["render_levels"] <= 11:
         raise ValueError("levels and render_levels must be in 0..11")
     if s["scheme"] in LIMIT_SCHEMES and s["levels"] > LOOP_MAX_LEVELS:
@@ -563,6 +576,163 @@ def compute_cage(obj, settings, progress=None, mesh=None, scan=None):
         raise
 
 
+def _new_mesh(name, points, face_sizes, face_vertices):
+    """A new mesh with these vertices and faces (edges calculated)."""
+    points = np.ascontiguousarray(points, np.float32).reshape(-1, 3)
+    faces = np.ascontiguousarray(face_vertices, np.int32).ravel()
+    face_sizes = np.ascontiguousarray(face_sizes, np.int32).ravel()
+    mesh = bpy.data.meshes.new(name)
+    mesh.vertices.add(len(points))
+    mesh.vertices.foreach_set("co", points.ravel())
+    count = len(face_sizes)
+    mesh.loops.add(len(faces))
+    mesh.loops.foreach_set("vertex_index", faces)
+    mesh.polygons.add(count)
+    starts = np.zeros(count, np.int32)
+    if count > 1:
+        np.cumsum(face_sizes[:-1], out=starts[1:])
+    mesh.polygons.foreach_set("loop_start", starts)
+    if not _LOOP_TOTAL_READ_ONLY:  # 4.0+: derived from loop_start
+        mesh.polygons.foreach_set("loop_total", face_sizes)
+    mesh.update(calc_edges=True)
+    return mesh
+
+
+def write_creases(mesh, edge_creases=None, vertex_creases=None):
+    """Set mesh's edge creases (one per mesh.edges) and vertex creases, where given."""
+    modern = bpy.app.version >= (4, 0, 0)
+    if edge_creases is not None:
+        values = np.ascontiguousarray(edge_creases, np.float32)
+        if modern:
+            attr = mesh.attributes.get("crease_edge") or mesh.attributes.new("crease_edge", 'FLOAT', 'EDGE')
+            attr.data.foreach_set("value", values)
+        elif hasattr(mesh, "edge_creases_ensure"):  # 3.5, 3.6
+            mesh.edge_creases_ensure()
+            mesh.edge_creases.data.foreach_set("value", values)
+        else:                                        # 3.4
+            mesh.edges.foreach_set("crease", values)
+    if vertex_creases is not None:
+        values = np.ascontiguousarray(vertex_creases, np.float32)
+        if modern:
+            attr = mesh.attributes.get("crease_vert") or mesh.attributes.new("crease_vert", 'FLOAT', 'POINT')
+            attr.data.foreach_set("value", values)
+        else:
+            bm = bmesh.new()
+            try:
+                bm.from_mesh(mesh)
+                layer = bm.verts.layers.crease.verify()
+                for vert, value in zip(bm.verts, values.tolist()):
+                    vert[layer] = value
+                bm.to_mesh(mesh)
+            finally:
+                bm.free()
+    mesh.update()
+
+
+_FACE_TYPES = {'FLOAT': np.float32, 'INT': np.int32, 'BOOLEAN': bool}
+
+
+def _copy_face_data(source, mesh, face_map):
+    """Per-face data of source onto mesh's faces (face i of mesh is face_map[i] of
+    source): materials, material indices, smooth shading and the float, integer
+    and boolean face attributes (the Doo-Sabin shape attribute among them)."""
+    for material in source.materials:
+        mesh.materials.append(material)
+    if not len(face_map):
+        return
+    rna = bpy.types.MeshPolygon.bl_rna.properties
+    for prop, dtype in (("material_index", np.int32), ("use_smooth", bool)):
+        if prop in rna and not rna[prop].is_readonly:
+            values = np.empty(len(source.polygons), dtype)
+            source.polygons.foreach_get(prop, values)
+            mesh.polygons.foreach_set(prop, np.ascontiguousarray(values[face_map]))
+    for attr in list(getattr(source, "attributes", ())):
+        dtype = _FACE_TYPES.get(attr.data_type)
+        if (attr.domain != 'FACE' or dtype is None or attr.name.startswith(".")
+                or getattr(attr, "is_internal", False) or attr.name in mesh.attributes
+                or len(attr.data) != len(source.polygons)):
+            continue
+        values = np.empty(len(attr.data), dtype)
+        attr.data.foreach_get("value", values)
+        new = mesh.attributes.new(attr.name, attr.data_type, 'FACE')
+        new.data.foreach_set("value", np.ascontiguousarray(values[face_map]))
+
+
+def cleaned_copy(mesh, distance=cleanup.DEFAULT_DISTANCE, name=None):
+    """(new mesh, stats): a cleaned copy of mesh (cleanup.clean on its arrays;
+    mesh itself is not changed). Kept: vertex positions (of the first vertex
+    of each merged group), edge creases (by vertex pair) and vertex creases,
+    materials, material indices, smooth shading and float, integer and boolean
+    face attributes. Dropped: UV maps, colours and other corner and vertex
+    attributes, vertex groups and shape keys. ValueError if no face is left."""
+    arrays = mesh_arrays(mesh)
+    result = cleanup.clean(arrays["positions"], arrays["face_sizes"], arrays["face_vertices"],
+                           edges=arrays["edges"], edge_creases=arrays["edge_creases"],
+                           vertex_creases=arrays["vertex_creases"], distance=distance)
+    if not len(result["face_sizes"]):
+        raise ValueError("Mesh '%s' has no faces left after cleanup (%s)"
+                         % (mesh.name, cleanup.format_stats(result["stats"])))
+    copy = _new_mesh(name or mesh.name + "_clean", result["positions"], result["face_sizes"],
+                     result["face_vertices"])
+    try:
+        _copy_face_data(mesh, copy, result["face_map"])
+        edge_creases = None
+        if result["edge_creases"] is not None:
+            m = len(result["positions"])
+            keys = result["edges"][:, 0].astype(np.int64) * m + result["edges"][:, 1]
+            ev = np.empty(len(copy.edges) * 2, np.int32)
+            copy.edges.foreach_get("vertices", ev)
+            ev = ev.reshape(-1, 2).astype(np.int64)
+            mine = np.minimum(ev[:, 0], ev[:, 1]) * m + np.maximum(ev[:, 0], ev[:, 1])
+            where = np.clip(np.searchsorted(keys, mine), 0, len(keys) - 1)
+            edge_creases = np.where(keys[where] == mine, result["edge_creases"][where], 0.0)
+        write_creases(copy, edge_creases, result["vertex_creases"])
+    except BaseException:
+        bpy.data.meshes.remove(copy)
+        raise
+    return copy, result["stats"]
+
+
+def cleanup_hint(error, mesh, settings):
+    """The library's refusal of mesh with a hint that the cleanup setting would
+    fix it (and what it would do), or None when cleanup is on or would not help."""
+    if settings.get("cleanup") or error.code not in ('DEGENERATE_FACE', 'TOPOLOGY'):
+        return None
+    if error.code == 'TOPOLOGY' and "triangles" in error.message:
+        return None
+    try:
+        arrays = mesh_arrays(mesh)
+        result = cleanup.clean(arrays["positions"], arrays["face_sizes"], arrays["face_vertices"],
+                               edges=arrays["edges"],
+                               distance=settings.get("cleanup_distance", cleanup.DEFAULT_DISTANCE))
+    except ValueError:
+        return None
+    if not cleanup.changed(result["stats"]):
+        return None
+    would = cleanup.format_stats(result["stats"], future=True)
+    return type(error)(error.code, "%s; the Cleanup setting (cleanup=True, --cleanup) would %s on a "
+                       "copy of the mesh" % (error.message, would), error.index)
+
+
+def store_cleanup(obj, stats):
+    """What the cleanup did, as custom properties of the cage."""
+    for name in cleanup.STAT_NAMES:
+        obj[CLEANUP_PREFIX + name] = int(stats.get(name, 0))
+
+
+def cleanup_stats(obj):
+    """What the cleanup did for the cage obj (a dict), or None if it had no cleanup."""
+    if obj is None or not obj.get("pia_cleanup"):
+        return None
+    return {name: int(obj.get(CLEANUP_PREFIX + name, 0)) for name in cleanup.STAT_NAMES}
+
+
+def format_cleanup(obj):
+    """'cleanup: merged 3 vertices, ...' for a cage made with cleanup, else ''."""
+    stats = cleanup_stats(obj)
+    return "" if stats is None else "cleanup: " + cleanup.format_stats(stats)
+
+
 def _link_like(source, new_obj, context):
     collections = list(source.users_collection) or [context.scene.collection]
     for collection in collections:
@@ -849,6 +1019,13 @@ def interpolate(obj, *, context=None, name=None, progress=None, **settings):
     Settings not given are taken from obj's
     Subdivision Surface modifier if it has one, else the defaults.
 
+    cleanup=True interpolates a cleaned copy of obj's mesh (cleaned_copy,
+    cleanup.clean): vertices closer than cleanup_distance x bounding-box
+    diagonal merged, repeated corners dissolved, degenerate, zero-area and
+    loose geometry removed, faces turned to one orientation per part. The
+    new object has the cleaned topology; what was cleaned is in its custom
+    properties pia_cleanup_<count> (format_cleanup says it in words).
+
     Loop: the cage has no modifier; its child ``<cage>_limit`` (find it
     with find_limit_object) holds the Loop limit surface refined `levels`
     times, whose first vertices are the limit points of the cage vertices.
@@ -888,17 +1065,34 @@ def interpolate(obj, *, context=None, name=None, progress=None, **settings):
     target = find_target(obj, s)
     scan = make_scan(target, obj, context) if target is not None else None
     mesh = None
-    if loop and s["triangulate"] and non_triangle_count(obj.data):
-        mesh = triangulated_copy(obj.data)
+    made = []  # meshes made here: removed again on failure
+    stats = None
     try:
-        cage, report = compute_cage(obj, s, progress=progress, mesh=mesh, scan=scan)
-        limit = (limit_arrays(mesh if mesh is not None else obj.data, s, cage)
-                 if separate_limit else None)
+        if s["cleanup"]:
+            mesh, stats = cleaned_copy(obj.data, s["cleanup_distance"])
+            made.append(mesh)
+        data = mesh if mesh is not None else obj.data
+        if loop and s["triangulate"] and non_triangle_count(data):
+            mesh = triangulated_copy(data)
+            made.append(mesh)
+            data = mesh
+        try:
+            cage, report = compute_cage(obj, s, progress=progress, mesh=mesh, scan=scan)
+            limit = limit_arrays(data, s, cage) if separate_limit else None
+        except native.PiaError as error:
+            hinted = cleanup_hint(error, data, s)
+            if hinted is not None:
+                raise hinted from None
+            raise
     except BaseException:
-        if mesh is not None:
-            bpy.data.meshes.remove(mesh)
+        for made_mesh in made:
+            bpy.data.meshes.remove(made_mesh)
         raise
+    for made_mesh in made[:-1]:  # the cleaned copy, once triangulated
+        bpy.data.meshes.remove(made_mesh)
     new_obj = build_object(obj, cage, report, s, context=context, name=name, mesh=mesh, limit=limit)
+    if stats is not None:
+        store_cleanup(new_obj, stats)
     return new_obj, report
 
 

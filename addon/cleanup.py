@@ -356,17 +356,23 @@ def changed(stats):
     return any(stats.get(name, 0) for name in STAT_NAMES if name != "non_orientable_parts")
 
 
-def format_stats(stats):
-    """The counts in words, e.g. 'merged 3 vertices, flipped 2 faces' ('nothing to clean')."""
-    words = (("merged_vertices", "merged %d vertex", "merged %d vertices"),
-             ("dissolved_corners", "dissolved %d repeated corner", "dissolved %d repeated corners"),
-             ("degenerate_faces", "removed %d degenerate face", "removed %d degenerate faces"),
-             ("zero_area_faces", "removed %d zero-area face", "removed %d zero-area faces"),
-             ("loose_vertices", "removed %d loose vertex", "removed %d loose vertices"),
-             ("loose_edges", "removed %d loose edge", "removed %d loose edges"),
-             ("flipped_faces", "flipped %d face", "flipped %d faces"),
-             ("non_orientable_parts", "left %d non-orientable part as it is",
-              "left %d non-orientable parts as they are"))
-    parts = [(one if stats.get(key, 0) == 1 else many) % stats.get(key, 0)
-             for key, one, many in words if stats.get(key, 0)]
+def format_stats(stats, future=False):
+    """The counts in words, e.g. 'merged 3 vertices, flipped 2 faces' ('nothing to clean');
+    future=True: what a cleanup would do ('merge 3 vertices, flip 2 faces')."""
+    words = (("merged_vertices", "merge", "vertex", "vertices"),
+             ("dissolved_corners", "dissolve", "repeated corner", "repeated corners"),
+             ("degenerate_faces", "remove", "degenerate face", "degenerate faces"),
+             ("zero_area_faces", "remove", "zero-area face", "zero-area faces"),
+             ("loose_vertices", "remove", "loose vertex", "loose vertices"),
+             ("loose_edges", "remove", "loose edge", "loose edges"),
+             ("flipped_faces", "flip", "face", "faces"),
+             ("non_orientable_parts", "leave", "non-orientable part as it is",
+              "non-orientable parts as they are"))
+    past = {"merge": "merged", "dissolve": "dissolved", "remove": "removed", "flip": "flipped",
+            "leave": "left"}
+    parts = []
+    for key, verb, one, many in words:
+        count = int(stats.get(key, 0))
+        if count:
+            parts.append("%s %d %s" % (verb if future else past[verb], count, one if count == 1 else many))
     return ", ".join(parts) if parts else "nothing to clean"
