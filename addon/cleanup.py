@@ -88,13 +88,13 @@ def merge_groups(points, tol):
     for dx in (-1, 0, 1):
         for dy in (-1, 0, 1):
             for dz in (-1, 0, 1):
-                shifted = key + (dx * dims[1] + dy) * dims[2] + dz
+                shifted = sorted_key + (dx * dims[1] + dy) * dims[2] + dz  # sorted: fast lookups
                 start = np.searchsorted(sorted_key, shifted, "left")
                 count = np.searchsorted(sorted_key, shifted, "right") - start
                 total = int(count.sum())
                 if not total:
                     continue
-                i = np.repeat(np.arange(n), count)
+                i = np.repeat(order, count)
                 offsets = np.arange(total) - np.repeat(np.cumsum(count) - count, count)
                 j = order[np.repeat(start, count) + offsets]
                 keep = i < j
@@ -105,6 +105,14 @@ def merge_groups(points, tol):
     a = np.concatenate(pairs_a) if pairs_a else np.zeros(0, np.int64)
     b = np.concatenate(pairs_b) if pairs_b else np.zeros(0, np.int64)
     return _union(labels, a, b)
+
+
+def _unique(values):
+    """np.unique of an integer array, by sorting."""
+    s = np.sort(values)
+    if len(s) < 2:
+        return s
+    return s[np.concatenate(([True], s[1:] != s[:-1]))]
 
 
 def _face_ids(face_sizes):
@@ -171,8 +179,12 @@ def orient(face_sizes, face_vertices, vertex_count):
     first = np.concatenate(([0], np.cumsum(degree)[:-1]))
     parity = np.full(f, -1, np.int8)
     component = np.full(f, -1, np.int64)
-    comps = []
-    for seed in range(f):
+    # A face sharing no edge with another is a part of its own, as it is.
+    isolated = np.flatnonzero(degree == 0)
+    parity[isolated] = 0
+    component[isolated] = np.arange(len(isolated))
+    comps = list(isolated)
+    for seed in np.flatnonzero(degree > 0).tolist():
         if parity[seed] >= 0:
             continue
         cid = len(comps)
@@ -247,7 +259,7 @@ def clean(positions, face_sizes, face_vertices, edges=None, edge_creases=None,
     # 1. Merge by distance.
     tol = distance * _diagonal(points.astype(np.float64))
     rep = merge_groups(points, tol)
-    stats["merged_vertices"] = int(n - len(np.unique(rep)))
+    stats["merged_vertices"] = int(n - np.count_nonzero(rep == np.arange(n)))
     fv = rep[fv]
 
     # 2. Dissolve repeated corners; drop faces that still repeat a vertex.
@@ -259,7 +271,7 @@ def clean(positions, face_sizes, face_vertices, edges=None, edge_creases=None,
         sizes = np.bincount(_face_ids(sizes)[keep_corner], minlength=f0).astype(np.int64)
         fv = fv[keep_corner]
     face = _face_ids(sizes)
-    distinct = np.bincount(np.unique(face * np.int64(max(n, 1)) + fv) // max(n, 1),
+    distinct = np.bincount(_unique(face * np.int64(max(n, 1)) + fv) // max(n, 1),
                            minlength=len(sizes)) if len(fv) else np.zeros(len(sizes), np.int64)
     good = (sizes >= 3) & (distinct == sizes)
     stats["degenerate_faces"] = int(np.count_nonzero(~good))
@@ -296,7 +308,7 @@ def clean(positions, face_sizes, face_vertices, edges=None, edge_creases=None,
 
     face_keys = np.zeros(0, np.int64)
     if len(fv):
-        face_keys = np.unique(_edge_keys(fv, fv[_next_corner(sizes)], m))
+        face_keys = _unique(_edge_keys(fv, fv[_next_corner(sizes)], m))
     new_edges = np.stack((face_keys // max(m, 1), face_keys % max(m, 1)), axis=1) if m else \
         np.zeros((0, 2), np.int64)
     new_creases = None
