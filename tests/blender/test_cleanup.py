@@ -14,7 +14,7 @@ import shapes
 from conftest import (DATA, MATCH, assert_unchanged, diagonal, expect_error, make_limit_cage,
                       object_from_pydata, object_counts, positions, relative_miss, run_operator,
                       snapshot)
-from subdiv_pia import api
+from subdiv_pia import api, operators
 from test_api_cli import run_cli
 from test_ui import draw_panel
 
@@ -178,6 +178,8 @@ def test_script_api_cleanup():
     assert report.converged
     assert api.cleanup_stats(cage)["merged_vertices"] == 1
     assert relative_miss(cage, targets) <= MATCH
+    line = operators.result_line(cage, report, {"target": ""})  # the operator's report
+    assert line.startswith("Dirty_pia: Converged") and "; cleanup: merged 1 vertex" in line, line
     plain, _ = api.interpolate(shapes.cube())
     assert api.cleanup_stats(plain) is None and api.format_cleanup(plain) == ""
 
