@@ -606,11 +606,11 @@ def write_creases(mesh, edge_creases=None, vertex_creases=None):
         if modern:
             attr = mesh.attributes.get("crease_edge") or mesh.attributes.new("crease_edge", 'FLOAT', 'EDGE')
             attr.data.foreach_set("value", values)
-        elif hasattr(mesh, "edge_creases_ensure"):  # 3.5, 3.6
+        elif "crease" in bpy.types.MeshEdge.bl_rna.properties:  # 3.4 to 3.6
+            mesh.edges.foreach_set("crease", values)
+        else:
             mesh.edge_creases_ensure()
             mesh.edge_creases.data.foreach_set("value", values)
-        else:                                        # 3.4
-            mesh.edges.foreach_set("crease", values)
     if vertex_creases is not None:
         values = np.ascontiguousarray(vertex_creases, np.float32)
         if modern:
