@@ -124,6 +124,8 @@ def test_cleanup_turns_flipped_faces(scheme):
     assert not outward(source.data)
     assert len(cage.data.vertices) == len(source.data.vertices)
     assert cage["pia_cleanup"] and cage["pia_cleanup_distance"] == pytest.approx(1e-6)
+    # The cleaned copy became the cage's mesh, or was removed once triangulated.
+    assert {m.name for m in bpy.data.meshes} == {source.data.name, cage.data.name, limit.data.name}
 
 
 def test_creases_are_carried_over():
