@@ -11,7 +11,7 @@ BLENDER_RUN = $(BLENDER) -b --factory-startup --python-exit-code 1
 # source package of OpenSubdiv (dpkg-source), the Windows one with mingw-w64
 # and tested under Wine; the machine's OpenSubdiv serves the development
 # build.
-DEBIAN_PACKAGES = blender libosd-dev cmake g++ make binutils python3-numpy python3-scipy python3-pytest \
+DEBIAN_PACKAGES = blender libosd-dev cmake g++ clang make binutils python3-numpy python3-scipy python3-pytest \
                   python3-matplotlib python3-venv libsuitesparse-dev debootstrap dpkg-dev xz-utils \
                   g++-mingw-w64-x86-64 wine64
 # Installed where the release has them: the closest-point benchmark compares
@@ -22,8 +22,8 @@ VERSION = $(shell $(PYTHON) tools/package.py version)
 PACKAGE = dist/subdiv_pia-$(VERSION)-linux-x64.zip
 WINDOWS_PACKAGE = dist/subdiv_pia-$(VERSION)-windows-x64.zip
 
-.PHONY: all deps build package test test-c test-asan test-python test-package test-blender blenders demo \
-        bench bench-scale bench-closest clean
+.PHONY: all deps build package test test-c test-asan test-tsan test-fuzz fuzz test-python test-package test-blender \
+        blenders demo bench bench-scale bench-closest clean
 
 all: build
 
@@ -52,7 +52,7 @@ build: deps
 package: deps
 	$(SUDO) $(PYTHON) tools/package.py all
 
-test: build test-c test-asan test-python test-package test-blender
+test: build test-c test-asan test-tsan test-fuzz test-python test-package test-blender
 
 test-c: build
 	ctest --test-dir build/cmake --output-on-failure
@@ -62,6 +62,34 @@ test-asan: deps
 	cmake --build build/asan --parallel 2
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
 	  ctest --test-dir build/asan --output-on-failure
+
+# ThreadSanitizer: interpolations, fits and closest-point queries from
+# several threads at once; only the library and that test are built.
+test-tsan: deps
+	cmake -S . -B build/tsan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSPIA_TSAN=ON
+	cmake --build build/tsan --target test_concurrent --parallel 2
+	TSAN_OPTIONS=halt_on_error=1:second_deadlock_stack=1 build/tsan/tests/c/test_concurrent
+
+# The libFuzzer target (tests/fuzz/fuzz_spia.c, clang, AddressSanitizer,
+# UndefinedBehaviorSanitizer, leak checking) for FUZZ_SECONDS, from the seed
+# corpus (tests/data, written by test_fuzz_replay --seeds), the regression
+# inputs and what earlier runs added to build/fuzz/corpus.  A crash stops it
+# and leaves the input in build/fuzz/crashes/; copied to
+# tests/fuzz/regressions/ it is replayed by every `make test-c` from then on.
+FUZZ_SECONDS ?= 600
+FUZZ_TARGET = build/fuzz/tests/fuzz/spia_fuzz
+fuzz: build
+	cmake -S . -B build/fuzz -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++ \
+	  -DSPIA_FUZZ=ON -DSPIA_TESTS=OFF
+	cmake --build build/fuzz --target spia_fuzz --parallel 2
+	mkdir -p build/fuzz/seeds build/fuzz/corpus build/fuzz/crashes
+	build/cmake/tests/c/test_fuzz_replay --seeds build/fuzz/seeds
+	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+	  $(FUZZ_TARGET) -max_total_time=$(FUZZ_SECONDS) -timeout=60 -rss_limit_mb=2048 -max_len=20000 \
+	  -print_final_stats=1 -artifact_prefix=build/fuzz/crashes/ build/fuzz/corpus build/fuzz/seeds tests/fuzz/regressions
+
+test-fuzz:
+	$(MAKE) fuzz FUZZ_SECONDS=60
 
 test-python: build
 	SUBDIV_PIA_ADDON_DIR=build/addon $(PYTHON) -m pytest -q tests/python

@@ -13,6 +13,7 @@ Script use (background or foreground)::
     cage, report = subdiv_pia.interpolate(closed_obj, scheme='DOO_SABIN', shape_parameter=0.8,
                                           shape_attribute="pia_shape")  # per-face values win
     fitted, report = subdiv_pia.interpolate(cage_obj, target="Scan", fit='SURFACE')  # fit to a scan
+    cage, report = subdiv_pia.interpolate(scan_obj, cleanup=True)  # a cleaned copy (merged, reoriented)
 
 The numeric core (``native``) imports no ``bpy``; everything else is loaded
 only inside Blender so that ``subdiv_pia.native`` stays importable outside it.

@@ -27,11 +27,14 @@ any transforms. The new object carries the distances as a point attribute
 (``pia_distance``) and a heat-map colour attribute (``pia_distance_color``).
 """
 
+import os
+import sys
+
 import bmesh
 import numpy as np
 import bpy
 
-from . import native
+from . import cleanup, native
 
 # Names follow the Subdivision Surface modifier where one exists.
 DEFAULT_SETTINGS = {
@@ -58,6 +61,9 @@ DEFAULT_SETTINGS = {
     # Catmull-Clark: the OpenSubdiv version whose rules the modifier follows,
     # e.g. "3.7.0" or (3, 7, 0); empty: this Blender's (bpy.app.opensubdiv).
     "opensubdiv_version": "",
+    # Interpolate a cleaned copy of the mesh (cleanup.clean); distance relative to the diagonal.
+    "cleanup": False,
+    "cleanup_distance": cleanup.DEFAULT_DISTANCE,
 }
 
 FIT_MODES = tuple(native.FIT_MODES)
@@ -85,7 +91,9 @@ LIMIT_SUFFIX = "_limit"
 LIMIT_MARK = "pia_limit_surface"   # on the child that holds the limit surface
 STORED_SETTINGS = ("scheme", "boundary_rule", "boundary_smooth", "use_creases", "triangulate", "staged",
                    "levels", "render_levels", "quality", "method", "tolerance", "max_iterations",
-                   "shape_parameter", "shape_attribute")
+                   "shape_parameter", "shape_attribute", "cleanup", "cleanup_distance")
+# What the cleanup did, stored on the cage as pia_cleanup_<name> (cleanup.STAT_NAMES).
+CLEANUP_PREFIX = "pia_cleanup_"
 
 # Settings that a source Subdivision Surface modifier provides.
 MODIFIER_SETTINGS = ("levels", "render_levels", "quality", "boundary_smooth", "use_creases")
@@ -163,6 +171,14 @@ def check_settings(settings):
     s["max_iterations"] = int(s["max_iterations"])
     s["tolerance"] = float(s["tolerance"])
     s["use_creases"] = bool(s["use_creases"])
+    s["cleanup"] = bool(s["cleanup"])
+    try:
+        s["cleanup_distance"] = float(s["cleanup_distance"])
+    except (TypeError, ValueError):
+        s["cleanup_distance"] = float("nan")
+    if not (s["cleanup_distance"] >= 0.0 and np.isfinite(s["cleanup_distance"])):
+        raise ValueError("cleanup_distance must be zero or a positive number (a fraction of the "
+                         "bounding-box diagonal), not %r" % (settings.get("cleanup_distance"),))
     if not 0 <= s["levels"] <= 11 or not 0 <= s["render_levels"] <= 11:
         raise ValueError("levels and render_levels must be in 0..11")
     if s["scheme"] in LIMIT_SCHEMES and s["levels"] > LOOP_MAX_LEVELS:
@@ -460,6 +476,67 @@ def make_scan(target, cage_obj, context=None):
     return native.Scan(native.Mesh(positions, face_sizes, face_vertices))
 
 
+def machine_memory():
+    """The machine's physical memory in bytes, or None where it cannot be told."""
+    try:
+        if sys.platform == "win32":
+            import ctypes
+
+            class _Status(ctypes.Structure):
+                _fields_ = [("length", ctypes.c_uint32), ("load", ctypes.c_uint32),
+                            ("total_phys", ctypes.c_uint64), ("avail_phys", ctypes.c_uint64),
+                            ("total_page", ctypes.c_uint64), ("avail_page", ctypes.c_uint64),
+                            ("total_virtual", ctypes.c_uint64), ("avail_virtual", ctypes.c_uint64),
+                            ("avail_extended", ctypes.c_uint64)]
+            status = _Status()
+            status.length = ctypes.sizeof(_Status)
+            if ctypes.windll.kernel32.GlobalMemoryStatusEx(ctypes.byref(status)):
+                return int(status.total_phys)
+            return None
+        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+# Bytes per stored weight (a 4-byte column and an 8-byte weight), and how
+# much more than the finished table building it takes at its peak.
+_BYTES_PER_WEIGHT = 12
+_BUILD_FACTOR = 4
+
+
+def stencil_memory_estimate(face_sizes, vertex_count, settings, scan=None):
+    """Bytes the library needs, at its peak, for the stencil table of a mesh
+    with these face sizes: a vertex's limit stencil spans the faces around
+    it (1 + sum of (size - 2) over them: 9 for a regular quad vertex, 7 for
+    a regular triangle one); a surface fit's samples span 16 vertices each."""
+    sizes = np.asarray(face_sizes, dtype=np.int64)
+    weights = int(vertex_count) + int(np.sum(sizes * np.maximum(sizes - 2, 0)))
+    rows = int(vertex_count)
+    if scan is not None and settings.get("fit") == 'SURFACE':
+        k = int(settings.get("fit_samples", 4))
+        samples = int(np.sum(np.where(sizes == 4, 1, sizes))) * k * k
+        weights += 16 * samples
+        rows += samples
+    return _BUILD_FACTOR * (_BYTES_PER_WEIGHT * weights + 8 * rows)
+
+
+def check_memory(data, settings, scan=None):
+    """Refuses up front a mesh whose stencils would not fit in the machine's memory."""
+    total = machine_memory()
+    if not total:
+        return
+    n = len(data.polygons)
+    sizes = np.empty(n, np.int32)
+    data.polygons.foreach_get("loop_total", sizes)
+    need = stencil_memory_estimate(sizes, len(data.vertices), settings, scan)
+    if need > total:
+        raise native.PiaError(
+            'OUT_OF_MEMORY',
+            "its stencil table would need about %.1f GB (%d vertices, %d faces), more than this "
+            "machine's %.1f GB of memory; try a lower quality or a smaller mesh"
+            % (need / 2.0 ** 30, len(data.vertices), n, total / 2.0 ** 30))
+
+
 def compute_cage(obj, settings, progress=None, mesh=None, scan=None):
     """Run the solver on obj's mesh data (not its modifiers), or on mesh if given.
     With scan (a native.Scan), fit the cage to it instead (native.fit).
@@ -481,6 +558,7 @@ def compute_cage(obj, settings, progress=None, mesh=None, scan=None):
                    tolerance=settings["tolerance"], max_iterations=settings["max_iterations"],
                    staged=settings["staged"] and scheme == 'LOOP', progress=progress,
                    opensubdiv_version=opensubdiv_version_of(settings), **shapes)
+    check_memory(data, settings, scan)
     try:
         if scan is not None:
             return native.fit(native_mesh(data), scan, mode=settings["fit"],
@@ -496,6 +574,163 @@ def compute_cage(obj, settings, progress=None, mesh=None, scan=None):
             raise type(error)(error.code, "%s, or turn on Triangulate to use a triangulated copy"
                               % error.message, error.index) from None
         raise
+
+
+def _new_mesh(name, points, face_sizes, face_vertices):
+    """A new mesh with these vertices and faces (edges calculated)."""
+    points = np.ascontiguousarray(points, np.float32).reshape(-1, 3)
+    faces = np.ascontiguousarray(face_vertices, np.int32).ravel()
+    face_sizes = np.ascontiguousarray(face_sizes, np.int32).ravel()
+    mesh = bpy.data.meshes.new(name)
+    mesh.vertices.add(len(points))
+    mesh.vertices.foreach_set("co", points.ravel())
+    count = len(face_sizes)
+    mesh.loops.add(len(faces))
+    mesh.loops.foreach_set("vertex_index", faces)
+    mesh.polygons.add(count)
+    starts = np.zeros(count, np.int32)
+    if count > 1:
+        np.cumsum(face_sizes[:-1], out=starts[1:])
+    mesh.polygons.foreach_set("loop_start", starts)
+    if not _LOOP_TOTAL_READ_ONLY:  # 4.0+: derived from loop_start
+        mesh.polygons.foreach_set("loop_total", face_sizes)
+    mesh.update(calc_edges=True)
+    return mesh
+
+
+def write_creases(mesh, edge_creases=None, vertex_creases=None):
+    """Set mesh's edge creases (one per mesh.edges) and vertex creases, where given."""
+    modern = bpy.app.version >= (4, 0, 0)
+    if edge_creases is not None:
+        values = np.ascontiguousarray(edge_creases, np.float32)
+        if modern:
+            attr = mesh.attributes.get("crease_edge") or mesh.attributes.new("crease_edge", 'FLOAT', 'EDGE')
+            attr.data.foreach_set("value", values)
+        elif "crease" in bpy.types.MeshEdge.bl_rna.properties:  # 3.4 to 3.6
+            mesh.edges.foreach_set("crease", values)
+        else:
+            mesh.edge_creases_ensure()
+            mesh.edge_creases.data.foreach_set("value", values)
+    if vertex_creases is not None:
+        values = np.ascontiguousarray(vertex_creases, np.float32)
+        if modern:
+            attr = mesh.attributes.get("crease_vert") or mesh.attributes.new("crease_vert", 'FLOAT', 'POINT')
+            attr.data.foreach_set("value", values)
+        else:
+            bm = bmesh.new()
+            try:
+                bm.from_mesh(mesh)
+                layer = bm.verts.layers.crease.verify()
+                for vert, value in zip(bm.verts, values.tolist()):
+                    vert[layer] = value
+                bm.to_mesh(mesh)
+            finally:
+                bm.free()
+    mesh.update()
+
+
+_FACE_TYPES = {'FLOAT': np.float32, 'INT': np.int32, 'BOOLEAN': bool}
+
+
+def _copy_face_data(source, mesh, face_map):
+    """Per-face data of source onto mesh's faces (face i of mesh is face_map[i] of
+    source): materials, material indices, smooth shading and the float, integer
+    and boolean face attributes (the Doo-Sabin shape attribute among them)."""
+    for material in source.materials:
+        mesh.materials.append(material)
+    if not len(face_map):
+        return
+    rna = bpy.types.MeshPolygon.bl_rna.properties
+    for prop, dtype in (("material_index", np.int32), ("use_smooth", bool)):
+        if prop in rna and not rna[prop].is_readonly:
+            values = np.empty(len(source.polygons), dtype)
+            source.polygons.foreach_get(prop, values)
+            mesh.polygons.foreach_set(prop, np.ascontiguousarray(values[face_map]))
+    for attr in list(getattr(source, "attributes", ())):
+        dtype = _FACE_TYPES.get(attr.data_type)
+        if (attr.domain != 'FACE' or dtype is None or attr.name.startswith(".")
+                or getattr(attr, "is_internal", False) or attr.name in mesh.attributes
+                or len(attr.data) != len(source.polygons)):
+            continue
+        values = np.empty(len(attr.data), dtype)
+        attr.data.foreach_get("value", values)
+        new = mesh.attributes.new(attr.name, attr.data_type, 'FACE')
+        new.data.foreach_set("value", np.ascontiguousarray(values[face_map]))
+
+
+def cleaned_copy(mesh, distance=cleanup.DEFAULT_DISTANCE, name=None):
+    """(new mesh, stats): a cleaned copy of mesh (cleanup.clean on its arrays;
+    mesh itself is not changed). Kept: vertex positions (of the first vertex
+    of each merged group), edge creases (by vertex pair) and vertex creases,
+    materials, material indices, smooth shading and float, integer and boolean
+    face attributes. Dropped: UV maps, colours and other corner and vertex
+    attributes, vertex groups and shape keys. ValueError if no face is left."""
+    arrays = mesh_arrays(mesh)
+    result = cleanup.clean(arrays["positions"], arrays["face_sizes"], arrays["face_vertices"],
+                           edges=arrays["edges"], edge_creases=arrays["edge_creases"],
+                           vertex_creases=arrays["vertex_creases"], distance=distance)
+    if not len(result["face_sizes"]):
+        raise ValueError("Mesh '%s' has no faces left after cleanup (%s)"
+                         % (mesh.name, cleanup.format_stats(result["stats"])))
+    copy = _new_mesh(name or mesh.name + "_clean", result["positions"], result["face_sizes"],
+                     result["face_vertices"])
+    try:
+        _copy_face_data(mesh, copy, result["face_map"])
+        edge_creases = None
+        if result["edge_creases"] is not None:
+            m = len(result["positions"])
+            keys = result["edges"][:, 0].astype(np.int64) * m + result["edges"][:, 1]
+            ev = np.empty(len(copy.edges) * 2, np.int32)
+            copy.edges.foreach_get("vertices", ev)
+            ev = ev.reshape(-1, 2).astype(np.int64)
+            mine = np.minimum(ev[:, 0], ev[:, 1]) * m + np.maximum(ev[:, 0], ev[:, 1])
+            where = np.clip(np.searchsorted(keys, mine), 0, len(keys) - 1)
+            edge_creases = np.where(keys[where] == mine, result["edge_creases"][where], 0.0)
+        write_creases(copy, edge_creases, result["vertex_creases"])
+    except BaseException:
+        bpy.data.meshes.remove(copy)
+        raise
+    return copy, result["stats"]
+
+
+def cleanup_hint(error, mesh, settings):
+    """The library's refusal of mesh with a hint that the cleanup setting would
+    fix it (and what it would do), or None when cleanup is on or would not help."""
+    if settings.get("cleanup") or error.code not in ('DEGENERATE_FACE', 'TOPOLOGY'):
+        return None
+    if error.code == 'TOPOLOGY' and "triangles" in error.message:
+        return None
+    try:
+        arrays = mesh_arrays(mesh)
+        result = cleanup.clean(arrays["positions"], arrays["face_sizes"], arrays["face_vertices"],
+                               edges=arrays["edges"],
+                               distance=settings.get("cleanup_distance", cleanup.DEFAULT_DISTANCE))
+    except ValueError:
+        return None
+    if not cleanup.changed(result["stats"]):
+        return None
+    would = cleanup.format_stats(result["stats"], future=True)
+    return type(error)(error.code, "%s; the Cleanup setting (cleanup=True, --cleanup) would %s on a "
+                       "copy of the mesh" % (error.message, would), error.index)
+
+
+def store_cleanup(obj, stats):
+    """What the cleanup did, as custom properties of the cage."""
+    for name in cleanup.STAT_NAMES:
+        obj[CLEANUP_PREFIX + name] = int(stats.get(name, 0))
+
+
+def cleanup_stats(obj):
+    """What the cleanup did for the cage obj (a dict), or None if it had no cleanup."""
+    if obj is None or not obj.get("pia_cleanup"):
+        return None
+    return {name: int(obj.get(CLEANUP_PREFIX + name, 0)) for name in cleanup.STAT_NAMES}
+
+
+def format_cleanup(obj):
+    """'cleanup: merged 3 vertices, ...' for a cage made with cleanup, else ''."""
+    stats = cleanup_stats(obj)
+    return "" if stats is None else "cleanup: " + cleanup.format_stats(stats)
 
 
 def _link_like(source, new_obj, context):
@@ -784,6 +1019,13 @@ def interpolate(obj, *, context=None, name=None, progress=None, **settings):
     Settings not given are taken from obj's
     Subdivision Surface modifier if it has one, else the defaults.
 
+    cleanup=True interpolates a cleaned copy of obj's mesh (cleaned_copy,
+    cleanup.clean): vertices closer than cleanup_distance x bounding-box
+    diagonal merged, repeated corners dissolved, degenerate, zero-area and
+    loose geometry removed, faces turned to one orientation per part. The
+    new object has the cleaned topology; what was cleaned is in its custom
+    properties pia_cleanup_<count> (format_cleanup says it in words).
+
     Loop: the cage has no modifier; its child ``<cage>_limit`` (find it
     with find_limit_object) holds the Loop limit surface refined `levels`
     times, whose first vertices are the limit points of the cage vertices.
@@ -823,17 +1065,34 @@ def interpolate(obj, *, context=None, name=None, progress=None, **settings):
     target = find_target(obj, s)
     scan = make_scan(target, obj, context) if target is not None else None
     mesh = None
-    if loop and s["triangulate"] and non_triangle_count(obj.data):
-        mesh = triangulated_copy(obj.data)
+    made = []  # meshes made here: removed again on failure
+    stats = None
     try:
-        cage, report = compute_cage(obj, s, progress=progress, mesh=mesh, scan=scan)
-        limit = (limit_arrays(mesh if mesh is not None else obj.data, s, cage)
-                 if separate_limit else None)
+        if s["cleanup"]:
+            mesh, stats = cleaned_copy(obj.data, s["cleanup_distance"])
+            made.append(mesh)
+        data = mesh if mesh is not None else obj.data
+        if loop and s["triangulate"] and non_triangle_count(data):
+            mesh = triangulated_copy(data)
+            made.append(mesh)
+            data = mesh
+        try:
+            cage, report = compute_cage(obj, s, progress=progress, mesh=mesh, scan=scan)
+            limit = limit_arrays(data, s, cage) if separate_limit else None
+        except native.PiaError as error:
+            hinted = cleanup_hint(error, data, s)
+            if hinted is not None:
+                raise hinted from None
+            raise
     except BaseException:
-        if mesh is not None:
-            bpy.data.meshes.remove(mesh)
+        for made_mesh in made:
+            bpy.data.meshes.remove(made_mesh)
         raise
+    for made_mesh in made[:-1]:  # the cleaned copy, once triangulated
+        bpy.data.meshes.remove(made_mesh)
     new_obj = build_object(obj, cage, report, s, context=context, name=name, mesh=mesh, limit=limit)
+    if stats is not None:
+        store_cleanup(new_obj, stats)
     return new_obj, report
 
 

@@ -129,6 +129,13 @@ def parse_args(argv):
                              "non-manifold vertices (default: this Blender's, %s)"
                         % (".".join(map(str, bpy.app.opensubdiv.version))
                            if getattr(bpy.app, "opensubdiv", None) else "unknown"))
+    parser.add_argument("--cleanup", action="store_true",
+                        help="interpolate a cleaned copy of the mesh: merge close vertices, dissolve "
+                             "repeated vertices in faces, remove zero-area faces and loose geometry, "
+                             "turn the faces to one orientation (the cage gets the cleaned topology)")
+    parser.add_argument("--cleanup-distance", type=float,
+                        help="--cleanup: merge vertices closer than this, relative to the "
+                             "bounding-box diagonal (default 1e-6)")
     parser.add_argument("--method", choices=pkg_methods())
     parser.add_argument("--tolerance", type=float,
                         help="max error relative to the bounding-box diagonal (default 1e-6)")
@@ -253,7 +260,8 @@ def main(argv):
     if args.render_levels is not None:
         settings["render_levels"] = args.render_levels
     for name in ("scheme", "boundary_rule", "quality", "boundary_smooth", "method", "tolerance",
-                 "max_iterations", "shape_parameter", "shape_attribute", "opensubdiv_version"):
+                 "max_iterations", "shape_parameter", "shape_attribute", "opensubdiv_version",
+                 "cleanup_distance"):
         value = getattr(args, name)
         if value is not None:
             settings[name] = value
@@ -263,6 +271,8 @@ def main(argv):
         settings["triangulate"] = True
     if args.staged:
         settings["staged"] = True
+    if args.cleanup:
+        settings["cleanup"] = True
     if args.target:
         if os.path.splitext(args.target)[1].lower() in (".obj", ".ply", ".stl"):
             target = import_mesh_file(os.path.abspath(args.target))
@@ -294,6 +304,9 @@ def main(argv):
     else:
         print("subdiv_pia: %s: %s" % (new_obj.name, package.api.format_report(report)))
         print("subdiv_pia: stencils %.3f s, solve %.3f s" % (report.stencil_seconds, report.solve_seconds))
+    cleaned = package.api.format_cleanup(new_obj)
+    if cleaned:
+        print("subdiv_pia: %s" % cleaned)
     limit = package.api.find_limit_object(new_obj)
     if limit is not None:
         print("subdiv_pia: limit surface %s: %d vertices, %d faces"

@@ -32,6 +32,24 @@ class _Progress:
             self.wm = None
 
 
+def draw_cleanup_settings(layout, settings):
+    """Cleanup and its merge distance (greyed out while cleanup is off)."""
+    layout.prop(settings, "cleanup")
+    row = layout.row()
+    row.enabled = settings.cleanup
+    row.prop(settings, "cleanup_distance")
+
+
+def result_line(new_obj, report, settings):
+    """The operator's report: the interpolation's or fit's line, and what the cleanup did."""
+    if isinstance(report, native.FitReport):
+        line = api.format_fit_report(report, settings["target"])
+    else:
+        line = api.format_report(report)
+    cleaned = api.format_cleanup(new_obj)
+    return "%s: %s%s" % (new_obj.name, line, "; " + cleaned if cleaned else "")
+
+
 def draw_settings(layout, settings, from_modifier=False):
     """The subdivision settings, shared by the redo panel and the Modifiers-tab panel.
 
@@ -123,6 +141,7 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
         layout.prop(self, "method")
         layout.prop(self, "tolerance")
         layout.prop(self, "max_iterations")
+        draw_cleanup_settings(layout, self)
         layout.separator()
         layout.prop_search(self, "target", context.blend_data, "objects")
         draw_fit_settings(layout, self, bool(self.target))
@@ -150,12 +169,8 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
             return {'CANCELLED'}
         finally:
             progress.end()
-        if isinstance(report, native.FitReport):
-            line = api.format_fit_report(report, settings["target"])
-        else:
-            line = api.format_report(report)
         self.report({'INFO'} if api.report_converged(report) else {'WARNING'},
-                    "%s: %s" % (new_obj.name, line))
+                    result_line(new_obj, report, settings))
         return {'FINISHED'}
 
 

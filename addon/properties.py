@@ -89,6 +89,18 @@ def settings_annotations():
                                           description="Name of a float Face attribute: where the "
                                                       "mesh has it, its per-face values win over "
                                                       "Shape Parameter (Doo-Sabin)"),
+        "cleanup": BoolProperty(name="Cleanup", default=d["cleanup"],
+                                description="Interpolate a cleaned copy of the mesh (the mesh itself "
+                                            "is not changed): merge vertices closer than Merge "
+                                            "Distance, dissolve repeated vertices in faces, remove "
+                                            "zero-area faces and loose geometry, and turn the faces "
+                                            "to one orientation. The cage gets the cleaned topology "
+                                            "(UV maps, vertex groups and shape keys are not kept)"),
+        "cleanup_distance": FloatProperty(name="Merge Distance", default=d["cleanup_distance"],
+                                          min=0.0, max=0.1, precision=8, step=0.0001,
+                                          description="Cleanup: vertices closer than this, relative "
+                                                      "to the bounding-box diagonal, are merged "
+                                                      "(faces thinner than it are removed)"),
         "method": EnumProperty(name="Method", items=METHOD_ITEMS, default=d["method"],
                                description="Iterative solver"),
         "tolerance": FloatProperty(name="Tolerance", default=d["tolerance"], min=1e-12, max=1.0,

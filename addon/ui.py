@@ -7,7 +7,7 @@ import bpy
 
 from . import api, native
 from .operators import (OBJECT_OT_subdiv_pia_interpolate, OBJECT_OT_subdiv_pia_refresh_limit,
-                        draw_fit_settings, draw_settings, menu_func)
+                        draw_cleanup_settings, draw_fit_settings, draw_settings, menu_func)
 from .properties import SCENE_SETTING_NAMES
 
 RESULT_KEYS = ("pia_status", "pia_method", "pia_iterations", "pia_max_error", "pia_mean_error")
@@ -54,6 +54,7 @@ class DATA_PT_subdiv_pia(bpy.types.Panel):
         layout.prop(settings, "method")
         layout.prop(settings, "tolerance")
         layout.prop(settings, "max_iterations")
+        draw_cleanup_settings(layout, settings)
 
         layout.separator()
         layout.prop(settings, "target_object")
@@ -92,6 +93,13 @@ class DATA_PT_subdiv_pia(bpy.types.Panel):
             col.label(text="Iterations: %d" % int(obj.get("pia_iterations", 0)))
             col.label(text="Max error: %.3g of bbox diagonal" % float(obj.get("pia_max_error", 0.0)))
             col.label(text="Mean error: %.3g of bbox diagonal" % float(obj.get("pia_mean_error", 0.0)))
+        cleaned = api.format_cleanup(obj)
+        if cleaned:
+            box = layout.box()
+            box.label(text="Cleanup", icon='INFO')
+            col = box.column(align=True)
+            for line in textwrap.wrap(cleaned[len("cleanup: "):], 60):
+                col.label(text=line)
 
 
 classes = (DATA_PT_subdiv_pia,)

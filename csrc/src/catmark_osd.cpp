@@ -84,6 +84,17 @@ bool is_face_edge(const spia_mesh *m, const spia_adjacency *adj, int32_t a, int3
 }
 
 // A Catmull-Clark refiner for a face list, with Blender's sharpness values.
+// OpenSubdiv's TopologyRefinerFactory::Create holds the new refiner in a
+// plain pointer while it fills in the base level, so the refiner is lost
+// when an allocation there throws; this one owns it until it is complete.
+struct OwningRefinerFactory : Far::TopologyRefinerFactory<Far::TopologyDescriptor> {
+    static Far::TopologyRefiner *Create(const Far::TopologyDescriptor &mesh, Options options) {
+        std::unique_ptr<Far::TopologyRefiner> refiner(new Far::TopologyRefiner(options.schemeType, options.schemeOptions));
+        if (!populateBaseLevel(*refiner, mesh, options)) return nullptr;
+        return refiner.release();
+    }
+};
+
 Far::TopologyRefiner *create_refiner(int32_t vertex_count, int32_t face_count, const int32_t *face_sizes,
                                      const int32_t *face_vertices, const std::vector<int32_t> &crease_pairs,
                                      const std::vector<float> &crease_weights,
@@ -101,8 +112,7 @@ Far::TopologyRefiner *create_refiner(int32_t vertex_count, int32_t face_count, c
     desc.numCorners = (int)corner_weights.size();
     desc.cornerVertexIndices = corner_indices.empty() ? nullptr : corner_indices.data();
     desc.cornerWeights = corner_weights.empty() ? nullptr : corner_weights.data();
-    typedef Far::TopologyRefinerFactory<Far::TopologyDescriptor> RefinerFactory;
-    return RefinerFactory::Create(desc, RefinerFactory::Options(scheme, sdc));
+    return OwningRefinerFactory::Create(desc, OwningRefinerFactory::Options(scheme, sdc));
 }
 
 // OpenSubdiv 3.6.0 leaves a non-manifold vertex smooth when it has exactly

@@ -68,6 +68,24 @@ def test_nan_coordinates():
     assert [m.name for m in source.modifiers] == []
 
 
+def test_stencils_beyond_memory(monkeypatch):
+    # The estimate is set against a machine of 1 KB: refused up front, the
+    # estimate in the message, nothing created, the source untouched.
+    from subdiv_pia import api
+    source = shapes.cube()
+    before = snapshot(source)
+    sizes = [len(p.vertices) for p in source.data.polygons]
+    need = api.stencil_memory_estimate(sizes, len(source.data.vertices), {})
+    assert need > 1 << 10
+    monkeypatch.setattr(api, "machine_memory", lambda: 1 << 10)
+    expect_error(r"OUT_OF_MEMORY|would need about [0-9.]+ GB .*more than this machine's")
+    assert_unchanged(source, before)
+    # With the machine's own memory the same cube goes through.
+    monkeypatch.undo()
+    assert api.machine_memory() is None or api.machine_memory() > need
+    assert run_operator() == {'FINISHED'}
+
+
 def test_degenerate_face():
     # from_pydata without validate() keeps a face that uses vertex 1 twice.
     source = object_from_pydata("Degenerate", [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (2, 0, 0)],
