@@ -746,6 +746,7 @@ def build_object(source, cage, report, settings, context=None, name=None, mesh=N
             value = settings[key]
             new_obj["pia_" + key] = value if isinstance(value, (bool, int, float, str)) else str(value)
     new_obj["pia_requested_method"] = str(settings["method"])
+    new_obj["pia_source"] = source.name  # what a Live cage follows (live.py)
     if settings["scheme"] == 'CATMULL_CLARK':
         # Which OpenSubdiv's rules the cage was made for (Blender 5.1 and
         # later differ from earlier ones at some non-manifold vertices).
@@ -766,7 +767,7 @@ def build_object(source, cage, report, settings, context=None, name=None, mesh=N
     return new_obj
 
 
-def interpolate(obj, *, context=None, name=None, progress=None, **settings):
+def interpolate(obj, *, context=None, name=None, progress=None, live=False, **settings):
     """Make an interpolating cage object for the mesh object obj.
 
     Settings (keywords, defaults in DEFAULT_SETTINGS; names as the modifier's):
@@ -805,6 +806,9 @@ def interpolate(obj, *, context=None, name=None, progress=None, **settings):
     progress(iteration, relative_error) -> bool: return True to cancel
     (for a Surface fit: progress(round, mean relative distance)).
 
+    live=True turns the new cage's Live switch on (live.set_live): every
+    later change of obj's vertex positions solves the cage again, in place.
+
     Returns (new_object, report); report.converged is False when the tolerance
     was not reached (the object is made anyway). Raises ValueError or
     native.PiaError on bad input, RuntimeError if the library is missing;
@@ -834,6 +838,9 @@ def interpolate(obj, *, context=None, name=None, progress=None, **settings):
             bpy.data.meshes.remove(mesh)
         raise
     new_obj = build_object(obj, cage, report, s, context=context, name=name, mesh=mesh, limit=limit)
+    if live:
+        from . import live as live_module
+        live_module.set_live(new_obj, True, source=obj)
     return new_obj, report
 
 
