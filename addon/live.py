@@ -315,8 +315,8 @@ def sync(cage, force=False):
                 rebuild = True
             elif faces is None:  # first solve: the cage may already have these faces
                 rebuild = not _same_faces(cage.data, arrays, settings)
-            else:
-                rebuild = new_faces != faces
+            else:  # creases and shape values live on the cage's mesh too: a new copy
+                rebuild = True
             faces = new_faces
             new_stencils = True
         else:

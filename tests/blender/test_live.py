@@ -113,6 +113,21 @@ def test_topology_edit_rebuilds_the_cage():
     assert follows(cage, source) <= MATCH
 
 
+def test_crease_edit_rebuilds_with_the_new_creases():
+    source = shapes.open_grid()
+    cage = make_live(source)
+    before = names(cage)
+    values = np.zeros(len(source.data.edges), np.float32)
+    values[:4] = 1.0
+    shapes.set_edge_creases(source.data, values)
+    source.data.update()
+    update()
+    edge, _vertex = api.read_creases(cage.data)
+    assert edge is not None and np.array_equal(edge, values)
+    assert follows(cage, source) <= MATCH
+    assert names(cage) == before
+
+
 def test_loop_cage_refreshes_its_limit_surface():
     source = shapes.ico_sphere()
     cage = make_live(source, scheme='LOOP')
