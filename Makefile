@@ -23,7 +23,7 @@ PACKAGE = dist/subdiv_pia-$(VERSION)-linux-x64.zip
 WINDOWS_PACKAGE = dist/subdiv_pia-$(VERSION)-windows-x64.zip
 
 .PHONY: all deps build package test test-c test-asan test-tsan test-fuzz fuzz test-python test-package test-blender \
-        blenders demo bench bench-scale bench-closest clean
+        blenders demo bench bench-scale bench-closest bench-live clean
 
 all: build
 
@@ -126,6 +126,10 @@ bench-scale: build
 	cmake -S . -B build/bench -DCMAKE_BUILD_TYPE=Release -DSPIA_BENCH=ON -DSPIA_TESTS=OFF
 	cmake --build build/bench --target spia_bench_osd --parallel 2
 	$(PYTHON) bench/bench_scale.py --blender $(BLENDER)
+
+# Live cages: the update time per edit at 1k, 10k and 50k vertices.
+bench-live: build
+	$(BLENDER_RUN) --python bench/bench_live.py
 
 # Closest points: the library's hierarchy against Embree's point query (the
 # system's Embree 4 or 3, linked into the benchmark only; without one the

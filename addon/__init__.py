@@ -10,6 +10,8 @@ Script use (background or foreground)::
     cage, report = subdiv_pia.interpolate(tri_obj, scheme='LOOP', boundary_rule='HOPPE')
     limit = subdiv_pia.find_limit_object(cage)   # child "<cage>_limit": the Loop limit surface
     subdiv_pia.refresh_limit(cage)               # after editing the cage
+    cage, report = subdiv_pia.interpolate(obj, live=True)  # follows every edit of obj
+    subdiv_pia.set_live(cage, False)             # Live off (subdiv_pia.is_live(cage))
     cage, report = subdiv_pia.interpolate(closed_obj, scheme='DOO_SABIN', shape_parameter=0.8,
                                           shape_attribute="pia_shape")  # per-face values win
     fitted, report = subdiv_pia.interpolate(cage_obj, target="Scan", fit='SURFACE')  # fit to a scan
@@ -35,11 +37,12 @@ except ImportError:  # outside Blender: only `native` is usable
     bpy = None
 
 if bpy is not None:
-    from . import properties, operators, ui
+    from . import properties, operators, ui, live
     from .api import (interpolate, refresh_limit, find_limit_object,  # noqa: F401
                       settings_from_modifier, DEFAULT_SETTINGS)
+    from .live import set_live, is_live  # noqa: F401
 
-    _modules = (properties, operators, ui)
+    _modules = (properties, operators, ui, live)
 
     def register():
         for module in _modules:

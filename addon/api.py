@@ -92,6 +92,10 @@ LIMIT_MARK = "pia_limit_surface"   # on the child that holds the limit surface
 STORED_SETTINGS = ("scheme", "boundary_rule", "boundary_smooth", "use_creases", "triangulate", "staged",
                    "levels", "render_levels", "quality", "method", "tolerance", "max_iterations",
                    "shape_parameter", "shape_attribute", "cleanup", "cleanup_distance")
+# A live cage follows its source's vertices one to one, which a cleaned copy's are not.
+LIVE_CLEANUP_MESSAGE = ("A cage made with cleanup cannot be live: its vertices are those of a cleaned copy "
+                        "of '%s', not the source's own; clean the source mesh itself, then make a live cage "
+                        "without cleanup")
 # What the cleanup did, stored on the cage as pia_cleanup_<name> (cleanup.STAT_NAMES).
 CLEANUP_PREFIX = "pia_cleanup_"
 
@@ -981,6 +985,7 @@ def build_object(source, cage, report, settings, context=None, name=None, mesh=N
             value = settings[key]
             new_obj["pia_" + key] = value if isinstance(value, (bool, int, float, str)) else str(value)
     new_obj["pia_requested_method"] = str(settings["method"])
+    new_obj["pia_source"] = source.name  # what a Live cage follows (live.py)
     if settings["scheme"] == 'CATMULL_CLARK':
         # Which OpenSubdiv's rules the cage was made for (Blender 5.1 and
         # later differ from earlier ones at some non-manifold vertices).
@@ -1001,7 +1006,7 @@ def build_object(source, cage, report, settings, context=None, name=None, mesh=N
     return new_obj
 
 
-def interpolate(obj, *, context=None, name=None, progress=None, **settings):
+def interpolate(obj, *, context=None, name=None, progress=None, live=False, **settings):
     """Make an interpolating cage object for the mesh object obj.
 
     Settings (keywords, defaults in DEFAULT_SETTINGS; names as the modifier's):
@@ -1047,6 +1052,9 @@ def interpolate(obj, *, context=None, name=None, progress=None, **settings):
     progress(iteration, relative_error) -> bool: return True to cancel
     (for a Surface fit: progress(round, mean relative distance)).
 
+    live=True turns the new cage's Live switch on (live.set_live): every
+    later change of obj's vertex positions solves the cage again, in place.
+
     Returns (new_object, report); report.converged is False when the tolerance
     was not reached (the object is made anyway). Raises ValueError or
     native.PiaError on bad input, RuntimeError if the library is missing;
@@ -1060,6 +1068,8 @@ def interpolate(obj, *, context=None, name=None, progress=None, **settings):
     merged = settings_from_modifier(obj)
     merged.update(settings)
     s = check_settings(merged)
+    if live and s["cleanup"]:
+        raise ValueError(LIVE_CLEANUP_MESSAGE % obj.name)
     loop = s["scheme"] == 'LOOP'
     separate_limit = s["scheme"] in LIMIT_SCHEMES
     target = find_target(obj, s)
@@ -1093,6 +1103,9 @@ def interpolate(obj, *, context=None, name=None, progress=None, **settings):
     new_obj = build_object(obj, cage, report, s, context=context, name=name, mesh=mesh, limit=limit)
     if stats is not None:
         store_cleanup(new_obj, stats)
+    if live:
+        from . import live as live_module
+        live_module.set_live(new_obj, True, source=obj)
     return new_obj, report
 
 

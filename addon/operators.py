@@ -3,8 +3,13 @@
 
 import bpy
 
-from . import api, native
+from bpy.props import BoolProperty
+
+from . import api, live, native
 from .properties import SETTING_NAMES, settings_annotations
+
+LIVE_DESCRIPTION = ("Live: while on, every change of the source mesh's vertex positions solves the "
+                    "cage again and moves its vertices in place (topology changes rebuild it)")
 
 
 def library_missing():
@@ -113,7 +118,8 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
     bl_idname = "object.subdiv_pia_interpolate"
     bl_label = "Make Interpolating Cage"
     bl_options = {'REGISTER', 'UNDO'}
-    __annotations__ = settings_annotations()
+    __annotations__ = dict(settings_annotations(),
+                           live=BoolProperty(name="Live", default=False, description=LIVE_DESCRIPTION))
 
     @classmethod
     def poll(cls, context):
@@ -145,6 +151,8 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
         layout.separator()
         layout.prop_search(self, "target", context.blend_data, "objects")
         draw_fit_settings(layout, self, bool(self.target))
+        layout.separator()
+        layout.prop(self, "live")
 
     def execute(self, context):
         if not native.available():  # say what is needed; touch nothing
@@ -160,7 +168,8 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
             api.check_source(obj)
             if obj.mode == 'EDIT':  # the new object becomes active: leave edit mode first
                 bpy.ops.object.mode_set(mode='OBJECT')
-            new_obj, report = api.interpolate(obj, context=context, progress=progress, **settings)
+            new_obj, report = api.interpolate(obj, context=context, progress=progress, live=self.live,
+                                              **settings)
         except native.PiaError as error:  # the library's words, with the object named
             self.report({'ERROR'}, "'%s': %s" % (context.active_object.name, error))
             return {'CANCELLED'}
@@ -206,11 +215,45 @@ class OBJECT_OT_subdiv_pia_refresh_limit(bpy.types.Operator):
         return {'FINISHED'}
 
 
+class OBJECT_OT_subdiv_pia_live(bpy.types.Operator):
+    """Turn Live on or off for the active cage: while on, the cage follows every change of its source mesh"""
+    bl_idname = "object.subdiv_pia_live"
+    bl_label = "Live"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    enable: BoolProperty(name="Live", default=True, description=LIVE_DESCRIPTION)
+
+    @classmethod
+    def poll(cls, context):
+        return True
+
+    def execute(self, context):
+        if not native.available():
+            self.report({'ERROR'}, library_missing())
+            return {'CANCELLED'}
+        cage = api.limit_cage_of(context.active_object) or context.active_object
+        try:
+            state = live.set_live(cage, self.enable)
+        except native.PiaError as error:
+            self.report({'ERROR'}, "'%s': %s" % (cage.name, error))
+            return {'CANCELLED'}
+        except (ValueError, RuntimeError) as error:
+            self.report({'ERROR'}, str(error))
+            return {'CANCELLED'}
+        message = cage.get(live.MESSAGE, "")
+        if state:
+            self.report({'WARNING'} if message else {'INFO'},
+                        "%s follows '%s'%s" % (cage.name, cage[live.SOURCE], ": " + message if message else ""))
+        else:
+            self.report({'INFO'}, "%s: Live off" % cage.name)
+        return {'FINISHED'}
+
+
 def menu_func(self, context):
     self.layout.operator(OBJECT_OT_subdiv_pia_interpolate.bl_idname, icon='MOD_SUBSURF')
 
 
-classes = (OBJECT_OT_subdiv_pia_interpolate, OBJECT_OT_subdiv_pia_refresh_limit)
+classes = (OBJECT_OT_subdiv_pia_interpolate, OBJECT_OT_subdiv_pia_refresh_limit, OBJECT_OT_subdiv_pia_live)
 _register, _unregister = bpy.utils.register_classes_factory(classes)
 
 

@@ -152,6 +152,9 @@ class SubdivPiaSettings(bpy.types.PropertyGroup):
             name="Target", type=bpy.types.Object, poll=_is_mesh,
             description="Mesh object to fit the cage to (a scan; its modifiers applied). "
                         "Empty: interpolate the cage's own vertices"),
+        live=BoolProperty(
+            name="Live", default=False,
+            description="Make the new cage live: it follows every later change of the source mesh"),
         use_modifier_settings=BoolProperty(
             name="From Modifier", default=True,
             description="Take levels, quality, boundary and creases from the active object's "

@@ -5,8 +5,8 @@ import textwrap
 
 import bpy
 
-from . import api, native
-from .operators import (OBJECT_OT_subdiv_pia_interpolate, OBJECT_OT_subdiv_pia_refresh_limit,
+from . import api, live, native
+from .operators import (OBJECT_OT_subdiv_pia_interpolate, OBJECT_OT_subdiv_pia_live, OBJECT_OT_subdiv_pia_refresh_limit,
                         draw_cleanup_settings, draw_fit_settings, draw_settings, menu_func)
 from .properties import SCENE_SETTING_NAMES
 
@@ -61,7 +61,9 @@ class DATA_PT_subdiv_pia(bpy.types.Panel):
         target = settings.target_object
         draw_fit_settings(layout, settings, target is not None)
 
+        layout.prop(settings, "live")
         op = layout.operator(OBJECT_OT_subdiv_pia_interpolate.bl_idname, icon='MOD_SUBSURF')
+        op.live = settings.live
         modifier_names = set(api.MODIFIER_SETTINGS) if from_modifier else set()
         for name in SCENE_SETTING_NAMES:
             if name not in modifier_names:
@@ -70,6 +72,10 @@ class DATA_PT_subdiv_pia(bpy.types.Panel):
 
         if api.limit_cage_of(obj) is not None:
             layout.operator(OBJECT_OT_subdiv_pia_refresh_limit.bl_idname, icon='FILE_REFRESH')
+
+        cage = api.limit_cage_of(obj) or obj
+        if "pia_scheme" in cage:
+            draw_live(layout, cage)
 
         if "pia_fit" in obj:
             box = layout.box()
@@ -100,6 +106,23 @@ class DATA_PT_subdiv_pia(bpy.types.Panel):
             col = box.column(align=True)
             for line in textwrap.wrap(cleaned[len("cleanup: "):], 60):
                 col.label(text=line)
+
+
+def draw_live(layout, cage):
+    """The cage's Live switch, what it follows, and why it stopped or did not follow."""
+    box = layout.box()
+    on = live.is_live(cage)
+    row = box.row()
+    op = row.operator(OBJECT_OT_subdiv_pia_live.bl_idname, text="Live: On" if on else "Live: Off",
+                      icon='LINKED' if on else 'UNLINKED', depress=on)
+    op.enable = not on
+    source = cage.get(live.SOURCE, "")
+    if source:
+        box.label(text="Follows '%s'" % source if on else "Source: '%s'" % source)
+    message = cage.get(live.MESSAGE, "")
+    if message:
+        for line in textwrap.wrap(message, 60) or [message]:
+            box.label(text=line, icon='ERROR')
 
 
 classes = (DATA_PT_subdiv_pia,)

@@ -30,7 +30,7 @@ ROOT = os.path.dirname(os.path.dirname(HERE))
 # imported only below, once the environment is in place.
 IN_EXECUTABLE = "bpy" in sys.modules
 PACKAGE_NAME = "subdiv_pia"
-SUBMODULES = ("native", "cleanup", "api", "properties", "operators", "ui", "cli")
+SUBMODULES = ("native", "cleanup", "api", "properties", "operators", "ui", "cli", "live")
 
 
 def _argv():

@@ -9,7 +9,7 @@ import sys
 import bpy
 
 import subdiv_pia
-from subdiv_pia import api, cleanup, cli, native, operators, properties, ui
+from subdiv_pia import api, cleanup, cli, live, native, operators, properties, ui
 
 FOLDER = os.path.dirname(os.path.abspath(subdiv_pia.__file__))
 
@@ -20,7 +20,7 @@ def _under(path, folder):
 
 
 def test_every_module_and_the_library_come_from_one_folder():
-    for module in (api, cleanup, cli, native, operators, properties, ui):
+    for module in (api, cleanup, cli, live, native, operators, properties, ui):
         assert os.path.dirname(os.path.abspath(module.__file__)) == FOLDER, module.__file__
     assert native.available(), native.load_error()
     assert native.library_path() == os.path.join(FOLDER, native.library_name())
