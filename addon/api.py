@@ -580,6 +580,9 @@ def compute_cage(obj, settings, progress=None, mesh=None, scan=None):
         raise
 
 
+_LOOP_TOTAL_READ_ONLY = bpy.types.MeshPolygon.bl_rna.properties["loop_total"].is_readonly
+
+
 def _new_mesh(name, points, face_sizes, face_vertices):
     """A new mesh with these vertices and faces (edges calculated)."""
     points = np.ascontiguousarray(points, np.float32).reshape(-1, 3)
@@ -788,32 +791,13 @@ def limit_arrays(mesh, settings, positions=None):
         raise
 
 
-_LOOP_TOTAL_READ_ONLY = bpy.types.MeshPolygon.bl_rna.properties["loop_total"].is_readonly
-
-
 def limit_mesh(name, points, face_sizes, face_vertices, materials=()):
     """A new smooth-shaded mesh from limit_arrays' output."""
-    points = np.ascontiguousarray(points, np.float32).reshape(-1, 3)
-    faces = np.ascontiguousarray(face_vertices, np.int32).ravel()
-    face_sizes = np.ascontiguousarray(face_sizes, np.int32).ravel()
-    mesh = bpy.data.meshes.new(name)
-    mesh.vertices.add(len(points))
-    mesh.vertices.foreach_set("co", points.ravel())
-    count = len(face_sizes)
-    mesh.loops.add(len(faces))
-    mesh.loops.foreach_set("vertex_index", faces)
-    mesh.polygons.add(count)
-    starts = np.zeros(count, np.int32)
-    if count > 1:
-        np.cumsum(face_sizes[:-1], out=starts[1:])
-    mesh.polygons.foreach_set("loop_start", starts)
-    if not _LOOP_TOTAL_READ_ONLY:  # 4.0+: derived from loop_start
-        mesh.polygons.foreach_set("loop_total", face_sizes)
-    mesh.update(calc_edges=True)
+    mesh = _new_mesh(name, points, face_sizes, face_vertices)
     if hasattr(mesh, "shade_smooth"):  # Blender 4.1+
         mesh.shade_smooth()
     else:
-        mesh.polygons.foreach_set("use_smooth", np.ones(count, bool))
+        mesh.polygons.foreach_set("use_smooth", np.ones(len(mesh.polygons), bool))
     for material in materials:
         mesh.materials.append(material)
     mesh.update()
