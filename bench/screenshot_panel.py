@@ -1,8 +1,10 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Screenshot of the add-on's panel in Blender's interface (for the README).
 
-    xvfb-run -a -s "-screen 0 1600x900x24" blender --factory-startup \
+    xvfb-run -a -s "-screen 0 1600x1500x24" blender --factory-startup \
         --python bench/screenshot_panel.py -- docs/panel.png
+    xvfb-run -a -s "-screen 0 1600x1500x24" blender --factory-startup \
+        --python bench/screenshot_panel.py -- --live          (docs/panel_live.png)
 
 Imports tests/data/mushroom.obj, gives it a Subdivision Surface modifier
 (levels 2, limit surface), runs the add-on's operator, and with the new
@@ -34,9 +36,19 @@ OUTLINER_HEIGHT = 110    # pixels
 CROP_VIEW_WIDTH = 600    # pixels of 3D viewport kept left of the Properties editor
 
 
+def script_args():
+    return sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
+
+
+# --live: the cage made with Live on (docs/panel_live.png), then a vertex of
+# the source moved, which the cage follows.
+LIVE = "--live" in script_args()
+
+
 def output_path():
-    argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
-    return os.path.abspath(argv[0] if argv else os.path.join(ROOT, "docs", "panel.png"))
+    argv = [a for a in script_args() if not a.startswith("--")]
+    default = "panel_live.png" if LIVE else "panel.png"
+    return os.path.abspath(argv[0] if argv else os.path.join(ROOT, "docs", default))
 
 
 def setup_scene():
@@ -53,11 +65,18 @@ def setup_scene():
     mod.levels = 2
     mod.render_levels = 2
     mod.use_limit_surface = True
-    result = bpy.ops.object.subdiv_pia_interpolate()
+    result = bpy.ops.object.subdiv_pia_interpolate(live=LIVE)
     if result != {'FINISHED'}:
         raise RuntimeError("operator returned %s" % result)
     new_obj = bpy.context.view_layer.objects.active
     assert new_obj is not source and "pia_status" in new_obj
+    if LIVE:
+        top = max(range(len(source.data.vertices)), key=lambda i: source.data.vertices[i].co.z)
+        before = new_obj.data.vertices[top].co.copy()
+        source.data.vertices[top].co.z += 0.15
+        source.data.update()
+        bpy.context.view_layer.update()
+        assert (new_obj.data.vertices[top].co - before).length > 0, "the live cage did not follow"
     source.hide_set(True)  # both occupy the same place; show the result
     new_obj.select_set(True)
     return new_obj
