@@ -329,10 +329,13 @@ def sync(cage, force=False):
             positions, report = api.compute_cage(source, settings, scan=scan)
             _write_positions(cage, positions)
         else:
-            if new_stencils:
+            if new_stencils or state.stencils is None:
                 state.stencils = _stencils(cage, settings)
+                initial = None
+            else:  # the same topology: start from the cage solved for the last positions
+                initial = read_positions(cage.data)
             positions, report = state.stencils.solve(
-                targets, method=settings["method"], tolerance=settings["tolerance"],
+                targets, initial=initial, method=settings["method"], tolerance=settings["tolerance"],
                 max_iterations=settings["max_iterations"],
                 staged=settings["staged"] and settings["scheme"] == 'LOOP')
             if not np.isfinite(positions).all():

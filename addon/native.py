@@ -91,7 +91,7 @@ class _Options(ctypes.Structure):
         ("max_iterations", ctypes.c_int32), ("progress", _PROGRESS), ("progress_user_data", ctypes.c_void_p),
         ("boundary_rule", ctypes.c_int), ("weight", ctypes.c_double), ("staged", ctypes.c_int32),
         ("shape_parameter", ctypes.c_double), ("face_shape_parameters", _f32p), ("threads", ctypes.c_int32),
-        ("opensubdiv_version", ctypes.c_int32),
+        ("opensubdiv_version", ctypes.c_int32), ("initial_cage", _f32p),
     ]
 
 
@@ -586,13 +586,21 @@ class Stencils:
         np.add.at(out, rows, self.weights[:, None] * cage[self.indices])
         return out
 
-    def solve(self, targets, **options):
-        """Solves L V = targets; returns (cage, Report).  See :func:`interpolate`."""
+    def solve(self, targets, initial=None, **options):
+        """Solves L V = targets; returns (cage, Report).  See :func:`interpolate`.
+
+        initial: the first iterate (row_count x 3), for example the cage
+        solved before the targets moved a little; None: the targets."""
         lib = self._lib
         targets = _as(targets, np.float32, (3,))
         if len(targets) != self.row_count:
             raise PiaError("INVALID_ARGUMENT", f"{len(targets)} targets for {self.row_count} stencils")
         opts, _keep = _options(**options)
+        if initial is not None:
+            initial = _as(initial, np.float32, (3,))
+            if initial.shape != targets.shape:
+                raise PiaError("INVALID_ARGUMENT", f"initial cage of {len(initial)} vertices for {self.row_count} stencils")
+            opts.initial_cage = _ptr(initial, ctypes.c_float)
         cage = np.empty_like(targets)
         rep, history, unreachable = _report_buffers(opts.max_iterations, len(targets))
         status = _Status()

@@ -258,6 +258,12 @@ typedef struct spia_options {
      * 5.0); above 30600: the later rule.  Loop and Doo-Sabin ignore it.
      * [0] */
     int32_t opensubdiv_version;
+    /* spia_solve and spia_interpolate: the first iterate, row_count * 3
+     * finite floats (for example the cage solved before the mesh was edited
+     * a little, which then needs fewer iterations to reach the same
+     * tolerance); NULL: the targets, as PIA starts.  It may alias the cage
+     * buffer.  spia_fit ignores it. [NULL] */
+    const float *initial_cage;
 } spia_options;
 
 /* The defaults, as a value (the same as an all-zero struct). */
@@ -333,7 +339,7 @@ typedef struct spia_report {
     double mean_error;         /* mean of the same distances                           */
     double max_error_relative; /* max_error / diagonal                                 */
     double mean_error_relative;
-    double initial_max_error_relative; /* the same before any iteration (cage = P) */
+    double initial_max_error_relative; /* the same before any iteration (the first iterate) */
     /* Vertices that cannot reach their targets (see SPIA_STAGNATED), and the
      * relative max error over all the others. */
     int32_t unreachable_count;

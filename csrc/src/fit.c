@@ -497,6 +497,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
     spia_fit_options fo = {0};
     spia_result r = spia__resolve_options(options, &opt, status);
     if (r != SPIA_OK) return r;
+    opt.initial_cage = NULL; /* each round's solve starts from its own targets */
     if ((r = resolve_fit(fit_options, &fo, status)) != SPIA_OK) return report->result = r;
     report->mode = fo.mode;
     if (fo.mode == SPIA_FIT_SURFACE && opt.scheme != SPIA_SCHEME_CATMULL_CLARK)

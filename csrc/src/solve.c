@@ -60,10 +60,11 @@ typedef struct solver_state {
     int32_t n;
     spia_method method;
     const float *P; /* targets (the caller's) */
+    const float *start; /* first iterate: options' initial_cage, else P */
     double *V; /* current cage         */
     double *R; /* residual P - L V     */
     double *diag;
-    double *initial;       /* |P_i - (L P)_i|, to tell stuck vertices from slow ones */
+    double *initial;       /* the first iterate's residual, to tell stuck vertices from slow ones */
     unsigned char *stuck;  /* rows that cannot be reached: left on their targets */
     unsigned char *frozen; /* rows of the other stage (staged solves)            */
     double norm2;          /* squared 2-norm of R over active rows, from residual() */
@@ -452,9 +453,10 @@ static double best_weight(const spia_stencils *L, double *work) {
  * push them along the null space of L, so they are put back on their
  * targets and left there, and the rest is solved without them.  GS-PIA
  * zeroes the residual of the last vertex it visits in such a group, which
- * then shows only by its drift: a cage vertex that has moved DRIFT_FACTOR
- * times farther than the largest initial distance of any vertex to its
- * limit point (a solvable cage moves by far less). */
+ * then shows only by its drift: a cage vertex that has moved from the
+ * first iterate DRIFT_FACTOR times farther than the largest initial
+ * distance of any vertex to its limit point (a solvable cage moves by far
+ * less). */
 static int32_t mark_stuck(solver_state *s, double threshold) {
     int32_t count = 0;
     double initial_max = threshold;
@@ -464,9 +466,10 @@ static int32_t mark_stuck(solver_state *s, double threshold) {
         if (!active(s, r)) continue;
         const double *q = s->R + 3 * (int64_t)r;
         double *v = s->V + 3 * (int64_t)r;
-        const float *p = s->P + 3 * (int64_t)r;
+        const float *p = s->P + 3 * (int64_t)r, *v0 = s->start + 3 * (int64_t)r;
         double d = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]);
-        double moved = sqrt((v[0] - p[0]) * (v[0] - p[0]) + (v[1] - p[1]) * (v[1] - p[1]) + (v[2] - p[2]) * (v[2] - p[2]));
+        double moved = sqrt((v[0] - v0[0]) * (v[0] - v0[0]) + (v[1] - v0[1]) * (v[1] - v0[1]) +
+                            (v[2] - v0[2]) * (v[2] - v0[2]));
         if ((d > threshold && d > 0.5 * s->initial[r]) || moved > DRIFT_FACTOR * initial_max) {
             s->stuck[r] = 1;
             for (int a = 0; a < 3; ++a) v[a] = p[a];
@@ -711,7 +714,16 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
         res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
         goto done;
     }
-    for (int64_t k = 0; k < 3 * (int64_t)n; ++k) s.V[k] = (double)targets[k];
+    if (opt.initial_cage) {
+        for (int64_t k = 0; k < 3 * (int64_t)n; ++k)
+            if (!isfinite(opt.initial_cage[k])) {
+                res = spia__fail(status, SPIA_ERROR_NONFINITE, k / 3, "initial cage vertex %lld is NaN or infinite",
+                                 (long long)(k / 3));
+                goto done;
+            }
+    }
+    s.start = opt.initial_cage ? opt.initial_cage : targets;
+    for (int64_t k = 0; k < 3 * (int64_t)n; ++k) s.V[k] = (double)s.start[k];
     if (s.method == SPIA_METHOD_CG) {
         const int cg = cg_scaling(&s);
         if (cg < 0) {

@@ -243,6 +243,17 @@ static void run_stencils(const spia_mesh *m, const spia_options *o, const float 
     if (rep.history_count < 0 || rep.history_count > 8) fuzz_fail("history count", "spia_solve");
     if (r < 0) check_untouched("spia_solve", cage, size);
     else check_finite("spia_solve", cage, 3 * (size_t)m->vertex_count);
+    /* From a first iterate: the cage just solved (the output buffer as its
+     * own start) or, after a failure, the targets themselves. */
+    spia_options warm = *o;
+    warm.initial_cage = r >= 0 ? cage : targets;
+    if (r < 0) fill(cage, size);
+    memset(&rep, 0, sizeof rep);
+    r = spia_solve(s, targets, &warm, cage, &rep, &st);
+    check_status("spia_solve (initial cage)", r, &st);
+    if (rep.result != r) fuzz_fail("report result differs", "spia_solve (initial cage)");
+    if (r >= 0) check_finite("spia_solve (initial cage)", cage, 3 * (size_t)m->vertex_count);
+    else if (warm.initial_cage == targets) check_untouched("spia_solve (initial cage)", cage, size);
     free(cage);
     spia_stencils_free(s);
 }
