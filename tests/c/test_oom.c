@@ -73,8 +73,17 @@ static struct rlimit original;
  * ballast fills it (in pieces below the mmap threshold) before a tight
  * limit is set, and is given back after. */
 static void *ballast = NULL;
+/* mallinfo2 is glibc 2.33 and later; the package's tests run on 2.31 too,
+ * where mallinfo's int fields are enough for this test's heap. */
+static size_t heap_free_bytes(void) {
+#if defined(__GLIBC__) && (__GLIBC__ > 2 || (__GLIBC__ == 2 && __GLIBC_MINOR__ >= 33))
+    return mallinfo2().fordblks;
+#else
+    return (size_t)(unsigned)mallinfo().fordblks;
+#endif
+}
 static void fill_heap(void) {
-    while (mallinfo2().fordblks > (512u << 10)) {
+    while (heap_free_bytes() > (512u << 10)) {
         void **piece = (void **)malloc(16u << 10);
         if (!piece) break;
         *piece = ballast;
