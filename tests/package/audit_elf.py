@@ -88,6 +88,25 @@ def required_versions(path):
     return result
 
 
+def export_problems(exported, header=None):
+    """What is wrong with a library's exported names: anything beside spia_*,
+    and (given the header) names it declares but the library lacks, or the
+    other way round."""
+    problems = []
+    foreign = [n for n in exported if not n.startswith("spia_")]
+    if foreign:
+        problems.append("exports %d names beside the API, e.g. %s" % (len(foreign), ", ".join(foreign[:5])))
+    if header:
+        api = header_api(header)
+        missing = sorted(api - set(exported))
+        extra = sorted(set(n for n in exported if n.startswith("spia_")) - api)
+        if missing:
+            problems.append("does not export %s (declared in %s)" % (", ".join(missing), os.path.basename(header)))
+        if extra:
+            problems.append("exports %s, which the header does not declare" % ", ".join(extra))
+    return problems
+
+
 def header_api(header):
     text = open(header).read()
     return set(re.findall(r"SPIA_API\s+[^;{(]*?\b(spia_\w+)\s*\(", text))
@@ -119,17 +138,7 @@ def audit(path, header=None, glibc_floor="2.31"):
         problems.append("needs the system's C++ runtime: %s" % ", ".join(glibcxx))
 
     exported = sorted(name for name, _v, _b in defined)
-    foreign = [n for n in exported if not n.startswith("spia_")]
-    if foreign:
-        problems.append("exports %d symbols beside the API, e.g. %s" % (len(foreign), ", ".join(foreign[:5])))
-    if header:
-        api = header_api(header)
-        missing = sorted(api - set(exported))
-        extra = sorted(set(n for n in exported if n.startswith("spia_")) - api)
-        if missing:
-            problems.append("does not export %s (declared in %s)" % (", ".join(missing), os.path.basename(header)))
-        if extra:
-            problems.append("exports %s, which the header does not declare" % ", ".join(extra))
+    problems += export_problems(exported, header)
 
     unbound = [(n, v, b) for n, v, b in undefined
                if not (ALLOWED_IMPORT_VERSIONS.match(v) or (not v and b == "WEAK" and n in ALLOWED_UNVERSIONED_WEAK))]
@@ -142,7 +151,8 @@ def audit(path, header=None, glibc_floor="2.31"):
         "RUNPATH": ", ".join(runpath) or "none",
         "highest GLIBC": glibc[-1] if glibc else "none",
         "highest GLIBCXX/CXXABI": glibcxx[-1] if glibcxx else "none",
-        "exported": "%d symbols, %d outside spia_*" % (len(exported), len(foreign)),
+        "exported": "%d symbols, %d outside spia_*" % (len(exported),
+                                                      sum(not n.startswith("spia_") for n in exported)),
         "imported": "%d symbols, %d unversioned or from other libraries" % (len(undefined), len(unbound)),
         "size": "%.2f MB" % (os.path.getsize(path) / 1e6),
     }

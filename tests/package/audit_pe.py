@@ -19,7 +19,7 @@ import subprocess
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from audit_elf import header_api  # noqa: E402
+from audit_elf import export_problems  # noqa: E402
 
 SYSTEM_DLLS = re.compile(r"^(kernel32|msvcrt|ucrtbase|api-ms-win-crt-[a-z0-9-]+|advapi32|ntdll)\.dll$", re.I)
 
@@ -53,21 +53,11 @@ def audit(path, header=None):
     for dll in imports:
         if not SYSTEM_DLLS.match(dll):
             problems.append("imports %s, which is not a Windows system DLL" % dll)
-    foreign = [e for e in exports if not e.startswith("spia_")]
-    if foreign:
-        problems.append("exports %d names beside the API, e.g. %s" % (len(foreign), ", ".join(foreign[:5])))
-    if header:
-        api = header_api(header)
-        missing = sorted(api - set(exports))
-        extra = sorted(set(e for e in exports if e.startswith("spia_")) - api)
-        if missing:
-            problems.append("does not export %s" % ", ".join(missing))
-        if extra:
-            problems.append("exports %s, which the header does not declare" % ", ".join(extra))
+    problems += export_problems(exports, header)
     if "x86-64" not in machine:
         problems.append("architecture %s, not x86-64" % machine)
     report = {"architecture": machine, "imports": ", ".join(imports) or "none",
-              "exported": "%d names, %d outside spia_*" % (len(exports), len(foreign)),
+              "exported": "%d names, %d outside spia_*" % (len(exports), sum(not e.startswith("spia_") for e in exports)),
               "size": "%.2f MB" % (os.path.getsize(path) / 1e6)}
     return report, problems
 
