@@ -18,8 +18,11 @@
 //  - adaptive refinement with isolation level = quality and infinitely
 //    sharp patches, limit evaluated at the control vertex's corner of the
 //    first face (in face order) that uses it;
-//  - where Blender's patches give the exact limit point anyway, Bfr gives
-//    the same stencil directly (see step 5);
+//  - where Blender's patches give the exact limit point anyway and it has a
+//    closed form, the row comes from catmark_closed.c, and OpenSubdiv's
+//    refiner is built only on the faces around the other vertices; among
+//    those, where the patches give the exact limit, Bfr gives the same
+//    stencil directly (see step 5);
 //  - with spia_options.opensubdiv_version above 30600, the non-manifold
 //    vertices that OpenSubdiv after 3.6.0 sharpens are sharpened (step 4b).
 
@@ -185,22 +188,30 @@ std::vector<int32_t> sharpened_after_360(const Far::TopologyLevel &base) {
     return out;
 }
 
-// Steps 1 to 4 below, shared by the stencils and by refinement: the
-// OpenSubdiv topology of a mesh with Blender's (or, for Loop, OpenSubdiv's)
-// sharpness values, and the renumbering that leaves out unused vertices.
+// Steps 1 to 3 below, shared by the stencils and by refinement: Blender's
+// (or, for Loop, OpenSubdiv's) sharpness values, and the renumbering that
+// leaves out unused vertices ("osd" numbering).  Step 4 makes a refiner of
+// the whole mesh (refinement, samples) or of the part of it around the
+// vertices that need OpenSubdiv's patches (stencils, see Region).
 struct Prepared {
     int32_t osd_n = 0;
     std::vector<int32_t> osd_of, vertex_of, remapped;
     std::vector<int32_t> crease_pairs, corner_indices;
     std::vector<float> crease_weights, corner_weights;
+    // The same sharpness in the mesh's own numbering, for the closed-form
+    // rows (catmark_closed.c): per vertex, and each vertex's creased face
+    // edges as a list (empty when no edge is creased).
+    std::vector<float> vertex_sharpness;
+    std::vector<int64_t> crease_first;
+    std::vector<int32_t> crease_other;
+    std::vector<float> crease_sharpness;
     bool blender = false;
     Sdc::SchemeType scheme = Sdc::SCHEME_CATMARK;
     Sdc::Options sdc;
-    std::unique_ptr<Far::TopologyRefiner> refiner;
+    std::unique_ptr<Far::TopologyRefiner> refiner;  // the whole mesh (prepare())
 };
 
-spia_result prepare(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, Prepared &p,
-                    spia_status *status) {
+spia_result prepare_sharpness(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, Prepared &p) {
     const int32_t n = m->vertex_count;
     const bool use_creases = !opt->ignore_creases;
     // Blender's own rules (loose-edge ends, the two-edge rule, smooth corners
@@ -221,48 +232,61 @@ spia_result prepare(const spia_mesh *m, const spia_adjacency *adj, const spia_op
     const int32_t osd_n = (int32_t)vertex_of.size();
     const bool renumbered = osd_n != n;
     std::vector<int32_t> remapped;
-    const int32_t *fv = m->face_vertices;
     if (renumbered) {
         remapped.resize((size_t)adj->corner_count);
         for (int64_t c = 0; c < adj->corner_count; ++c) remapped[c] = osd_of[m->face_vertices[c]];
-        fv = remapped.data();
     }
 
     // 2. Edge sharpness of face edges; loose edges sharpen their end points.
     std::vector<float> vertex_sharpness(osd_n, 0.0f);
     std::vector<int32_t> crease_pairs;
     std::vector<float> crease_weights;
-    // Per vertex, its creased face edges as (other end, sharpness), for the
-    // two-edge rule below.
-    std::vector<std::vector<std::pair<int32_t, float>>> creased_at;
-    bool any_edge_crease = false;
-    for (int32_t e = 0; e < m->edge_count; ++e) {
-        int32_t a = m->edges[2 * (int64_t)e], b = m->edges[2 * (int64_t)e + 1];
-        bool face_edge = osd_of[a] >= 0 && osd_of[b] >= 0 && is_face_edge(m, adj, a, b);
-        if (!face_edge) {
-            if (!blender) continue;
-            if (osd_of[a] >= 0) vertex_sharpness[osd_of[a]] = INFINITY;
-            if (osd_of[b] >= 0) vertex_sharpness[osd_of[b]] = INFINITY;
-            continue;
+    // Per vertex, the number of its creased face edges, then (counting
+    // sort) the edges themselves as (other end, sharpness) lists.
+    std::vector<int64_t> crease_first;
+    for (int pass = 0; pass < 2; ++pass) {
+        std::vector<int64_t> fill;
+        if (pass == 1) {
+            if (crease_first.empty()) break;
+            for (int32_t v = 0; v < n; ++v) crease_first[v + 1] += crease_first[v];
+            fill.assign(crease_first.begin(), crease_first.end() - 1);
+            p.crease_other.resize((size_t)crease_first[n]);
+            p.crease_sharpness.resize((size_t)crease_first[n]);
         }
-        if (!use_creases || !m->edge_creases) continue;
-        float s = crease_to_sharpness(m->edge_creases[e]);
-        if (s < 1e-6f) continue;
-        if (!any_edge_crease) {
-            creased_at.resize(osd_n);
-            any_edge_crease = true;
+        for (int32_t e = 0; e < m->edge_count; ++e) {
+            int32_t a = m->edges[2 * (int64_t)e], b = m->edges[2 * (int64_t)e + 1];
+            bool face_edge = osd_of[a] >= 0 && osd_of[b] >= 0 && is_face_edge(m, adj, a, b);
+            if (!face_edge) {
+                if (!blender || pass == 1) continue;
+                if (osd_of[a] >= 0) vertex_sharpness[osd_of[a]] = INFINITY;
+                if (osd_of[b] >= 0) vertex_sharpness[osd_of[b]] = INFINITY;
+                continue;
+            }
+            if (!use_creases || !m->edge_creases) continue;
+            float s = crease_to_sharpness(m->edge_creases[e]);
+            if (s < 1e-6f) continue;
+            if (pass == 0) {
+                if (crease_first.empty()) crease_first.assign((size_t)n + 1, 0);
+                crease_pairs.push_back(osd_of[a]);
+                crease_pairs.push_back(osd_of[b]);
+                crease_weights.push_back(s);
+                ++crease_first[a + 1];
+                ++crease_first[b + 1];
+            } else {
+                p.crease_other[(size_t)fill[a]] = b;
+                p.crease_sharpness[(size_t)fill[a]++] = s;
+                p.crease_other[(size_t)fill[b]] = a;
+                p.crease_sharpness[(size_t)fill[b]++] = s;
+            }
         }
-        crease_pairs.push_back(osd_of[a]);
-        crease_pairs.push_back(osd_of[b]);
-        crease_weights.push_back(s);
-        creased_at[osd_of[a]].push_back(std::make_pair(osd_of[b], s));
-        creased_at[osd_of[b]].push_back(std::make_pair(osd_of[a], s));
     }
+    const bool any_edge_crease = !crease_first.empty();
 
     // 3. Vertex sharpness: infinite at loose-edge ends; else the vertex
     //    crease, plus the smaller sharpness of exactly two incident edges.
     std::vector<int32_t> corner_indices;
     std::vector<float> corner_weights;
+    p.vertex_sharpness.assign((size_t)n, 0.0f);
     for (int32_t o = 0; o < osd_n; ++o) {
         int32_t v = vertex_of[o];
         float s;
@@ -270,13 +294,13 @@ spia_result prepare(const spia_mesh *m, const spia_adjacency *adj, const spia_op
             s = kInfiniteSharpness;
         } else {
             s = (use_creases && m->vertex_creases) ? crease_to_sharpness(m->vertex_creases[v]) : 0.0f;
-            if (blender && any_edge_crease && !creased_at[o].empty()) {
+            if (blender && any_edge_crease && crease_first[v + 1] > crease_first[v]) {
                 // Distinct neighbours along face edges.
                 int32_t nb[3];
                 int count = 0;
                 for (int64_t i = adj->first[v]; i < adj->first[v + 1] && count < 3; ++i) {
                     int64_t c = adj->corner_of[i];
-                    int32_t cand[2] = {osd_of[spia__corner_prev(m, adj, c)], osd_of[spia__corner_next(m, adj, c)]};
+                    int32_t cand[2] = {spia__corner_prev(m, adj, c), spia__corner_next(m, adj, c)};
                     for (int32_t w : cand) {
                         bool seen = false;
                         for (int k = 0; k < count; ++k) seen = seen || nb[k] == w;
@@ -286,8 +310,8 @@ spia_result prepare(const spia_mesh *m, const spia_adjacency *adj, const spia_op
                 if (count == 2) {
                     float e_s[2] = {0.0f, 0.0f};
                     for (int k = 0; k < 2; ++k)
-                        for (const auto &pr : creased_at[o])
-                            if (pr.first == nb[k]) e_s[k] = pr.second;
+                        for (int64_t i = crease_first[v]; i < crease_first[v + 1]; ++i)
+                            if (p.crease_other[(size_t)i] == nb[k]) e_s[k] = p.crease_sharpness[(size_t)i];
                     s += std::min(e_s[0], e_s[1]);
                     s = std::min(s, 10.0f);
                 }
@@ -297,43 +321,15 @@ spia_result prepare(const spia_mesh *m, const spia_adjacency *adj, const spia_op
             corner_indices.push_back(o);
             corner_weights.push_back(s);
         }
+        p.vertex_sharpness[(size_t)v] = s;
     }
 
-    // 4. The refiner.
     Sdc::Options sdc;
     sdc.SetVtxBoundaryInterpolation(opt->boundary_smooth == SPIA_BOUNDARY_SMOOTH_PRESERVE_CORNERS
                                         ? Sdc::Options::VTX_BOUNDARY_EDGE_AND_CORNER
                                         : Sdc::Options::VTX_BOUNDARY_EDGE_ONLY);
     sdc.SetCreasingMethod(Sdc::Options::CREASE_UNIFORM);
     sdc.SetFVarLinearInterpolation(Sdc::Options::FVAR_LINEAR_ALL);
-    p.refiner.reset(create_refiner(osd_n, m->face_count, m->face_sizes, fv, crease_pairs, crease_weights,
-                                   corner_indices, corner_weights, scheme, sdc));
-    if (!p.refiner) return spia__fail(status, SPIA_ERROR_TOPOLOGY, -1, "OpenSubdiv rejected the mesh topology");
-
-    // 4b. Blender with OpenSubdiv after 3.6.0: the non-manifold vertices
-    //     that version sharpens and this one (3.5 or 3.6.0) does not get
-    //     infinite sharpness of their own, and the refiner is made again.
-    //     The vertices stay non-manifold, so their rows come from adaptive
-    //     patches (step 5), where their limit point is the vertex itself.
-    if (blender && opt->opensubdiv_version > 30600) {
-        const std::vector<int32_t> sharpened = sharpened_after_360(p.refiner->GetLevel(0));
-        if (!sharpened.empty()) {
-            std::vector<int32_t> corner_of((size_t)osd_n, -1);
-            for (size_t k = 0; k < corner_indices.size(); ++k) corner_of[(size_t)corner_indices[k]] = (int32_t)k;
-            for (int32_t o : sharpened) {
-                if (corner_of[(size_t)o] >= 0) {
-                    corner_weights[(size_t)corner_of[(size_t)o]] = kInfiniteSharpness;
-                } else {
-                    corner_indices.push_back(o);
-                    corner_weights.push_back(kInfiniteSharpness);
-                }
-            }
-            p.refiner.reset(create_refiner(osd_n, m->face_count, m->face_sizes, fv, crease_pairs, crease_weights,
-                                           corner_indices, corner_weights, scheme, sdc));
-            if (!p.refiner)
-                return spia__fail(status, SPIA_ERROR_TOPOLOGY, -1, "OpenSubdiv rejected the mesh topology");
-        }
-    }
     p.osd_n = osd_n;
     p.osd_of.swap(osd_of);
     p.vertex_of.swap(vertex_of);
@@ -342,9 +338,54 @@ spia_result prepare(const spia_mesh *m, const spia_adjacency *adj, const spia_op
     p.crease_weights.swap(crease_weights);
     p.corner_indices.swap(corner_indices);
     p.corner_weights.swap(corner_weights);
+    p.crease_first.swap(crease_first);
     p.blender = blender;
     p.scheme = scheme;
     p.sdc = sdc;
+    return SPIA_OK;
+}
+
+// 4. A refiner for the given topology and sharpness (in its own numbering).
+//    Blender with OpenSubdiv after 3.6.0: the non-manifold vertices that
+//    version sharpens and this one (3.5 or 3.6.0) does not get infinite
+//    sharpness of their own, and the refiner is made again.  The vertices
+//    stay non-manifold, so their rows come from adaptive patches, where
+//    their limit point is the vertex itself.  `sharpened` receives them.
+Far::TopologyRefiner *make_refiner(const Prepared &p, const spia_options *opt, int32_t vertex_count,
+                                   int32_t face_count, const int32_t *face_sizes, const int32_t *fv,
+                                   const std::vector<int32_t> &crease_pairs, const std::vector<float> &crease_weights,
+                                   std::vector<int32_t> &corner_indices, std::vector<float> &corner_weights,
+                                   std::vector<int32_t> *sharpened) {
+    std::unique_ptr<Far::TopologyRefiner> refiner(create_refiner(vertex_count, face_count, face_sizes, fv, crease_pairs,
+                                                                 crease_weights, corner_indices, corner_weights,
+                                                                 p.scheme, p.sdc));
+    if (!refiner || !p.blender || opt->opensubdiv_version <= 30600) return refiner.release();
+    const std::vector<int32_t> more = sharpened_after_360(refiner->GetLevel(0));
+    if (more.empty()) return refiner.release();
+    std::vector<int32_t> corner_of((size_t)vertex_count, -1);
+    for (size_t k = 0; k < corner_indices.size(); ++k) corner_of[(size_t)corner_indices[k]] = (int32_t)k;
+    for (int32_t o : more) {
+        if (corner_of[(size_t)o] >= 0) {
+            corner_weights[(size_t)corner_of[(size_t)o]] = kInfiniteSharpness;
+        } else {
+            corner_indices.push_back(o);
+            corner_weights.push_back(kInfiniteSharpness);
+        }
+    }
+    if (sharpened) *sharpened = more;
+    return create_refiner(vertex_count, face_count, face_sizes, fv, crease_pairs, crease_weights, corner_indices,
+                          corner_weights, p.scheme, p.sdc);
+}
+
+// Steps 1 to 4 for the whole mesh.
+spia_result prepare(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, Prepared &p,
+                    spia_status *status) {
+    spia_result r = prepare_sharpness(m, adj, opt, p);
+    if (r != SPIA_OK) return r;
+    p.refiner.reset(make_refiner(p, opt, p.osd_n, m->face_count, m->face_sizes,
+                                 p.remapped.empty() ? m->face_vertices : p.remapped.data(), p.crease_pairs,
+                                 p.crease_weights, p.corner_indices, p.corner_weights, nullptr));
+    if (!p.refiner) return spia__fail(status, SPIA_ERROR_TOPOLOGY, -1, "OpenSubdiv rejected the mesh topology");
     return SPIA_OK;
 }
 
@@ -405,59 +446,184 @@ bool exact_limit_rows(Far::TopologyRefiner &sub, int levels, int32_t sub_n, cons
     return true;
 }
 
-spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_options *opt, spia_stencils **out,
-                  spia_status *status) {
-    const spia_adjacency *adj = adj_lists;
-    Prepared p;
-    spia_result r = prepare(m, adj, opt, p, status);
-    if (r != SPIA_OK) return r;
-    const int32_t n = m->vertex_count;
-    const int32_t osd_n = p.osd_n;
-    const std::vector<int32_t> &osd_of = p.osd_of, &vertex_of = p.vertex_of;
-    const std::vector<int32_t> &crease_pairs = p.crease_pairs, &corner_indices = p.corner_indices;
-    const std::vector<float> &crease_weights = p.crease_weights, &corner_weights = p.corner_weights;
+
+// The sharpness of a part of the mesh, in a numbering of its own (local_of:
+// osd vertex -> local vertex, -1 outside): the creased edges the part's
+// faces have (OpenSubdiv warns about others) and the sharp vertices in it.
+void restrict_sharpness(const spia_mesh *m, const spia_adjacency *adj, const Prepared &p,
+                        const std::vector<int32_t> &local_of, const std::vector<char> &in_part,
+                        std::vector<int32_t> &pairs, std::vector<float> &weights, std::vector<int32_t> &corners,
+                        std::vector<float> &corner_weights) {
+    for (size_t k = 0; k < p.crease_weights.size(); ++k) {
+        int32_t a = p.crease_pairs[2 * k], b = p.crease_pairs[2 * k + 1];
+        if (local_of[a] < 0 || local_of[b] < 0) continue;
+        bool present = false;
+        int32_t va = p.vertex_of[a];
+        for (int64_t i = adj->first[va]; i < adj->first[va + 1] && !present; ++i) {
+            int64_t c = adj->corner_of[i];
+            present = in_part[adj->face_of_corner[c]] &&
+                      (p.osd_of[spia__corner_next(m, adj, c)] == b || p.osd_of[spia__corner_prev(m, adj, c)] == b);
+        }
+        if (!present) continue;
+        pairs.push_back(local_of[a]);
+        pairs.push_back(local_of[b]);
+        weights.push_back(p.crease_weights[k]);
+    }
+    for (size_t k = 0; k < p.corner_weights.size(); ++k) {
+        if (local_of[p.corner_indices[k]] < 0) continue;
+        corners.push_back(local_of[p.corner_indices[k]]);
+        corner_weights.push_back(p.corner_weights[k]);
+    }
+}
+
+// The faces within two rings of the marked osd vertices: their limit points
+// depend on their own faces alone, and the second ring gives those faces'
+// vertices complete neighbourhoods (so their rules are the whole mesh's).
+std::vector<char> two_ring_faces(const spia_mesh *m, const spia_adjacency *adj, const Prepared &p,
+                                 const std::vector<int32_t> &marked) {
+    std::vector<char> near_vertex((size_t)p.osd_n, 0), in_part((size_t)m->face_count, 0);
+    for (int32_t o : marked) {
+        int32_t v = p.vertex_of[o];
+        for (int64_t k = adj->first[v]; k < adj->first[v + 1]; ++k) {
+            int32_t f = adj->face_of_corner[adj->corner_of[k]];
+            for (int64_t c = adj->corner_start[f]; c < adj->corner_start[f + 1]; ++c)
+                near_vertex[p.osd_of[m->face_vertices[c]]] = 1;
+        }
+    }
+    for (int32_t o = 0; o < p.osd_n; ++o) {
+        if (!near_vertex[o]) continue;
+        int32_t v = p.vertex_of[o];
+        for (int64_t i = adj->first[v]; i < adj->first[v + 1]; ++i) in_part[adj->face_of_corner[adj->corner_of[i]]] = 1;
+    }
+    return in_part;
+}
+
+// A part of the mesh with an OpenSubdiv refiner of its own, and the maps
+// between its numbering and the osd numbering (identities, left empty, when
+// it is the whole mesh).
+struct Part {
+    std::unique_ptr<Far::TopologyRefiner> refiner;
+    bool whole = true;
+    std::vector<int32_t> local_of, osd_of_local;  // vertices
+    std::vector<int32_t> mesh_face_of;           // local face -> mesh face
+    std::vector<int32_t> sizes, fv;              // its topology
+    std::vector<int32_t> crease_pairs, corner_indices;
+    std::vector<float> crease_weights, corner_weights;
+    int32_t vertex(int32_t o) const { return whole ? o : local_of[(size_t)o]; }
+    int32_t osd(int32_t i) const { return whole ? i : osd_of_local[(size_t)i]; }
+    int32_t mesh_face(int32_t i) const { return whole ? i : mesh_face_of[(size_t)i]; }
+};
+
+// The part of the mesh made of the faces in_part (all when in_part is
+// empty).  Vertices the refiner sharpens after 3.6.0 (make_refiner) are
+// sharpened in p as well, so that the sub-meshes of step 7 see them.
+//    The sub-meshes of step 7 (`own` false) take p's sharpness as it is.
+spia_result make_part(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, Prepared &p,
+                      const std::vector<char> &in_part, bool own, Part &part, spia_status *status) {
+    std::vector<int32_t> sharpened;
+    part.whole = in_part.empty();
+    if (part.whole) {
+        part.refiner.reset(make_refiner(p, opt, p.osd_n, m->face_count, m->face_sizes,
+                                        p.remapped.empty() ? m->face_vertices : p.remapped.data(), p.crease_pairs,
+                                        p.crease_weights, p.corner_indices, p.corner_weights, nullptr));
+    } else {
+        part.local_of.assign((size_t)p.osd_n, -1);
+        for (int32_t f = 0; f < m->face_count; ++f) {
+            if (!in_part[f]) continue;
+            part.mesh_face_of.push_back(f);
+            part.sizes.push_back(m->face_sizes[f]);
+            for (int64_t c = adj->corner_start[f]; c < adj->corner_start[f + 1]; ++c) {
+                const int32_t o = p.osd_of[m->face_vertices[c]];
+                if (part.local_of[o] < 0) {
+                    part.local_of[o] = (int32_t)part.osd_of_local.size();
+                    part.osd_of_local.push_back(o);
+                }
+                part.fv.push_back(part.local_of[o]);
+            }
+        }
+        restrict_sharpness(m, adj, p, part.local_of, in_part, part.crease_pairs, part.crease_weights,
+                           part.corner_indices, part.corner_weights);
+        const int32_t count = (int32_t)part.osd_of_local.size(), faces = (int32_t)part.sizes.size();
+        if (own)
+            part.refiner.reset(make_refiner(p, opt, count, faces, part.sizes.data(), part.fv.data(), part.crease_pairs,
+                                            part.crease_weights, part.corner_indices, part.corner_weights,
+                                            &sharpened));
+        else
+            part.refiner.reset(create_refiner(count, faces, part.sizes.data(), part.fv.data(), part.crease_pairs,
+                                              part.crease_weights, part.corner_indices, part.corner_weights, p.scheme,
+                                              p.sdc));
+        if (!sharpened.empty()) {
+            std::vector<int32_t> corner_of((size_t)p.osd_n, -1);
+            for (size_t k = 0; k < p.corner_indices.size(); ++k) corner_of[(size_t)p.corner_indices[k]] = (int32_t)k;
+            for (int32_t i : sharpened) {
+                const int32_t o = part.osd_of_local[(size_t)i];
+                if (corner_of[(size_t)o] >= 0) {
+                    p.corner_weights[(size_t)corner_of[(size_t)o]] = kInfiniteSharpness;
+                } else {
+                    p.corner_indices.push_back(o);
+                    p.corner_weights.push_back(kInfiniteSharpness);
+                }
+            }
+        }
+    }
+    if (!part.refiner) return spia__fail(status, SPIA_ERROR_TOPOLOGY, -1, "OpenSubdiv rejected the mesh topology");
+    return SPIA_OK;
+}
+
+// Rows kept aside until the table exists, in osd numbering of the vertex and
+// mesh numbering of the columns.
+struct HeldRows {
+    std::vector<int64_t> start;  // per osd vertex, -1 for none
+    std::vector<int32_t> size;
+    std::vector<int32_t> indices;
+    std::vector<double> weights;
+};
+
+// How each vertex that needs OpenSubdiv is evaluated (step 5).
+struct Evaluation {
+    std::vector<char> adaptive;       // per osd vertex: step 7
+    std::vector<int32_t> bfr_corner;  // per osd vertex: the corner Bfr evaluates it at (step 10), or -1
+    std::vector<char> level_face;     // per mesh face: Bfr at the isolation level (empty if none)
+    int32_t adaptive_count = 0;
+};
+
+// 5. How each vertex of `wanted` (osd numbering) is evaluated.  At
+//    semi-sharp features and darts of manifold meshes Blender's surface
+//    depends on the isolation level; there Bfr with its approximation
+//    levels (sharp and smooth) set to `quality` builds the same patches as
+//    Blender's adaptive refinement at that level, evaluated at the vertex's
+//    corner of its first face as Blender does.  Non-manifold vertices and
+//    smooth valence-2 boundary corners go through the adaptive
+//    LimitStencilTableFactory, on their neighbourhood only, as Blender
+//    builds it (Bfr does not reproduce those).  Where the limit point has a
+//    closed form Blender's patches reproduce it exactly; those vertices
+//    that come here (Loop, and Catmull-Clark ones whose fan the closed form
+//    does not take) get Bfr at its default levels.  The test against the
+//    full adaptive table (tests/c/test_reference.cpp, with random creases
+//    on scans) holds all of this to 1e-12.
+void choose_evaluation(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, const Prepared &p,
+                       const Part &part, const std::vector<int32_t> &wanted, Evaluation &ev) {
+    const Far::TopologyLevel &base = part.refiner->GetLevel(0);
     const bool blender = p.blender;
-    const Sdc::SchemeType scheme = p.scheme;
-    const Sdc::Options &sdc = p.sdc;
-    std::unique_ptr<Far::TopologyRefiner> &refiner = p.refiner;
-
-
-    // 5. How each vertex's row is computed.  Where the limit point has a
-    //    closed form (smooth interior and boundary vertices, extraordinary or
-    //    not, any face sizes, infinitely sharp creases and corners of
-    //    manifold meshes) Blender's patches reproduce it exactly, and Bfr
-    //    gives it at a fraction of the cost.  At semi-sharp features and
-    //    darts of manifold meshes Blender's surface depends on the isolation
-    //    level; there Bfr with its approximation levels (sharp and smooth)
-    //    set to `quality` builds the same patches as Blender's adaptive
-    //    refinement at that level, evaluated at the vertex's corner of its
-    //    first face as Blender does.  Non-manifold vertices and smooth
-    //    valence-2 boundary corners go through the adaptive
-    //    LimitStencilTableFactory, on their neighbourhood only, as Blender
-    //    builds it (Bfr does not reproduce those).  The test against the
-    //    full adaptive table (tests/c/test_reference.cpp, with random
-    //    creases on scans) holds all of this to 1e-12.
-    const Far::TopologyLevel &base = refiner->GetLevel(0);
-    std::vector<char> feature((size_t)osd_n, 0);
-    int32_t feature_count = 0;
-
-    // Rows of the adaptive (feature) vertices in OpenSubdiv numbering,
-    // filled in any order, then gathered.
-    std::vector<int64_t> row_start;  // sized when there are feature vertices
-    std::vector<int32_t> row_size;
-    std::vector<Far::Index> row_indices;
-    std::vector<double> row_weights;
-
+    auto non_manifold = [&](int32_t o) { return base.IsVertexNonManifold(part.vertex(o)); };
     // The corner at which Bfr evaluates a smooth vertex: its corner of its
     // first face, or of the first face with no non-manifold vertex, since
     // Bfr's irregular patch builder in OpenSubdiv 3.5 writes out of bounds on
     // some faces next to non-manifold vertices (seen on the Stanford dragon
     // scan).  The limit point of a smooth vertex is the same from every face.
-    std::vector<int32_t> bfr_corner((size_t)osd_n, -1);  // corners fit in int32 (spia__adjacency_build)
-    std::vector<char> approx((size_t)osd_n, 0);
-    for (int32_t o = 0; o < osd_n; ++o) {
-        const float vs = base.GetVertexSharpness(o);
-        Far::ConstIndexArray ve = base.GetVertexEdges(o);
+    auto clean_face = [&](int32_t f) {
+        for (int64_t d = adj->corner_start[f]; d < adj->corner_start[f + 1]; ++d)
+            if (non_manifold(p.osd_of[m->face_vertices[d]])) return false;
+        return true;
+    };
+    ev.adaptive.assign((size_t)p.osd_n, 0);
+    ev.bfr_corner.assign((size_t)p.osd_n, -1);
+    std::vector<char> approx((size_t)p.osd_n, 0);
+    bool any_approx = false;
+    for (int32_t o : wanted) {
+        const int32_t lo = part.vertex(o);
+        const float vs = base.GetVertexSharpness(lo);
+        Far::ConstIndexArray ve = base.GetVertexEdges(lo);
         // Infinitely sharp interior edges (non-manifold edges are, in Far).
         int infinitely_sharp = 0;
         bool semi_sharp = vs > 0.0f && vs < kInfiniteSharpness;
@@ -479,251 +645,180 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
         // (Catmull-Clark only: Loop is taken at its exact limit).
         const bool dart = infinitely_sharp == 1;
         const bool smooth_corner = blender && opt->boundary_smooth == SPIA_BOUNDARY_SMOOTH_ALL &&
-                                   base.IsVertexBoundary(o) && ve.size() == 2;
-        bool adaptive = base.IsVertexNonManifold(o);
-        if (smooth_corner) adaptive = true;  // Blender is not at the limit there
-        else if (!adaptive && (semi_sharp || dart)) {
+                                   base.IsVertexBoundary(lo) && ve.size() == 2;
+        bool adaptive = base.IsVertexNonManifold(lo) || smooth_corner;  // Blender is not at the limit there
+        if (!adaptive && (semi_sharp || dart)) {
             if (blender) approx[o] = 1;
             else adaptive = true;
         }
         if (!adaptive) {
-            const int32_t v = vertex_of[o];
-            for (int64_t i = adj->first[v]; i < adj->first[v + 1] && bfr_corner[o] < 0; ++i) {
+            const int32_t v = p.vertex_of[o];
+            for (int64_t i = adj->first[v]; i < adj->first[v + 1] && ev.bfr_corner[o] < 0; ++i) {
                 int64_t c = adj->corner_of[i];
-                int32_t f = adj->face_of_corner[c];
-                bool clean = true;
-                for (int64_t d = adj->corner_start[f]; d < adj->corner_start[f + 1] && clean; ++d)
-                    clean = !base.IsVertexNonManifold(osd_of[m->face_vertices[d]]);
-                if (clean) bfr_corner[o] = (int32_t)c;
+                if (clean_face(adj->face_of_corner[c])) ev.bfr_corner[o] = (int32_t)c;
             }
-            adaptive = bfr_corner[o] < 0;
-
+            adaptive = ev.bfr_corner[o] < 0;
         }
-        if (adaptive) approx[o] = 0;
         if (adaptive) {
-            feature[o] = 1;
-            ++feature_count;
+            approx[o] = 0;
+            ev.adaptive[o] = 1;
+            ++ev.adaptive_count;
         }
+        any_approx = any_approx || approx[o];
     }
-    // Closed-form vertices come out the same from any of their faces and at
-    // any level: where one of their clean faces already gives a vertex at
-    // the isolation level, they share its surface instead of costing one
-    // more (a sharp face at Bfr's default levels is the dearest of all).
-    //    The same holds for the vertices taken at the isolation level
-    //    (Blender evaluates them on their first face; their limit point is
-    //    the corner their patches share, which test_reference checks with
-    //    the last face as well): each takes a clean face that already gives
-    //    one, else the clean face with the most such vertices, so that
-    //    fewer irregular surfaces are built.
-    std::vector<char> level_face;
-    if (std::find(approx.begin(), approx.end(), 1) != approx.end()) {
-        level_face.assign((size_t)m->face_count, 0);
-        auto clean_face = [&](int32_t f) {
-            for (int64_t d = adj->corner_start[f]; d < adj->corner_start[f + 1]; ++d)
-                if (base.IsVertexNonManifold(osd_of[m->face_vertices[d]])) return false;
-            return true;
-        };
-        for (int32_t o = 0; o < osd_n; ++o) {
-            if (!approx[o]) continue;
-            const int32_t v = vertex_of[o];
-            int64_t best = -1;
-            int best_count = -1;
-            for (int64_t i = adj->first[v]; i < adj->first[v + 1]; ++i) {
-                const int64_t c = adj->corner_of[i];
-                const int32_t f = adj->face_of_corner[c];
-                if (!clean_face(f)) continue;
-                int count = 0;
-                if (level_face[f]) {
-                    count = INT32_MAX;
-                } else {
-                    for (int64_t d = adj->corner_start[f]; d < adj->corner_start[f + 1]; ++d)
-                        count += approx[osd_of[m->face_vertices[d]]];
-                }
-                if (count > best_count) {
-                    best_count = count;
-                    best = c;
-                }
+    if (!any_approx) return;
+    // 6. Vertices with a closed form come out the same from any of their
+    //    faces and at any level: where one of their clean faces already
+    //    gives a vertex at the isolation level, they share its surface
+    //    instead of costing one more (a sharp face at Bfr's default levels is
+    //    the dearest of all).  The same holds for the vertices taken at the
+    //    isolation level (Blender evaluates them on their first face; their
+    //    limit point is the corner their patches share, which
+    //    test_reference checks with the last face as well): each takes a
+    //    clean face that already gives one, else the clean face with the
+    //    most such vertices, so that fewer irregular surfaces are built.
+    ev.level_face.assign((size_t)m->face_count, 0);
+    for (int32_t o : wanted) {
+        if (!approx[o]) continue;
+        const int32_t v = p.vertex_of[o];
+        int64_t best = -1;
+        int best_count = -1;
+        for (int64_t i = adj->first[v]; i < adj->first[v + 1]; ++i) {
+            const int64_t c = adj->corner_of[i];
+            const int32_t f = adj->face_of_corner[c];
+            if (!clean_face(f)) continue;
+            int count = 0;
+            if (ev.level_face[f]) {
+                count = INT32_MAX;
+            } else {
+                for (int64_t d = adj->corner_start[f]; d < adj->corner_start[f + 1]; ++d)
+                    count += approx[p.osd_of[m->face_vertices[d]]];
             }
-            bfr_corner[o] = (int32_t)best;  // step 5 found a clean face, so best >= 0
-            level_face[adj->face_of_corner[best]] = 1;
+            if (count > best_count) {
+                best_count = count;
+                best = c;
+            }
         }
-        for (int32_t o = 0; o < osd_n; ++o) {
-            if (approx[o] || bfr_corner[o] < 0 || level_face[adj->face_of_corner[bfr_corner[o]]]) continue;
-            const int32_t v = vertex_of[o];
-            for (int64_t i = adj->first[v]; i < adj->first[v + 1]; ++i) {
-                const int64_t c = adj->corner_of[i];
-                const int32_t f = adj->face_of_corner[c];
-                if (!level_face[f]) continue;
-                bool clean = true;
-                for (int64_t d = adj->corner_start[f]; d < adj->corner_start[f + 1] && clean; ++d)
-                    clean = !base.IsVertexNonManifold(osd_of[m->face_vertices[d]]);
-                if (clean) {
-                    bfr_corner[o] = (int32_t)c;
-                    break;
-                }
+        ev.bfr_corner[o] = (int32_t)best;  // the loop above found a clean face, so best >= 0
+        ev.level_face[adj->face_of_corner[best]] = 1;
+    }
+    for (int32_t o : wanted) {
+        if (approx[o] || ev.bfr_corner[o] < 0 || ev.level_face[adj->face_of_corner[ev.bfr_corner[o]]]) continue;
+        const int32_t v = p.vertex_of[o];
+        for (int64_t i = adj->first[v]; i < adj->first[v + 1]; ++i) {
+            const int64_t c = adj->corner_of[i];
+            const int32_t f = adj->face_of_corner[c];
+            if (ev.level_face[f] && clean_face(f)) {
+                ev.bfr_corner[o] = (int32_t)c;
+                break;
             }
         }
     }
+}
 
-    // 7. Feature vertices: Blender's adaptive patches at quality, one limit
-    //    location per vertex: its corner of its first face.  Patches are
-    //    built for every face of a refiner, so the adaptive refiner holds
-    //    only the faces within two rings of the feature vertices: a vertex's
-    //    limit point depends on its incident faces alone, and the second
-    //    ring gives their vertices complete neighbourhoods.  Sharpness comes
-    //    from the whole mesh.
-    //    The feature vertices are taken in batches of consecutive vertices,
-    //    each with its own sub-mesh, so that OpenSubdiv's tables (which
-    //    hold every refined vertex) stay small, and batches run on the
-    //    threads.  The batches do not depend on the thread count.
-    if (feature_count > 0) {
-        row_start.assign((size_t)osd_n, -1);
-        row_size.assign((size_t)osd_n, 0);
-        std::vector<int32_t> features;
-        features.reserve((size_t)feature_count);
-        for (int32_t o = 0; o < osd_n; ++o)
-            if (feature[o]) features.push_back(o);
-        const int32_t batch_size = std::max<int32_t>(kFeatureBatch, (feature_count + kMaxFeatureBatches - 1) / kMaxFeatureBatches);
-        const int32_t batches = (feature_count + batch_size - 1) / batch_size;
-        struct BatchRows {
-            std::vector<int32_t> vertex;  // OpenSubdiv numbering, one per row
-            std::vector<int64_t> start;   // rows' first entries, plus the end
-            std::vector<Far::Index> indices;
-            std::vector<double> weights;
-            spia_result code = SPIA_OK;
-            int64_t index = -1;
-            char message[SPIA_MESSAGE_SIZE] = {0};
+// 7. The vertices marked adaptive: Blender's adaptive patches at quality,
+//    one limit location per vertex: its corner of its first face.  Patches
+//    are built for every face of a refiner, so each refiner holds only the
+//    faces within two rings of its vertices (two_ring_faces), with the whole
+//    mesh's sharpness.  The vertices are taken in batches of consecutive
+//    vertices, each with its own sub-mesh, so that OpenSubdiv's tables
+//    (which hold every refined vertex) stay small, and batches run on the
+//    threads.  The batches do not depend on the thread count.
+spia_result adaptive_rows(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, Prepared &p,
+                          const Evaluation &ev, HeldRows &held, spia_status *status) {
+    const int32_t osd_n = p.osd_n;
+    const bool blender = p.blender;
+    std::vector<int32_t> features;
+    features.reserve((size_t)ev.adaptive_count);
+    for (int32_t o = 0; o < osd_n; ++o)
+        if (ev.adaptive[o]) features.push_back(o);
+    const int32_t feature_count = (int32_t)features.size();
+    if (feature_count == 0) return SPIA_OK;
+    const int32_t batch_size =
+        std::max<int32_t>(kFeatureBatch, (feature_count + kMaxFeatureBatches - 1) / kMaxFeatureBatches);
+    const int32_t batches = (feature_count + batch_size - 1) / batch_size;
+    struct BatchRows {
+        std::vector<int32_t> vertex;  // osd numbering, one per row
+        std::vector<int64_t> start;   // rows' first entries, plus the end
+        std::vector<int32_t> indices; // osd numbering
+        std::vector<double> weights;
+        spia_result code = SPIA_OK;
+        int64_t index = -1;
+        char message[SPIA_MESSAGE_SIZE] = {0};
+    };
+    std::vector<BatchRows> results((size_t)batches);
+    auto run_batch = [&](int32_t b, BatchRows &out) {
+        const int32_t first_feature = b * batch_size;
+        const int32_t batch_count = std::min(feature_count - first_feature, batch_size);
+        const int32_t *batch = features.data() + first_feature;
+        auto failed = [&](spia_result code, int64_t index, const char *text, int value, int value2) {
+            out.code = code;
+            out.index = index;
+            snprintf(out.message, sizeof out.message, text, value, value2);
         };
-        std::vector<BatchRows> results((size_t)batches);
-        auto run_batch = [&](int32_t b, BatchRows &out) {
-            const int32_t first_feature = b * batch_size;
-            const int32_t batch_count = std::min(feature_count - first_feature, batch_size);
-            const int32_t *batch = features.data() + first_feature;
-            auto failed = [&](spia_result code, int64_t index, const char *text, int value, int value2) {
-                out.code = code;
-                out.index = index;
-                snprintf(out.message, sizeof out.message, text, value, value2);
-            };
-            std::vector<char> batch_feature((size_t)osd_n, 0);
-            std::vector<Far::Index> feature_faces;
-            for (int32_t i = 0; i < batch_count; ++i) {
-                batch_feature[batch[i]] = 1;
-                Far::ConstIndexArray vf = base.GetVertexFaces(batch[i]);
-                feature_faces.insert(feature_faces.end(), vf.begin(), vf.end());
-            }
-            std::vector<char> near_vertex((size_t)osd_n, 0), in_sub((size_t)m->face_count, 0);
-            for (int32_t i = 0; i < batch_count; ++i) {
-                int32_t v = vertex_of[batch[i]];
-                for (int64_t k = adj->first[v]; k < adj->first[v + 1]; ++k) {
-                    int32_t f = adj->face_of_corner[adj->corner_of[k]];
-                    for (int64_t c = adj->corner_start[f]; c < adj->corner_start[f + 1]; ++c)
-                        near_vertex[osd_of[m->face_vertices[c]]] = 1;
-                }
-            }
-        for (int32_t o = 0; o < osd_n; ++o) {
-            if (!near_vertex[o]) continue;
-            int32_t v = vertex_of[o];
-            for (int64_t i = adj->first[v]; i < adj->first[v + 1]; ++i) in_sub[adj->face_of_corner[adj->corner_of[i]]] = 1;
-        }
-        std::vector<int32_t> sub_face_of((size_t)m->face_count, -1), sub_sizes, sub_fv, sub_of((size_t)osd_n, -1);
-        int32_t sub_n = 0;
-        for (int32_t f = 0; f < m->face_count; ++f) {
-            if (!in_sub[f]) continue;
-            sub_face_of[f] = (int32_t)sub_sizes.size();
-            sub_sizes.push_back(m->face_sizes[f]);
-            for (int64_t c = adj->corner_start[f]; c < adj->corner_start[f + 1]; ++c) {
-                int32_t o = osd_of[m->face_vertices[c]];
-                if (sub_of[o] < 0) sub_of[o] = sub_n++;
-                sub_fv.push_back(sub_of[o]);
-            }
-        }
-        std::vector<int32_t> sub_crease_pairs, sub_corner_indices;
-        std::vector<float> sub_crease_weights, sub_corner_weights;
-        for (size_t k = 0; k < crease_weights.size(); ++k) {
-            int32_t a = crease_pairs[2 * k], b = crease_pairs[2 * k + 1];
-            if (sub_of[a] < 0 || sub_of[b] < 0) continue;
-            // Only edges the sub-mesh has (OpenSubdiv warns about others).
-            bool present = false;
-            int32_t va = vertex_of[a];
-            for (int64_t i = adj->first[va]; i < adj->first[va + 1] && !present; ++i) {
-                int64_t c = adj->corner_of[i];
-                present = in_sub[adj->face_of_corner[c]] &&
-                          (osd_of[spia__corner_next(m, adj, c)] == b || osd_of[spia__corner_prev(m, adj, c)] == b);
-            }
-            if (!present) continue;
-            sub_crease_pairs.push_back(sub_of[a]);
-            sub_crease_pairs.push_back(sub_of[b]);
-            sub_crease_weights.push_back(crease_weights[k]);
-        }
-        for (size_t k = 0; k < corner_weights.size(); ++k) {
-            if (sub_of[corner_indices[k]] < 0) continue;
-            sub_corner_indices.push_back(sub_of[corner_indices[k]]);
-            sub_corner_weights.push_back(corner_weights[k]);
-        }
-        std::unique_ptr<Far::TopologyRefiner> sub(create_refiner(sub_n, (int32_t)sub_sizes.size(), sub_sizes.data(),
-                                                                 sub_fv.data(), sub_crease_pairs, sub_crease_weights,
-                                                                 sub_corner_indices, sub_corner_weights, scheme, sdc));
-        if (!sub)
-            {
+        std::vector<int32_t> marked(batch, batch + batch_count);
+        Part sub;
+        spia_status local_status;
+        if (make_part(m, adj, opt, p, two_ring_faces(m, adj, p, marked), false, sub, &local_status) != SPIA_OK) {
             failed(SPIA_ERROR_TOPOLOGY, -1, "OpenSubdiv rejected the topology around sharp features", 0, 0);
             return;
         }
-        for (Far::Index &f : feature_faces) f = sub_face_of[f];
-        std::sort(feature_faces.begin(), feature_faces.end());
-        feature_faces.erase(std::unique(feature_faces.begin(), feature_faces.end()), feature_faces.end());
-        std::vector<int32_t> osd_of_sub((size_t)sub_n);
-        for (int32_t o = 0; o < osd_n; ++o)
-            if (sub_of[o] >= 0) osd_of_sub[sub_of[o]] = o;
+        std::vector<int32_t> sub_face_of((size_t)m->face_count, -1);
+        for (size_t i = 0; i < sub.mesh_face_of.size(); ++i) sub_face_of[(size_t)sub.mesh_face_of[i]] = (int32_t)i;
+        const int32_t sub_n = (int32_t)sub.osd_of_local.size();
         if (!blender) {
             // Loop is taken at its exact limit, as refine() takes it:
             // uniform refinement until semi-sharp creases have decayed,
             // then OpenSubdiv's limit masks, on sparse stencils.
             float sharpest = 0.0f;
-            for (float w : sub_crease_weights) sharpest = std::max(sharpest, w < kInfiniteSharpness ? w : 0.0f);
-            for (float w : sub_corner_weights) sharpest = std::max(sharpest, w < kInfiniteSharpness ? w : 0.0f);
+            for (float w : sub.crease_weights) sharpest = std::max(sharpest, w < kInfiniteSharpness ? w : 0.0f);
+            for (float w : sub.corner_weights) sharpest = std::max(sharpest, w < kInfiniteSharpness ? w : 0.0f);
             const int levels = std::max(1, std::min(10, (int)std::ceil(sharpest)));
+            std::vector<char> batch_feature((size_t)osd_n, 0);
+            for (int32_t o : marked) batch_feature[(size_t)o] = 1;
             auto begin_batch_row = [&](int32_t o) {
                 out.vertex.push_back(o);
                 out.start.push_back((int64_t)out.indices.size());
             };
-            auto add_batch_weight = [&](Far::Index j, double w) {
+            auto add_batch_weight = [&](int32_t j, double w) {
                 out.indices.push_back(j);
                 out.weights.push_back(w);
             };
             auto end_batch_row = [&](int32_t) {};
-            if (!exact_limit_rows(*sub, levels, sub_n, batch_feature, sub_of, osd_of_sub, osd_n, begin_batch_row,
-                                  add_batch_weight, end_batch_row))
+            if (!exact_limit_rows(*sub.refiner, levels, sub_n, batch_feature, sub.local_of, sub.osd_of_local, osd_n,
+                                  begin_batch_row, add_batch_weight, end_batch_row))
                 failed(SPIA_ERROR_INTERNAL, -1, "OpenSubdiv's limit masks failed", 0, 0);
             out.start.push_back((int64_t)out.indices.size());
-        } else {
+            return;
+        }
+        // Refined around the faces the vertices are evaluated on.
+        std::vector<Far::Index> feature_faces;
+        for (int32_t o : marked) {
+            const int32_t v = p.vertex_of[o];
+            for (int64_t k = adj->first[v]; k < adj->first[v + 1]; ++k)
+                feature_faces.push_back(sub_face_of[adj->face_of_corner[adj->corner_of[k]]]);
+        }
+        std::sort(feature_faces.begin(), feature_faces.end());
+        feature_faces.erase(std::unique(feature_faces.begin(), feature_faces.end()), feature_faces.end());
         Far::TopologyRefiner::AdaptiveOptions adaptive(opt->quality);
         adaptive.useInfSharpPatch = true;
         adaptive.considerFVarChannels = false;
-        sub->RefineAdaptive(adaptive, Far::ConstIndexArray(feature_faces.data(), (int)feature_faces.size()));
+        sub.refiner->RefineAdaptive(adaptive, Far::ConstIndexArray(feature_faces.data(), (int)feature_faces.size()));
 
-        // Corners of a quad ptex face, and of a triangle (Loop).
+        // Corners of a quad ptex face.
         static const double corner_s[4] = {0.0, 1.0, 1.0, 0.0};
         static const double corner_t[4] = {0.0, 0.0, 1.0, 1.0};
-        static const double tri_s[3] = {0.0, 1.0, 0.0};
-        static const double tri_t[3] = {0.0, 0.0, 1.0};
-        Far::PtexIndices ptex(*sub);
+        Far::PtexIndices ptex(*sub.refiner);
         LimitFactory::LocationArrayVec locations;
-        std::vector<int32_t> location_vertex;
         locations.reserve((size_t)batch_count);
-        location_vertex.reserve((size_t)batch_count);
-        for (int32_t i = 0; i < batch_count; ++i) {
-            const int32_t o = batch[i];
-            int32_t v = vertex_of[o];
-            int64_t c = adj->corner_of[adj->first[v]];
-            int32_t f = adj->face_of_corner[c];
-            int32_t k = (int32_t)(c - adj->corner_start[f]);
+        for (int32_t o : marked) {
+            const int32_t v = p.vertex_of[o];
+            const int64_t c = adj->corner_of[adj->first[v]];
+            const int32_t f = adj->face_of_corner[c];
+            const int32_t k = (int32_t)(c - adj->corner_start[f]);
             LimitFactory::LocationArray loc;
             loc.numLocations = 1;
-            if (!blender) {
-                loc.ptexIdx = ptex.GetFaceId(sub_face_of[f]);
-                loc.s = &tri_s[k];
-                loc.t = &tri_t[k];
-            } else if (m->face_sizes[f] == 4) {
+            if (m->face_sizes[f] == 4) {
                 loc.ptexIdx = ptex.GetFaceId(sub_face_of[f]);
                 loc.s = &corner_s[k];
                 loc.t = &corner_t[k];
@@ -733,12 +828,12 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
                 loc.t = &corner_t[0];
             }
             locations.push_back(loc);
-            location_vertex.push_back(o);
         }
         LimitFactory::Options limit_options;
         limit_options.generate1stDerivatives = false;
         limit_options.generate2ndDerivatives = false;
-        std::unique_ptr<const LimitTable> table(LimitFactory::Create(*sub, locations, nullptr, nullptr, limit_options));
+        std::unique_ptr<const LimitTable> table(
+            LimitFactory::Create(*sub.refiner, locations, nullptr, nullptr, limit_options));
         if (!table || table->GetNumStencils() != batch_count) {
             failed(SPIA_ERROR_INTERNAL, -1, "OpenSubdiv returned %d limit stencils for %d vertices",
                    table ? table->GetNumStencils() : -1, (int)batch_count);
@@ -749,119 +844,70 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
         const std::vector<Far::Index> &indices = table->GetControlIndices();
         const std::vector<double> &weights = table->GetWeights();
         for (int32_t i = 0; i < batch_count; ++i) {
-            int32_t o = location_vertex[i];
+            const int32_t o = marked[(size_t)i];
             out.vertex.push_back(o);
             out.start.push_back((int64_t)out.indices.size());
             for (int k = 0; k < sizes[i]; ++k) {
                 Far::Index j = indices[offsets[i] + k];
                 if (j < 0 || j >= sub_n) {
-                    failed(SPIA_ERROR_INTERNAL, vertex_of[o], "OpenSubdiv stencil refers to point %d, not a control vertex",
-                           (int)j, 0);
+                    failed(SPIA_ERROR_INTERNAL, p.vertex_of[o],
+                           "OpenSubdiv stencil refers to point %d, not a control vertex", (int)j, 0);
                     return;
                 }
-                out.indices.push_back(osd_of_sub[j]);
+                out.indices.push_back(sub.osd_of_local[(size_t)j]);
             }
-            out.weights.insert(out.weights.end(), weights.begin() + offsets[i], weights.begin() + offsets[i] + sizes[i]);
+            out.weights.insert(out.weights.end(), weights.begin() + offsets[i],
+                               weights.begin() + offsets[i] + sizes[i]);
         }
         out.start.push_back((int64_t)out.indices.size());
-            }
-            };
-        std::atomic<bool> out_of_memory(false);
-        const int batch_threads = std::max(1, std::min(opt->threads, batches));
-        parallel_for(batch_threads, batches, 1, [&](int64_t b0, int64_t b1, int) {
-            for (int64_t b = b0; b < b1; ++b) {
-                try {
-                    run_batch((int32_t)b, results[(size_t)b]);
-                } catch (const std::bad_alloc &) {
-                    out_of_memory = true;
-                } catch (...) {
-                    results[(size_t)b].code = SPIA_ERROR_INTERNAL;
-                    snprintf(results[(size_t)b].message, SPIA_MESSAGE_SIZE, "unexpected failure around sharp features");
-                }
-            }
-        });
-        if (out_of_memory) throw std::bad_alloc();
-        for (BatchRows &out : results)
-            if (out.code != SPIA_OK) return spia__fail(status, out.code, out.index, "%s", out.message);
-        for (BatchRows &out : results) {
-            for (size_t r = 0; r < out.vertex.size(); ++r) {
-                const int32_t o = out.vertex[r];
-                row_start[o] = (int64_t)row_indices.size();
-                row_size[o] = (int32_t)(out.start[r + 1] - out.start[r]);
-                row_indices.insert(row_indices.end(), out.indices.begin() + out.start[r], out.indices.begin() + out.start[r + 1]);
-                row_weights.insert(row_weights.end(), out.weights.begin() + out.start[r], out.weights.begin() + out.start[r + 1]);
-            }
-            BatchRows().indices.swap(out.indices);
-            std::vector<double>().swap(out.weights);
-        }
-    }
-
-    // 8. Vertices no face uses keep their position, except that Blender
-    //    smooths a vertex with exactly two (loose) edges along them:
-    //    (prev + 4 V + next) / 6.
-    std::vector<int32_t> loose_degree, loose_ends;
-    if (blender && osd_n < n && m->edge_count > 0) {
-        loose_degree.assign((size_t)n, 0);
-        loose_ends.assign(2 * (size_t)n, -1);
-        for (int32_t e = 0; e < m->edge_count; ++e)
-            for (int k = 0; k < 2; ++k) {
-                int32_t v = m->edges[2 * (int64_t)e + k], w = m->edges[2 * (int64_t)e + 1 - k];
-                if (osd_of[v] >= 0) continue;
-                if (loose_degree[v] < 2) loose_ends[2 * (size_t)v + loose_degree[v]] = w;
-                ++loose_degree[v];
-            }
-    }
-    auto smoothed_loose = [&](int32_t v) { return !loose_degree.empty() && loose_degree[v] == 2; };
-
-    // 9. The table, written in place: each row gets room for a bound on its
-    //    length (the distinct vertices of the vertex's faces, on which its
-    //    limit point alone depends; the adaptive rows' own lengths), is
-    //    filled, sorted, merged and stripped of zeros there, and the rows are
-    //    then moved together.  A row longer than its bound (not expected) is
-    //    kept aside and the arrays are rebuilt to fit.
-    std::vector<int32_t> bound((size_t)n, 0);
-    {
-        std::vector<int32_t> stamp((size_t)osd_n, -1);
-        for (int32_t v = 0; v < n; ++v) {
-            const int32_t o = osd_of[v];
-            if (o < 0) {
-                bound[v] = smoothed_loose(v) ? 3 : 1;
-            } else if (feature[o]) {
-                bound[v] = row_size[o];
-            } else {
-                int32_t count = 0;
-                for (int64_t i = adj->first[v]; i < adj->first[v + 1]; ++i) {
-                    const int32_t f = adj->face_of_corner[adj->corner_of[i]];
-                    for (int64_t c = adj->corner_start[f]; c < adj->corner_start[f + 1]; ++c) {
-                        const int32_t u = osd_of[m->face_vertices[c]];
-                        if (stamp[u] != o) {
-                            stamp[u] = o;
-                            ++count;
-                        }
-                    }
-                }
-                bound[v] = count;
+    };
+    std::atomic<bool> out_of_memory(false);
+    const int batch_threads = std::max(1, std::min(opt->threads, batches));
+    parallel_for(batch_threads, batches, 1, [&](int64_t b0, int64_t b1, int) {
+        for (int64_t b = b0; b < b1; ++b) {
+            try {
+                run_batch((int32_t)b, results[(size_t)b]);
+            } catch (const std::bad_alloc &) {
+                out_of_memory = true;
+            } catch (...) {
+                results[(size_t)b].code = SPIA_ERROR_INTERNAL;
+                snprintf(results[(size_t)b].message, SPIA_MESSAGE_SIZE, "unexpected failure around sharp features");
             }
         }
+    });
+    if (out_of_memory) throw std::bad_alloc();
+    for (BatchRows &out : results)
+        if (out.code != SPIA_OK) return spia__fail(status, out.code, out.index, "%s", out.message);
+    held.start.assign((size_t)osd_n, -1);
+    held.size.assign((size_t)osd_n, 0);
+    for (BatchRows &out : results) {
+        for (size_t r = 0; r < out.vertex.size(); ++r) {
+            const int32_t o = out.vertex[r];
+            held.start[(size_t)o] = (int64_t)held.indices.size();
+            held.size[(size_t)o] = (int32_t)(out.start[r + 1] - out.start[r]);
+            for (int64_t k = out.start[r]; k < out.start[r + 1]; ++k) {
+                held.indices.push_back(p.vertex_of[(size_t)out.indices[(size_t)k]]);
+                held.weights.push_back(out.weights[(size_t)k]);
+            }
+        }
+        std::vector<int32_t>().swap(out.indices);
+        std::vector<double>().swap(out.weights);
     }
-    // From here on only corner_start is needed: the vertex lists make room
-    // for the table.
-    spia__adjacency_release_vertex_lists(adj_lists);
-    adj = nullptr;
-    const int64_t *corner_start = adj_lists->corner_start;
-    int64_t capacity = 0;
-    for (int32_t v = 0; v < n; ++v) capacity += bound[v];
-    spia_stencils *s = spia__stencils_alloc(n, capacity);
-    if (!s) return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for %lld stencil weights", (long long)capacity);
-    std::unique_ptr<spia_stencils, void (*)(spia_stencils *)> owner(s, spia_stencils_free);
-    for (int32_t v = 0; v < n; ++v) s->offsets[v + 1] = s->offsets[v] + bound[v];
-    std::vector<int32_t> &length = bound;  // bound[v] becomes the row's length once written
+    return SPIA_OK;
+}
+
+// The table under construction, written in place: each row gets room for a
+// bound on its length, is filled, sorted, merged and stripped of zeros
+// there, and the rows are then moved together (finish).  A row longer than
+// its bound (not expected) is kept aside and the arrays are rebuilt to fit.
+struct TableWriter {
+    spia_stencils *s = nullptr;
+    std::vector<int32_t> length;  // per row: its bound, then its length once written
     std::vector<std::pair<int32_t, std::vector<Entry>>> spilled;
 
-    // Writes row v from entries in caller numbering (any order, repeats
-    // allowed): stable sort by column, repeats added up in order, zeros
-    // dropped; returns false if it did not fit (then it is spilled).
-    auto write_row = [&](int32_t v, std::vector<Entry> &row, std::vector<std::pair<int32_t, std::vector<Entry>>> &spill) {
+    // Row v from entries in caller numbering (any order, repeats allowed):
+    // stable sort by column, repeats added up in order, zeros dropped.
+    void write(int32_t v, std::vector<Entry> &row, std::vector<std::pair<int32_t, std::vector<Entry>>> &spill) {
         for (size_t i = 1; i < row.size(); ++i) {
             Entry e = row[i];
             size_t j = i;
@@ -879,145 +925,37 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
             if (w != 0.0) row[out++] = Entry(k, w);
         }
         row.resize(out);
+        length[(size_t)v] = (int32_t)out;
         if ((int64_t)out > s->offsets[v + 1] - s->offsets[v]) {
             spill.emplace_back(v, row);
-            length[v] = (int32_t)out;
             return;
         }
-        int32_t *idx = s->indices + s->offsets[v];
-        double *wt = s->weights + s->offsets[v];
         for (size_t i = 0; i < out; ++i) {
-            idx[i] = row[i].first;
-            wt[i] = row[i].second;
+            s->indices[s->offsets[v] + (int64_t)i] = row[i].first;
+            s->weights[s->offsets[v] + (int64_t)i] = row[i].second;
         }
-        length[v] = (int32_t)out;
-    };
-
-    // Vertices no face uses, and the adaptive rows.
-    {
-        std::vector<Entry> row;
-        for (int32_t v = 0; v < n; ++v) {
-            const int32_t o = osd_of[v];
-            row.clear();
-            if (o < 0) {
-                row.emplace_back(v, smoothed_loose(v) ? 4.0 / 6.0 : 1.0);
-                if (smoothed_loose(v))
-                    for (int k = 0; k < 2; ++k) row.emplace_back(loose_ends[2 * (size_t)v + k], 1.0 / 6.0);
-            } else if (feature[o]) {
-                for (int32_t k = 0; k < row_size[o]; ++k) {
-                    Far::Index j = row_indices[row_start[o] + k];
-                    if (j < 0 || j >= osd_n)
-                        return spia__fail(status, SPIA_ERROR_INTERNAL, v,
-                                          "OpenSubdiv stencil refers to point %d, not a control vertex", (int)j);
-                    row.emplace_back(vertex_of[j], row_weights[row_start[o] + k]);
-                }
-            } else {
-                continue;
-            }
-            write_row(v, row, spilled);
-        }
-        std::vector<int64_t>().swap(row_start);
-        std::vector<int32_t>().swap(row_size);
-        std::vector<Far::Index>().swap(row_indices);
-        std::vector<double>().swap(row_weights);
-    }
-
-    // 10. Bfr at the corner chosen in step 5: closed-form vertices with the
-    //     default options, unless their face also gives a vertex at the
-    //     isolation level: then the face's one surface at that level serves
-    //     both (closed-form vertices come out the same from Blender's
-    //     patches at any level).  Faces are shared out among threads; each
-    //     row comes from one face, so the table is the same whatever the
-    //     number of threads.  Faces go in blocks of kFaceBlock, each with
-    //     factories of its own and so its own cache of irregular patches
-    //     (keyed by topology): a cache shared between threads measured no
-    //     faster with two threads than with one, its lock taken for every
-    //     face, and one cache per thread for the whole mesh grew to 1.6 kB a
-    //     vertex on the creased 1M-vertex sphere (0.85 kB per block, for
-    //     about the same time).
-    {
-        Bfr::SurfaceFactory::Options qopt;
-        qopt.SetApproxLevelSharp(opt->quality).SetApproxLevelSmooth(opt->quality);
-        const int32_t face_count = m->face_count;
-        const int threads = opt->threads > 0 ? opt->threads : 1;
-        std::vector<int32_t> failed_face_of((size_t)threads, INT32_MAX);  // per thread, the first face Bfr failed on
-        std::vector<unsigned char> out_of_memory_of((size_t)threads, 0), other_failure_of((size_t)threads, 0);
-        std::vector<std::vector<std::pair<int32_t, std::vector<Entry>>>> spill_of((size_t)threads);
-        const int32_t blocks = (face_count + kFaceBlock - 1) / kFaceBlock;
-        parallel_for(threads, blocks, 1, [&](int64_t fb0, int64_t fb1, int thread) {
-            try {
-                Bfr::Surface<double> srf;
-                std::vector<Far::Index> cv;
-                std::vector<double> w;
-                std::vector<Entry> row;
-                for (int32_t fb = (int32_t)fb0; fb < (int32_t)fb1; ++fb) {
-                Bfr::RefinerSurfaceFactory<> factory(*refiner, Bfr::SurfaceFactory::Options()), qfactory(*refiner, qopt);
-                const int32_t f_end = (int32_t)std::min<int64_t>(face_count, (int64_t)(fb + 1) * kFaceBlock);
-                for (int32_t f = fb * kFaceBlock; f < f_end; ++f) {
-                    bool initialized = false;
-                    const bool q = !level_face.empty() && level_face[f];
-                    for (int64_t c = corner_start[f]; c < corner_start[f + 1]; ++c) {
-                        const int32_t o = osd_of[m->face_vertices[c]];
-                        if (bfr_corner[o] != c) continue;
-                        if (!initialized) {
-                            if (!(q ? qfactory.InitVertexSurface(f, &srf) : factory.InitVertexSurface(f, &srf)) ||
-                                !srf.IsValid()) {
-                                failed_face_of[(size_t)thread] = std::min(failed_face_of[(size_t)thread], f);
-                                break;
-                            }
-                            initialized = true;
-                            cv.resize((size_t)srf.GetNumControlPoints());
-                            w.resize(cv.size());
-                            srf.GetControlPointIndices(cv.data());
-                        }
-                        double uv[2];
-                        srf.GetParameterization().GetVertexCoord((int)(c - corner_start[f]), uv);
-                        srf.EvaluateStencil(uv, w.data());
-                        row.clear();
-                        for (size_t k = 0; k < cv.size(); ++k)
-                            if (w[k] != 0.0) row.emplace_back(vertex_of[cv[k]], w[k]);
-                        write_row(m->face_vertices[c], row, spill_of[(size_t)thread]);
-                    }
-                }
-                }
-            } catch (const std::bad_alloc &) {
-                out_of_memory_of[(size_t)thread] = 1;
-            } catch (...) {
-                other_failure_of[(size_t)thread] = 1;
-            }
-        });
-        int32_t failed_face = INT32_MAX;
-        bool out_of_memory = false, other_failure = false;
-        for (int t = 0; t < threads; ++t) {
-            failed_face = std::min(failed_face, failed_face_of[(size_t)t]);
-            out_of_memory = out_of_memory || out_of_memory_of[(size_t)t];
-            other_failure = other_failure || other_failure_of[(size_t)t];
-        }
-        if (out_of_memory) throw std::bad_alloc();
-        if (other_failure) return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "unexpected failure computing limit stencils");
-        if (failed_face != INT32_MAX)
-            return spia__fail(status, SPIA_ERROR_INTERNAL, failed_face, "OpenSubdiv built no limit surface for face %d",
-                              (int)failed_face);
-        for (auto &part : spill_of)
-            for (auto &r : part) spilled.push_back(std::move(r));
     }
 
     // 11. Rows moved together (or, if some were spilled, copied into arrays
-    //     that fit them all).
-    if (spilled.empty()) {
-        int64_t pos = 0;
-        for (int32_t v = 0; v < n; ++v) {
-            const int64_t start = s->offsets[v];
-            s->offsets[v] = pos;
-            if (start != pos) {
-                memmove(s->indices + pos, s->indices + start, sizeof(int32_t) * (size_t)length[v]);
-                memmove(s->weights + pos, s->weights + start, sizeof(double) * (size_t)length[v]);
+    //     that fit them all).  Returns the finished table, or nullptr when
+    //     out of memory (s is then still owned by the caller).
+    spia_stencils *finish(int32_t n) {
+        if (spilled.empty()) {
+            int64_t pos = 0;
+            for (int32_t v = 0; v < n; ++v) {
+                const int64_t start = s->offsets[v];
+                s->offsets[v] = pos;
+                if (start != pos) {
+                    memmove(s->indices + pos, s->indices + start, sizeof(int32_t) * (size_t)length[v]);
+                    memmove(s->weights + pos, s->weights + start, sizeof(double) * (size_t)length[v]);
+                }
+                pos += length[v];
             }
-            pos += length[v];
+            s->offsets[n] = pos;
+            s->nnz = pos;
+            spia__stencils_shrink(s);
+            return s;
         }
-        s->offsets[n] = pos;
-        s->nnz = pos;
-    } else {
         std::sort(spilled.begin(), spilled.end(),
                   [](const std::pair<int32_t, std::vector<Entry>> &a, const std::pair<int32_t, std::vector<Entry>> &b) {
                       return a.first < b.first;
@@ -1025,7 +963,7 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
         int64_t total = 0;
         for (int32_t v = 0; v < n; ++v) total += length[v];
         spia_stencils *t = spia__stencils_alloc(n, total);
-        if (!t) return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for %lld stencil weights", (long long)total);
+        if (!t) return nullptr;
         size_t next = 0;
         int64_t pos = 0;
         for (int32_t v = 0; v < n; ++v) {
@@ -1043,11 +981,262 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
             }
         }
         t->offsets[n] = pos;
-        owner.reset(t);
+        t->nnz = pos;
+        spia_stencils_free(s);
         s = t;
+        return t;
     }
-    spia__stencils_shrink(s);
-    *out = owner.release();
+};
+
+// 10. Bfr at the corners chosen in step 5: at its default options, unless
+//     the face also gives a vertex at the isolation level: then the face's
+//     one surface at that level serves both (closed-form vertices come out
+//     the same from Blender's patches at any level).  Faces are shared out
+//     among threads; each row comes from one face, so the table is the same
+//     whatever the number of threads.  Faces go in blocks of kFaceBlock,
+//     each with factories of its own and so its own cache of irregular
+//     patches (keyed by topology): a cache shared between threads measured
+//     no faster with two threads than with one, its lock taken for every
+//     face, and one cache per thread for the whole mesh grew to 1.6 kB a
+//     vertex on the creased 1M-vertex sphere (0.85 kB per block, for about
+//     the same time).
+spia_result bfr_rows(const spia_mesh *m, const int64_t *corner_start, const spia_options *opt, const Prepared &p,
+                     const Part &part, const Evaluation &ev, TableWriter &table, spia_status *status) {
+    Bfr::SurfaceFactory::Options qopt;
+    qopt.SetApproxLevelSharp(opt->quality).SetApproxLevelSmooth(opt->quality);
+    const Far::TopologyRefiner &refiner = *part.refiner;
+    const int32_t face_count = refiner.GetLevel(0).GetNumFaces();
+    const int threads = opt->threads > 0 ? opt->threads : 1;
+    std::vector<int32_t> failed_face_of((size_t)threads, INT32_MAX);  // per thread, the first face Bfr failed on
+    std::vector<unsigned char> out_of_memory_of((size_t)threads, 0), other_failure_of((size_t)threads, 0);
+    std::vector<std::vector<std::pair<int32_t, std::vector<Entry>>>> spill_of((size_t)threads);
+    const int32_t blocks = (face_count + kFaceBlock - 1) / kFaceBlock;
+    parallel_for(threads, blocks, 1, [&](int64_t fb0, int64_t fb1, int thread) {
+        try {
+            Bfr::Surface<double> srf;
+            std::vector<Far::Index> cv;
+            std::vector<double> w;
+            std::vector<Entry> row;
+            for (int32_t fb = (int32_t)fb0; fb < (int32_t)fb1; ++fb) {
+                Bfr::RefinerSurfaceFactory<> factory(refiner, Bfr::SurfaceFactory::Options()),
+                    qfactory(refiner, qopt);
+                const int32_t i_end = (int32_t)std::min<int64_t>(face_count, (int64_t)(fb + 1) * kFaceBlock);
+                for (int32_t i = fb * kFaceBlock; i < i_end; ++i) {
+                    const int32_t f = part.mesh_face(i);
+                    bool initialized = false;
+                    const bool q = !ev.level_face.empty() && ev.level_face[f];
+                    for (int64_t c = corner_start[f]; c < corner_start[f + 1]; ++c) {
+                        const int32_t o = p.osd_of[m->face_vertices[c]];
+                        if (ev.bfr_corner[o] != c) continue;
+                        if (!initialized) {
+                            if (!(q ? qfactory.InitVertexSurface(i, &srf) : factory.InitVertexSurface(i, &srf)) ||
+                                !srf.IsValid()) {
+                                failed_face_of[(size_t)thread] = std::min(failed_face_of[(size_t)thread], f);
+                                break;
+                            }
+                            initialized = true;
+                            cv.resize((size_t)srf.GetNumControlPoints());
+                            w.resize(cv.size());
+                            srf.GetControlPointIndices(cv.data());
+                        }
+                        double uv[2];
+                        srf.GetParameterization().GetVertexCoord((int)(c - corner_start[f]), uv);
+                        srf.EvaluateStencil(uv, w.data());
+                        row.clear();
+                        for (size_t k = 0; k < cv.size(); ++k)
+                            if (w[k] != 0.0) row.emplace_back(p.vertex_of[part.osd(cv[k])], w[k]);
+                        table.write(m->face_vertices[c], row, spill_of[(size_t)thread]);
+                    }
+                }
+            }
+        } catch (const std::bad_alloc &) {
+            out_of_memory_of[(size_t)thread] = 1;
+        } catch (...) {
+            other_failure_of[(size_t)thread] = 1;
+        }
+    });
+    int32_t failed_face = INT32_MAX;
+    bool out_of_memory = false, other_failure = false;
+    for (int t = 0; t < threads; ++t) {
+        failed_face = std::min(failed_face, failed_face_of[(size_t)t]);
+        out_of_memory = out_of_memory || out_of_memory_of[(size_t)t];
+        other_failure = other_failure || other_failure_of[(size_t)t];
+    }
+    if (out_of_memory) throw std::bad_alloc();
+    if (other_failure) return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "unexpected failure computing limit stencils");
+    if (failed_face != INT32_MAX)
+        return spia__fail(status, SPIA_ERROR_INTERNAL, failed_face, "OpenSubdiv built no limit surface for face %d",
+                          (int)failed_face);
+    for (auto &part_spill : spill_of)
+        for (auto &r : part_spill) table.spilled.push_back(std::move(r));
+    return SPIA_OK;
+}
+
+// The closed-form rows (catmark_closed.c) over all vertices, on the
+// threads: lengths (-1 for vertices that need OpenSubdiv, or no face uses)
+// when table is nullptr, else the rows written into the table.
+void closed_rows(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, const Prepared &p,
+                 std::vector<int32_t> *lengths, TableWriter *table) {
+    spia_catmark_sharpness sh;
+    sh.vertex = p.vertex_sharpness.data();
+    sh.crease_first = p.crease_first.empty() ? nullptr : p.crease_first.data();
+    sh.crease_other = p.crease_other.empty() ? nullptr : p.crease_other.data();
+    sh.crease_sharpness = p.crease_sharpness.empty() ? nullptr : p.crease_sharpness.data();
+    sh.preserve_corners = opt->boundary_smooth == SPIA_BOUNDARY_SMOOTH_PRESERVE_CORNERS;
+    const int threads = opt->threads > 0 ? opt->threads : 1;
+    std::atomic<bool> out_of_memory(false);
+    parallel_for(threads, m->vertex_count, 4096, [&](int64_t v0, int64_t v1, int) {
+        spia_row_scratch scratch;
+        memset(&scratch, 0, sizeof scratch);
+        scratch.build = table != nullptr;
+        for (int32_t v = (int32_t)v0; v < (int32_t)v1 && !out_of_memory; ++v) {
+            if (table && (*lengths)[(size_t)v] < 0) continue;
+            const int32_t len = spia__catmark_closed_row(m, adj, &sh, v, &scratch);
+            if (len == SPIA__ROW_OUT_OF_MEMORY) {
+                out_of_memory = true;
+            } else if (!table) {
+                (*lengths)[(size_t)v] = len;
+            } else {
+                spia_stencils *s = table->s;
+                for (int32_t k = 0; k < len; ++k) {
+                    s->indices[s->offsets[v] + k] = scratch.entries[k].column;
+                    s->weights[s->offsets[v] + k] = scratch.entries[k].weight;
+                }
+                table->length[(size_t)v] = len;
+            }
+        }
+        spia__row_scratch_free(&scratch);
+    });
+    if (out_of_memory) throw std::bad_alloc();
+}
+
+spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_options *opt, spia_stencils **out,
+                  spia_status *status) {
+    const spia_adjacency *adj = adj_lists;
+    Prepared p;
+    spia_result r = prepare_sharpness(m, adj, opt, p);
+    if (r != SPIA_OK) return r;
+    const int32_t n = m->vertex_count;
+
+    // Closed-form rows first (Catmull-Clark): their lengths, and the
+    // vertices left for OpenSubdiv.
+    std::vector<int32_t> closed_length((size_t)n, -1);
+    if (p.blender) closed_rows(m, adj, opt, p, &closed_length, nullptr);
+    std::vector<int32_t> wanted;
+    for (int32_t o = 0; o < p.osd_n; ++o)
+        if (closed_length[(size_t)p.vertex_of[o]] < 0) wanted.push_back(o);
+
+    // OpenSubdiv's refiner on the faces within two rings of those vertices
+    // (the whole mesh when that is all of it).
+    Part part;
+    Evaluation ev;
+    HeldRows held;
+    if (!wanted.empty()) {
+        std::vector<char> in_part = two_ring_faces(m, adj, p, wanted);
+        if (std::find(in_part.begin(), in_part.end(), 0) == in_part.end()) in_part.clear();
+        r = make_part(m, adj, opt, p, in_part, true, part, status);
+        if (r != SPIA_OK) return r;
+        choose_evaluation(m, adj, opt, p, part, wanted, ev);
+        r = adaptive_rows(m, adj, opt, p, ev, held, status);
+        if (r != SPIA_OK) return r;
+    }
+
+    // 8. Vertices no face uses keep their position, except that Blender
+    //    smooths a vertex with exactly two (loose) edges along them:
+    //    (prev + 4 V + next) / 6.
+    std::vector<int32_t> loose_degree, loose_ends;
+    if (p.blender && p.osd_n < n && m->edge_count > 0) {
+        loose_degree.assign((size_t)n, 0);
+        loose_ends.assign(2 * (size_t)n, -1);
+        for (int32_t e = 0; e < m->edge_count; ++e)
+            for (int k = 0; k < 2; ++k) {
+                int32_t v = m->edges[2 * (int64_t)e + k], w = m->edges[2 * (int64_t)e + 1 - k];
+                if (p.osd_of[v] >= 0) continue;
+                if (loose_degree[v] < 2) loose_ends[2 * (size_t)v + loose_degree[v]] = w;
+                ++loose_degree[v];
+            }
+    }
+    auto smoothed_loose = [&](int32_t v) { return !loose_degree.empty() && loose_degree[v] == 2; };
+
+    // 9. Each row's bound: the closed-form and adaptive rows' own lengths;
+    //    for Bfr's, the distinct vertices of the vertex's faces, on which
+    //    its limit point alone depends.
+    TableWriter table;
+    table.length.assign((size_t)n, 0);
+    {
+        std::vector<int32_t> stamp;
+        for (int32_t v = 0; v < n; ++v) {
+            const int32_t o = p.osd_of[v];
+            int32_t &bound = table.length[(size_t)v];
+            if (o < 0) {
+                bound = smoothed_loose(v) ? 3 : 1;
+            } else if (closed_length[(size_t)v] >= 0) {
+                bound = closed_length[(size_t)v];
+            } else if (ev.adaptive[o]) {
+                bound = held.size[o];
+            } else {
+                if (stamp.empty()) stamp.assign((size_t)p.osd_n, -1);
+                int32_t count = 0;
+                for (int64_t i = adj->first[v]; i < adj->first[v + 1]; ++i) {
+                    const int32_t f = adj->face_of_corner[adj->corner_of[i]];
+                    for (int64_t c = adj->corner_start[f]; c < adj->corner_start[f + 1]; ++c) {
+                        const int32_t u = p.osd_of[m->face_vertices[c]];
+                        if (stamp[u] != o) {
+                            stamp[u] = o;
+                            ++count;
+                        }
+                    }
+                }
+                bound = count;
+            }
+        }
+    }
+    int64_t capacity = 0;
+    for (int32_t v = 0; v < n; ++v) capacity += table.length[(size_t)v];
+    table.s = spia__stencils_alloc(n, capacity);
+    if (!table.s)
+        return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for %lld stencil weights",
+                          (long long)capacity);
+    std::unique_ptr<spia_stencils, void (*)(spia_stencils *)> owner(table.s, spia_stencils_free);
+    for (int32_t v = 0; v < n; ++v) table.s->offsets[v + 1] = table.s->offsets[v] + table.length[(size_t)v];
+
+    if (p.blender) closed_rows(m, adj, opt, p, &closed_length, &table);
+    std::vector<int32_t>().swap(closed_length);
+    // Vertices no face uses, and the adaptive rows.
+    {
+        std::vector<Entry> row;
+        for (int32_t v = 0; v < n; ++v) {
+            const int32_t o = p.osd_of[v];
+            row.clear();
+            if (o < 0) {
+                row.emplace_back(v, smoothed_loose(v) ? 4.0 / 6.0 : 1.0);
+                if (smoothed_loose(v))
+                    for (int k = 0; k < 2; ++k) row.emplace_back(loose_ends[2 * (size_t)v + k], 1.0 / 6.0);
+            } else if (!ev.adaptive.empty() && ev.adaptive[o]) {
+                for (int32_t k = 0; k < held.size[o]; ++k)
+                    row.emplace_back(held.indices[held.start[o] + k], held.weights[held.start[o] + k]);
+            } else {
+                continue;
+            }
+            table.write(v, row, table.spilled);
+        }
+        HeldRows().indices.swap(held.indices);
+        std::vector<double>().swap(held.weights);
+    }
+    // From here on only corner_start is needed: the vertex lists make room.
+    spia__adjacency_release_vertex_lists(adj_lists);
+    adj = nullptr;
+    if (part.refiner) {
+        r = bfr_rows(m, adj_lists->corner_start, opt, p, part, ev, table, status);
+        if (r != SPIA_OK) return r;
+    }
+    owner.release();
+    spia_stencils *done = table.finish(n);
+    if (!done) {
+        spia_stencils_free(table.s);
+        return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the stencil table");
+    }
+    *out = done;
     spia__ok(status);
     return SPIA_OK;
 }

@@ -118,6 +118,45 @@ void spia__stencils_mark_boundary(spia_stencils *s, const unsigned char *on_boun
 spia_result spia__osd_limit_stencils(const spia_mesh *mesh, spia_adjacency *adj, const spia_options *options,
                                      spia_stencils **out, spia_status *status);
 
+/* Catmull-Clark rows with a closed form (catmark_closed.c).  Sharpness as
+ * OpenSubdiv is given it, in the mesh's vertex numbering: vertex[v] after
+ * Blender's rules (0 for vertices no face uses), and the creased face edges
+ * of each vertex as a list (crease_first NULL when there are none). */
+#define SPIA__SHARPNESS_INFINITE 10.0f
+typedef struct spia_catmark_sharpness {
+    const float *vertex;
+    const int64_t *crease_first; /* vertex_count + 1 */
+    const int32_t *crease_other;
+    const float *crease_sharpness;
+    int preserve_corners; /* boundary vertices with one face are corners */
+} spia_catmark_sharpness;
+
+typedef struct spia_row_entry {
+    int32_t column;
+    double weight;
+} spia_row_entry;
+
+/* Per-thread room for one row, grown as needed; zero it to start.  With
+ * build 0, spia__catmark_closed_row only classifies and returns a bound on
+ * the row's length. */
+typedef struct spia_row_scratch {
+    spia_row_entry *entries;
+    int32_t *neighbours;
+    int64_t capacity;
+    int build;
+} spia_row_scratch;
+void spia__row_scratch_free(spia_row_scratch *s);
+
+enum { SPIA__ROW_NOT_CLOSED = -1, SPIA__ROW_OUT_OF_MEMORY = -2 };
+
+/* The closed-form limit row of vertex v: its length, with the entries in
+ * scratch->entries sorted by column, repeats added up and zeros dropped
+ * (with scratch->build 0: a bound on it, and no entries);
+ * SPIA__ROW_NOT_CLOSED when v needs OpenSubdiv's patches, or
+ * SPIA__ROW_OUT_OF_MEMORY. */
+int32_t spia__catmark_closed_row(const spia_mesh *mesh, const spia_adjacency *adj, const spia_catmark_sharpness *sh,
+                                 int32_t v, spia_row_scratch *scratch);
+
 /* Loop refinement with every vertex at its limit (OpenSubdiv's rules, in
  * catmark_osd.cpp; Hoppe's, in loop.c).  Counts only when positions is NULL. */
 spia_result spia__osd_refine_limit(const spia_mesh *mesh, const spia_adjacency *adj, const spia_options *options,
