@@ -795,8 +795,7 @@ spia_result adaptive_rows(const spia_mesh *m, const spia_adjacency *adj, const s
         std::vector<Far::Index> feature_faces;
         for (int32_t o : marked) {
             const int32_t v = p.vertex_of[o];
-            for (int64_t k = adj->first[v]; k < adj->first[v + 1]; ++k)
-                feature_faces.push_back(sub_face_of[adj->face_of_corner[adj->corner_of[k]]]);
+            feature_faces.push_back(sub_face_of[adj->face_of_corner[adj->corner_of[adj->first[v]]]]);
         }
         std::sort(feature_faces.begin(), feature_faces.end());
         feature_faces.erase(std::unique(feature_faces.begin(), feature_faces.end()), feature_faces.end());

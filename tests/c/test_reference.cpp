@@ -413,6 +413,69 @@ int main(int argc, char **argv) {
     compare_all(t, "triangulated torus", {1, 3});
     tmesh_free(&t);
 
+    // What messy meshes have: cones meeting at their apexes (vertices with
+    // two fans, valence 2 x 40) beside a smooth cone tip of valence 40 and
+    // a vertex shared by a third cone's fan only at its rim; a cylinder
+    // with 24- and 64-sided caps, the rim of one cap creased; and a
+    // vertex whose faces wind two ways (an edge used twice in one
+    // direction).
+    tmesh hard;
+    memset(&hard, 0, sizeof hard);
+    {
+        const int seg = 40;
+        const int32_t apex = tmesh_vertex(&hard, 0.0, 0.0, 0.0);
+        for (int side = 0; side < 2; ++side) {
+            const double z = side ? -1.0 : 1.0;
+            std::vector<int32_t> ring;
+            for (int i = 0; i < seg; ++i)
+                ring.push_back(tmesh_vertex(&hard, cos(6.283185307 * i / seg), sin(6.283185307 * i / seg) * 1.1, z));
+            const int32_t tip = tmesh_vertex(&hard, 0.05, 0.0, 2.0 * z);
+            for (int i = 0; i < seg; ++i) {
+                const int32_t a = ring[(size_t)i], b = ring[(size_t)((i + 1) % seg)];
+                if (side) {
+                    tmesh_tri(&hard, apex, a, b);
+                    tmesh_tri(&hard, b, a, tip);
+                } else {
+                    tmesh_tri(&hard, apex, b, a);
+                    tmesh_tri(&hard, a, b, tip);
+                }
+            }
+        }
+        const int sides[2] = {24, 64};
+        for (int c = 0; c < 2; ++c) {
+            const int s = sides[c];
+            std::vector<int32_t> lo, hi;
+            for (int i = 0; i < s; ++i) {
+                const double a = 6.283185307 * i / s;
+                lo.push_back(tmesh_vertex(&hard, 4.0 + 5.0 * c + cos(a), sin(a), 0.0));
+                hi.push_back(tmesh_vertex(&hard, 4.0 + 5.0 * c + cos(a), sin(a), 1.5 + 0.1 * cos(3 * a)));
+            }
+            for (int i = 0; i < s; ++i) {
+                const int j = (i + 1) % s;
+                tmesh_quad(&hard, lo[(size_t)i], lo[(size_t)j], hi[(size_t)j], hi[(size_t)i]);
+                if (c == 1) tmesh_edge(&hard, hi[(size_t)i], hi[(size_t)j], 1.0f);
+            }
+            std::vector<int32_t> top(hi), bottom(lo.rbegin(), lo.rend());
+            tmesh_face(&hard, s, top.data());
+            tmesh_face(&hard, s, bottom.data());
+        }
+        // A quad fan around a centre with a face turned the other way.
+        const int32_t centre = tmesh_vertex(&hard, 15.0, 0.0, 0.2);
+        std::vector<int32_t> rim, mid;
+        for (int i = 0; i < 6; ++i) {
+            rim.push_back(tmesh_vertex(&hard, 15.0 + 2.0 * cos(1.0471975512 * i), 2.0 * sin(1.0471975512 * i), 0.0));
+            mid.push_back(tmesh_vertex(&hard, 15.0 + 2.0 * cos(1.0471975512 * (i + 0.5)),
+                                       2.0 * sin(1.0471975512 * (i + 0.5)), 0.3));
+        }
+        for (int i = 0; i < 6; ++i) {
+            const int32_t a = rim[(size_t)i], m = mid[(size_t)i], b = rim[(size_t)((i + 1) % 6)];
+            if (i == 3) tmesh_quad(&hard, centre, b, m, a);
+            else tmesh_quad(&hard, centre, a, m, b);
+        }
+    }
+    compare_all(hard, "cones at an apex, 24- and 64-gons, a flipped face", {1, 3, 6}, {0, 30700});
+    tmesh_free(&hard);
+
     static const char *names[] = {"mushroom.obj", "double-torus.obj", "teapot.obj", "catmark_car.obj",
                                   "catmark_nonman_edges.obj", "bunny.obj"};
     for (const char *n : names) {
