@@ -47,10 +47,10 @@ static int grow(spia_row_scratch *s, int64_t need) {
     int64_t cap = s->capacity > 0 ? s->capacity : 64;
     while (cap < need) cap *= 2;
     spia_row_entry *e = (spia_row_entry *)realloc(s->entries, sizeof(spia_row_entry) * (size_t)cap);
-    int32_t *nb = (int32_t *)realloc(s->neighbours, sizeof(int32_t) * 3 * (size_t)cap);
     if (e) s->entries = e;
-    if (nb) s->neighbours = nb;
-    if (!e || !nb) return 0;
+    spia_fan_corner *fan = (spia_fan_corner *)realloc(s->fan, sizeof(spia_fan_corner) * (size_t)cap);
+    if (fan) s->fan = fan;
+    if (!e || !fan) return 0;
     s->capacity = cap;
     return 1;
 }
@@ -98,35 +98,44 @@ int32_t spia__catmark_closed_row(const spia_mesh *m, const spia_adjacency *adj, 
     const float vs = sh->vertex[v];
     if (vs > 0.0f && vs < SPIA__SHARPNESS_INFINITE) return SPIA__ROW_NOT_CLOSED;
     if (!grow(scratch, (int64_t)k + 1)) return SPIA__ROW_OUT_OF_MEMORY;
-    /* next[i], prev[i]: the neighbours after and before v in its i-th face;
-     * succ[i]: the face that follows face i around v (its prev is next[i]). */
-    int32_t *next = scratch->neighbours, *prev = scratch->neighbours + k, *succ = scratch->neighbours + 2 * (int64_t)k;
+    /* The faces around v, read once: for the i-th, the neighbours after and
+     * before v in it and where its corners are. */
+    spia_fan_corner *fan = scratch->fan;
+    int64_t total = 1; /* 1 + sum (|f| - 2): the smooth row's length bound */
     for (int32_t i = 0; i < k; ++i) {
         const int64_t c = adj->corner_of[first + i];
         const int32_t f = adj->face_of_corner[c];
+        const int64_t c0 = adj->corner_start[f], c1 = adj->corner_start[f + 1];
+        const int32_t *fv = m->face_vertices;
         int uses = 0;
-        for (int64_t d = adj->corner_start[f]; d < adj->corner_start[f + 1]; ++d) uses += m->face_vertices[d] == v;
-        next[i] = spia__corner_next(m, adj, c);
-        prev[i] = spia__corner_prev(m, adj, c);
-        if (uses != 1 || next[i] == prev[i]) return SPIA__ROW_NOT_CLOSED;
+        for (int64_t d = c0; d < c1; ++d) uses += fv[d] == v;
+        fan[i].corner = c;
+        fan[i].start = c0;
+        fan[i].size = (int32_t)(c1 - c0);
+        fan[i].next = fv[c + 1 == c1 ? c0 : c + 1];
+        fan[i].prev = fv[c == c0 ? c1 - 1 : c - 1];
+        total += c1 - c0 - 2;
+        if (uses != 1 || fan[i].next == fan[i].prev) return SPIA__ROW_NOT_CLOSED;
     }
     /* One fan, consistently oriented: every neighbour follows v in at most
      * one face and precedes it in at most one; around an interior vertex
      * each face's next is another face's prev, around a boundary vertex all
-     * but one (end), and walking from face to face visits every face. */
+     * but one (end), and walking from face to face visits every face.
+     * succ[i]: the face after face i (its prev is face i's next). */
     int32_t start = -1, end = -1;
     for (int32_t i = 0; i < k; ++i) {
-        int32_t as_prev = 0, prev_as_next = 0;
+        int32_t succ = -1, pred = -1;
         for (int32_t j = 0; j < k; ++j) {
-            if (j != i && (next[j] == next[i] || prev[j] == prev[i])) return SPIA__ROW_NOT_CLOSED;
-            as_prev += prev[j] == next[i];
-            prev_as_next += next[j] == prev[i];
+            if (j != i && (fan[j].next == fan[i].next || fan[j].prev == fan[i].prev)) return SPIA__ROW_NOT_CLOSED;
+            if (fan[j].prev == fan[i].next) succ = j;
+            if (fan[j].next == fan[i].prev) pred = j;
         }
-        if (!as_prev) {
+        fan[i].succ = succ;
+        if (succ < 0) {
             if (end >= 0) return SPIA__ROW_NOT_CLOSED;
             end = i;
         }
-        if (!prev_as_next) {
+        if (pred < 0) {
             if (start >= 0) return SPIA__ROW_NOT_CLOSED;
             start = i;
         }
@@ -135,13 +144,8 @@ int32_t spia__catmark_closed_row(const spia_mesh *m, const spia_adjacency *adj, 
     if ((start >= 0) != (end >= 0)) return SPIA__ROW_NOT_CLOSED;
     {
         int32_t i = boundary ? start : 0, steps = 1;
-        while (boundary ? i != end : 1) {
-            int32_t j = 0;
-            while (j < k && prev[j] != next[i]) ++j;
-            if (j == k) return SPIA__ROW_NOT_CLOSED;
-            succ[i] = j;
-            i = j;
-            if (!boundary && i == 0) break;
+        while (fan[i].succ >= 0 && fan[i].succ != (boundary ? -1 : 0)) {
+            i = fan[i].succ;
             if (++steps > k) return SPIA__ROW_NOT_CLOSED;
         }
         if (steps != k) return SPIA__ROW_NOT_CLOSED;
@@ -151,16 +155,18 @@ int32_t spia__catmark_closed_row(const spia_mesh *m, const spia_adjacency *adj, 
     int32_t sharp[SHARP_EDGE_LIMIT];
     int n_sharp = 0;
     if (boundary) {
-        sharp[n_sharp++] = prev[start];
-        sharp[n_sharp++] = next[end];
+        sharp[n_sharp++] = fan[start].prev;
+        sharp[n_sharp++] = fan[end].next;
     }
-    for (int32_t i = 0; i < k; ++i) {
-        if (boundary && i == end) continue; /* a boundary edge */
-        const float s = edge_sharpness(sh, v, next[i]);
-        if (s <= 0.0f) continue;
-        if (s < SPIA__SHARPNESS_INFINITE) return SPIA__ROW_NOT_CLOSED; /* semi-sharp */
-        if (n_sharp < SHARP_EDGE_LIMIT) sharp[n_sharp] = next[i];
-        ++n_sharp;
+    if (sh->crease_first && sh->crease_first[v + 1] > sh->crease_first[v]) {
+        for (int32_t i = 0; i < k; ++i) {
+            if (boundary && i == end) continue; /* a boundary edge */
+            const float s = edge_sharpness(sh, v, fan[i].next);
+            if (s <= 0.0f) continue;
+            if (s < SPIA__SHARPNESS_INFINITE) return SPIA__ROW_NOT_CLOSED; /* semi-sharp */
+            if (n_sharp < SHARP_EDGE_LIMIT) sharp[n_sharp] = fan[i].next;
+            ++n_sharp;
+        }
     }
     const int corner_vertex = vs >= SPIA__SHARPNESS_INFINITE || (boundary && k == 1 && sh->preserve_corners);
     spia_row_entry *e = scratch->entries;
@@ -169,8 +175,8 @@ int32_t spia__catmark_closed_row(const spia_mesh *m, const spia_adjacency *adj, 
         e[0].weight = 1.0;
         return 1;
     }
-    if (n_sharp == 1) return SPIA__ROW_NOT_CLOSED;                     /* a dart */
-    if (boundary && k == 1) return SPIA__ROW_NOT_CLOSED;               /* a smooth corner */
+    if (n_sharp == 1) return SPIA__ROW_NOT_CLOSED;       /* a dart */
+    if (boundary && k == 1) return SPIA__ROW_NOT_CLOSED; /* a smooth corner */
     if (n_sharp == 2) {
         e[0].column = sharp[0];
         e[0].weight = 1.0 / 6.0;
@@ -180,41 +186,32 @@ int32_t spia__catmark_closed_row(const spia_mesh *m, const spia_adjacency *adj, 
         e[2].weight = 1.0 / 6.0;
         return finish_row(e, 3);
     }
-    if (k < 3) return SPIA__ROW_NOT_CLOSED;                             /* two faces */
+    if (k < 3) return SPIA__ROW_NOT_CLOSED; /* two faces */
 
     /* Smooth interior: ((n^2 - n) V + 2 sum w + 4 sum F) / (n (n + 5)),
      * one entry per vertex of the fan: V, each neighbour w along an edge
      * (2 plus 4 / |f| from each of the edge's two faces) and the faces'
      * other vertices (4 / |f|).  Repeats (a vertex on two faces that share
      * no edge) are added up by finish_row. */
-    int64_t total = 1;
-    for (int32_t i = 0; i < k; ++i) {
-        const int32_t f = adj->face_of_corner[adj->corner_of[first + i]];
-        total += adj->corner_start[f + 1] - adj->corner_start[f] - 2;
-    }
     if (total > INT32_MAX) return SPIA__ROW_OUT_OF_MEMORY;
     if (!scratch->build) return (int32_t)total; /* a bound on the length */
     if (!grow(scratch, total)) return SPIA__ROW_OUT_OF_MEMORY;
     e = scratch->entries;
-    next = scratch->neighbours;
-    succ = scratch->neighbours + 2 * (int64_t)k;
+    fan = scratch->fan;
     const double n = (double)k, scale = 1.0 / (n * (n + 5.0));
     double centre = (n * n - n) * scale;
     int32_t count = 1;
     for (int32_t i = 0; i < k; ++i) {
-        const int64_t c = adj->corner_of[first + i];
-        const int32_t f = adj->face_of_corner[c];
-        const int64_t c0 = adj->corner_start[f], c1 = adj->corner_start[f + 1];
-        const double wf = 4.0 * scale / (double)(c1 - c0);
+        const int64_t c = fan[i].corner, c0 = fan[i].start, c1 = c0 + fan[i].size;
+        const double wf = 4.0 * scale / (double)fan[i].size;
         centre += wf;
-        /* The edge to next[i] lies on face i and the face after it. */
-        const int32_t g = adj->face_of_corner[adj->corner_of[first + succ[i]]];
-        e[count].column = next[i];
-        e[count++].weight = 2.0 * scale + wf + 4.0 * scale / (double)(adj->corner_start[g + 1] - adj->corner_start[g]);
-        /* The face's vertices from the one after next[i] to the one before
-         * prev[i]. */
-        int64_t d = c + 2 < c1 ? c + 2 : c + 2 - (c1 - c0);
-        for (int64_t left = c1 - c0 - 3; left > 0; --left) {
+        /* The edge to next lies on face i and the face after it. */
+        e[count].column = fan[i].next;
+        e[count++].weight = 2.0 * scale + wf + 4.0 * scale / (double)fan[fan[i].succ].size;
+        /* The face's vertices from the one after next to the one before
+         * prev. */
+        int64_t d = c + 2 < c1 ? c + 2 : c + 2 - fan[i].size;
+        for (int32_t left = fan[i].size - 3; left > 0; --left) {
             e[count].column = m->face_vertices[d];
             e[count++].weight = wf;
             if (++d == c1) d = c0;
@@ -227,6 +224,6 @@ int32_t spia__catmark_closed_row(const spia_mesh *m, const spia_adjacency *adj, 
 
 void spia__row_scratch_free(spia_row_scratch *s) {
     free(s->entries);
-    free(s->neighbours);
+    free(s->fan);
     memset(s, 0, sizeof *s);
 }

@@ -1071,11 +1071,10 @@ spia_result bfr_rows(const spia_mesh *m, const int64_t *corner_start, const spia
     return SPIA_OK;
 }
 
-// The closed-form rows (catmark_closed.c) over all vertices, on the
-// threads: lengths (-1 for vertices that need OpenSubdiv, or no face uses)
-// when table is nullptr, else the rows written into the table.
+// The closed-form rows (catmark_closed.c), on the threads, written into
+// the table; the vertices they do not cover (no closed form) get length -1.
 void closed_rows(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, const Prepared &p,
-                 std::vector<int32_t> *lengths, TableWriter *table) {
+                 TableWriter &table) {
     spia_catmark_sharpness sh;
     sh.vertex = p.vertex_sharpness.data();
     sh.crease_first = p.crease_first.empty() ? nullptr : p.crease_first.data();
@@ -1084,29 +1083,72 @@ void closed_rows(const spia_mesh *m, const spia_adjacency *adj, const spia_optio
     sh.preserve_corners = opt->boundary_smooth == SPIA_BOUNDARY_SMOOTH_PRESERVE_CORNERS;
     const int threads = opt->threads > 0 ? opt->threads : 1;
     std::atomic<bool> out_of_memory(false);
+    spia_stencils *s = table.s;
     parallel_for(threads, m->vertex_count, 4096, [&](int64_t v0, int64_t v1, int) {
         spia_row_scratch scratch;
         memset(&scratch, 0, sizeof scratch);
-        scratch.build = table != nullptr;
+        scratch.build = 1;
         for (int32_t v = (int32_t)v0; v < (int32_t)v1 && !out_of_memory; ++v) {
-            if (table && (*lengths)[(size_t)v] < 0) continue;
+            if (p.osd_of[v] < 0) continue;
             const int32_t len = spia__catmark_closed_row(m, adj, &sh, v, &scratch);
             if (len == SPIA__ROW_OUT_OF_MEMORY) {
                 out_of_memory = true;
-            } else if (!table) {
-                (*lengths)[(size_t)v] = len;
+            } else if (len < 0 || len > s->offsets[v + 1] - s->offsets[v]) {
+                table.length[(size_t)v] = -1;  // (a closed row is never longer than its room)
             } else {
-                spia_stencils *s = table->s;
                 for (int32_t k = 0; k < len; ++k) {
                     s->indices[s->offsets[v] + k] = scratch.entries[k].column;
                     s->weights[s->offsets[v] + k] = scratch.entries[k].weight;
                 }
-                table->length[(size_t)v] = len;
+                table.length[(size_t)v] = len;
             }
         }
         spia__row_scratch_free(&scratch);
     });
     if (out_of_memory) throw std::bad_alloc();
+}
+
+// 9. Each row's room.  For Loop, where every row comes from OpenSubdiv, the
+//    distinct vertices of the vertex's faces, on which its limit point
+//    alone depends.  For Catmull-Clark, where most rows have a closed form,
+//    that row's length for a smooth interior vertex, 1 + sum (|f| - 2)
+//    (and at least 3, a crease's): the table is made before it is known
+//    which vertices need OpenSubdiv, and a row from it that does not fit
+//    is kept aside (TableWriter).  Vertices no face uses: 1, or 3 where
+//    two loose edges smooth them.
+std::vector<int32_t> row_room(const spia_mesh *m, const spia_adjacency *adj, const Prepared &p,
+                              const std::vector<int32_t> &loose_degree) {
+    const int32_t n = m->vertex_count;
+    std::vector<int32_t> room((size_t)n, 0);
+    std::vector<int32_t> stamp;
+    if (!p.blender) stamp.assign((size_t)p.osd_n, -1);
+    for (int32_t v = 0; v < n; ++v) {
+        const int32_t o = p.osd_of[v];
+        int32_t count = 0;
+        if (o < 0) {
+            count = !loose_degree.empty() && loose_degree[v] == 2 ? 3 : 1;
+        } else if (p.blender) {
+            int64_t sum = 1;
+            for (int64_t i = adj->first[v]; i < adj->first[v + 1]; ++i) {
+                const int32_t f = adj->face_of_corner[adj->corner_of[i]];
+                sum += adj->corner_start[f + 1] - adj->corner_start[f] - 2;
+            }
+            count = (int32_t)std::min<int64_t>(std::max<int64_t>(sum, 3), INT32_MAX);
+        } else {
+            for (int64_t i = adj->first[v]; i < adj->first[v + 1]; ++i) {
+                const int32_t f = adj->face_of_corner[adj->corner_of[i]];
+                for (int64_t c = adj->corner_start[f]; c < adj->corner_start[f + 1]; ++c) {
+                    const int32_t u = p.osd_of[m->face_vertices[c]];
+                    if (stamp[u] != o) {
+                        stamp[u] = o;
+                        ++count;
+                    }
+                }
+            }
+        }
+        room[(size_t)v] = count;
+    }
+    return room;
 }
 
 spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_options *opt, spia_stencils **out,
@@ -1116,29 +1158,6 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
     spia_result r = prepare_sharpness(m, adj, opt, p);
     if (r != SPIA_OK) return r;
     const int32_t n = m->vertex_count;
-
-    // Closed-form rows first (Catmull-Clark): their lengths, and the
-    // vertices left for OpenSubdiv.
-    std::vector<int32_t> closed_length((size_t)n, -1);
-    if (p.blender) closed_rows(m, adj, opt, p, &closed_length, nullptr);
-    std::vector<int32_t> wanted;
-    for (int32_t o = 0; o < p.osd_n; ++o)
-        if (closed_length[(size_t)p.vertex_of[o]] < 0) wanted.push_back(o);
-
-    // OpenSubdiv's refiner on the faces within two rings of those vertices
-    // (the whole mesh when that is all of it).
-    Part part;
-    Evaluation ev;
-    HeldRows held;
-    if (!wanted.empty()) {
-        std::vector<char> in_part = two_ring_faces(m, adj, p, wanted);
-        if (std::find(in_part.begin(), in_part.end(), 0) == in_part.end()) in_part.clear();
-        r = make_part(m, adj, opt, p, in_part, true, part, status);
-        if (r != SPIA_OK) return r;
-        choose_evaluation(m, adj, opt, p, part, wanted, ev);
-        r = adaptive_rows(m, adj, opt, p, ev, held, status);
-        if (r != SPIA_OK) return r;
-    }
 
     // 8. Vertices no face uses keep their position, except that Blender
     //    smooths a vertex with exactly two (loose) edges along them:
@@ -1155,41 +1174,10 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
                 ++loose_degree[v];
             }
     }
-    auto smoothed_loose = [&](int32_t v) { return !loose_degree.empty() && loose_degree[v] == 2; };
 
-    // 9. Each row's bound: the closed-form and adaptive rows' own lengths;
-    //    for Bfr's, the distinct vertices of the vertex's faces, on which
-    //    its limit point alone depends.
+    // 9. The table, with room for each row.
     TableWriter table;
-    table.length.assign((size_t)n, 0);
-    {
-        std::vector<int32_t> stamp;
-        for (int32_t v = 0; v < n; ++v) {
-            const int32_t o = p.osd_of[v];
-            int32_t &bound = table.length[(size_t)v];
-            if (o < 0) {
-                bound = smoothed_loose(v) ? 3 : 1;
-            } else if (closed_length[(size_t)v] >= 0) {
-                bound = closed_length[(size_t)v];
-            } else if (ev.adaptive[o]) {
-                bound = held.size[o];
-            } else {
-                if (stamp.empty()) stamp.assign((size_t)p.osd_n, -1);
-                int32_t count = 0;
-                for (int64_t i = adj->first[v]; i < adj->first[v + 1]; ++i) {
-                    const int32_t f = adj->face_of_corner[adj->corner_of[i]];
-                    for (int64_t c = adj->corner_start[f]; c < adj->corner_start[f + 1]; ++c) {
-                        const int32_t u = p.osd_of[m->face_vertices[c]];
-                        if (stamp[u] != o) {
-                            stamp[u] = o;
-                            ++count;
-                        }
-                    }
-                }
-                bound = count;
-            }
-        }
-    }
+    table.length = row_room(m, adj, p, loose_degree);
     int64_t capacity = 0;
     for (int32_t v = 0; v < n; ++v) capacity += table.length[(size_t)v];
     table.s = spia__stencils_alloc(n, capacity);
@@ -1199,8 +1187,27 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
     std::unique_ptr<spia_stencils, void (*)(spia_stencils *)> owner(table.s, spia_stencils_free);
     for (int32_t v = 0; v < n; ++v) table.s->offsets[v + 1] = table.s->offsets[v] + table.length[(size_t)v];
 
-    if (p.blender) closed_rows(m, adj, opt, p, &closed_length, &table);
-    std::vector<int32_t>().swap(closed_length);
+    // The closed-form rows (Catmull-Clark), and the vertices left for
+    // OpenSubdiv (all, for Loop).
+    if (p.blender) closed_rows(m, adj, opt, p, table);
+    std::vector<int32_t> wanted;
+    for (int32_t o = 0; o < p.osd_n; ++o)
+        if (!p.blender || table.length[(size_t)p.vertex_of[o]] < 0) wanted.push_back(o);
+
+    // OpenSubdiv's refiner on the faces within two rings of those vertices
+    // (the whole mesh when that is all of it); the adaptive rows (step 7).
+    Part part;
+    Evaluation ev;
+    HeldRows held;
+    if (!wanted.empty()) {
+        std::vector<char> in_part = two_ring_faces(m, adj, p, wanted);
+        if (std::find(in_part.begin(), in_part.end(), 0) == in_part.end()) in_part.clear();
+        r = make_part(m, adj, opt, p, in_part, true, part, status);
+        if (r != SPIA_OK) return r;
+        choose_evaluation(m, adj, opt, p, part, wanted, ev);
+        r = adaptive_rows(m, adj, opt, p, ev, held, status);
+        if (r != SPIA_OK) return r;
+    }
     // Vertices no face uses, and the adaptive rows.
     {
         std::vector<Entry> row;
@@ -1208,8 +1215,9 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
             const int32_t o = p.osd_of[v];
             row.clear();
             if (o < 0) {
-                row.emplace_back(v, smoothed_loose(v) ? 4.0 / 6.0 : 1.0);
-                if (smoothed_loose(v))
+                const bool smoothed = !loose_degree.empty() && loose_degree[v] == 2;
+                row.emplace_back(v, smoothed ? 4.0 / 6.0 : 1.0);
+                if (smoothed)
                     for (int k = 0; k < 2; ++k) row.emplace_back(loose_ends[2 * (size_t)v + k], 1.0 / 6.0);
             } else if (!ev.adaptive.empty() && ev.adaptive[o]) {
                 for (int32_t k = 0; k < held.size[o]; ++k)
@@ -1219,7 +1227,7 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
             }
             table.write(v, row, table.spilled);
         }
-        HeldRows().indices.swap(held.indices);
+        std::vector<int32_t>().swap(held.indices);
         std::vector<double>().swap(held.weights);
     }
     // From here on only corner_start is needed: the vertex lists make room.

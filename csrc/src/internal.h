@@ -139,9 +139,13 @@ typedef struct spia_row_entry {
 /* Per-thread room for one row, grown as needed; zero it to start.  With
  * build 0, spia__catmark_closed_row only classifies and returns a bound on
  * the row's length. */
+typedef struct spia_fan_corner {
+    int64_t corner, start; /* v's corner, and its face's first */
+    int32_t size, next, prev, succ;
+} spia_fan_corner;
 typedef struct spia_row_scratch {
     spia_row_entry *entries;
-    int32_t *neighbours;
+    spia_fan_corner *fan;
     int64_t capacity;
     int build;
 } spia_row_scratch;
