@@ -47,7 +47,7 @@ static spia_result check_input(const spia_mesh *m, const spia_adjacency *a, cons
                           "%lld faces have a shape parameter outside (0, 1) (first: face %lld, %g)", (long long)bad,
                           (long long)first, face_parameter(o, (int32_t)first));
     unsigned char *boundary = (unsigned char *)calloc((size_t)m->vertex_count, 1);
-    if (!boundary || spia__boundary_vertices(m, a, boundary) != SPIA_OK) {
+    if (!boundary || spia__boundary_vertices(m, a, boundary, o->threads) != SPIA_OK) {
         free(boundary);
         return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory checking the mesh");
     }

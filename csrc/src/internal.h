@@ -96,8 +96,10 @@ static inline int32_t spia__corner_next(const spia_mesh *m, const spia_adjacency
     return m->face_vertices[c + 1 == e ? a->corner_start[f] : c + 1];
 }
 
-/* boundary[v] = 1 for vertices on an edge that only one face uses. */
-spia_result spia__boundary_vertices(const spia_mesh *mesh, const spia_adjacency *adj, unsigned char *boundary);
+/* boundary[v] = 1 for vertices on an edge that only one face uses (threads
+ * as spia_options.threads, resolved). */
+spia_result spia__boundary_vertices(const spia_mesh *mesh, const spia_adjacency *adj, unsigned char *boundary,
+                                    int threads);
 
 /* The most corners any vertex has (its valence bound: neighbours <= 2x). */
 int32_t spia__max_corners_per_vertex(const spia_adjacency *adj);

@@ -38,7 +38,7 @@ spia_result spia_limit_stencils_create(const spia_mesh *mesh, const spia_options
     /* Boundary vertices first: the builder may free the adjacency's vertex
      * lists to make room for the table. */
     unsigned char *on_boundary = (unsigned char *)calloc((size_t)mesh->vertex_count + 1, 1);
-    if (!on_boundary || spia__boundary_vertices(mesh, &adj, on_boundary) != SPIA_OK) {
+    if (!on_boundary || spia__boundary_vertices(mesh, &adj, on_boundary, opt.threads) != SPIA_OK) {
         free(on_boundary);
         spia__adjacency_free(&adj);
         return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory classifying boundary vertices");

@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
 /* Mesh validation and vertex-to-corner adjacency. */
 #include "internal.h"
+#include "threads.h"
 
 #include <stdint.h>
 
@@ -190,19 +191,37 @@ int32_t spia__max_corners_per_vertex(const spia_adjacency *a) {
     return (int32_t)most;
 }
 
-spia_result spia__boundary_vertices(const spia_mesh *m, const spia_adjacency *a, unsigned char *boundary) {
-    const int32_t cap = 2 * spia__max_corners_per_vertex(a) + 2;
-    int32_t *nb = (int32_t *)malloc(sizeof(int32_t) * 2 * (size_t)cap);
-    if (!nb) return SPIA_ERROR_OUT_OF_MEMORY;
-    int32_t *fe = nb + cap;
-    for (int32_t v = 0; v < m->vertex_count; ++v) {
-        int32_t n = spia__vertex_neighbours(m, a, v, nb, fe, cap);
-        boundary[v] = 0;
+typedef struct boundary_job {
+    const spia_mesh *m;
+    const spia_adjacency *a;
+    unsigned char *boundary;
+    int32_t cap;
+    int failed;
+} boundary_job;
+
+static void boundary_range(void *context, int64_t v0, int64_t v1, int thread) {
+    (void)thread;
+    boundary_job *job = (boundary_job *)context;
+    int32_t *nb = (int32_t *)malloc(sizeof(int32_t) * 2 * (size_t)job->cap);
+    if (!nb) {
+        job->failed = 1; /* only ever set to 1: no other value to race with */
+        return;
+    }
+    int32_t *fe = nb + job->cap;
+    for (int64_t v = v0; v < v1; ++v) {
+        int32_t n = spia__vertex_neighbours(job->m, job->a, (int32_t)v, nb, fe, job->cap);
+        job->boundary[v] = 0;
         for (int32_t k = 0; k < n; ++k)
-            if (fe[k] == 1) boundary[v] = 1;
+            if (fe[k] == 1) job->boundary[v] = 1;
     }
     free(nb);
-    return SPIA_OK;
+}
+
+spia_result spia__boundary_vertices(const spia_mesh *m, const spia_adjacency *a, unsigned char *boundary,
+                                    int threads) {
+    boundary_job job = {m, a, boundary, 2 * spia__max_corners_per_vertex(a) + 2, 0};
+    spia__parallel_for(threads, m->vertex_count, 16384, boundary_range, &job);
+    return job.failed ? SPIA_ERROR_OUT_OF_MEMORY : SPIA_OK;
 }
 
 spia_result spia__require_triangles(const spia_mesh *m, spia_status *status) {
