@@ -584,6 +584,8 @@ struct Evaluation {
     std::vector<char> adaptive;       // per osd vertex: step 7
     std::vector<int32_t> bfr_corner;  // per osd vertex: the corner Bfr evaluates it at (step 10), or -1
     std::vector<char> level_face;     // per mesh face: Bfr at the isolation level (empty if none)
+    std::vector<int32_t> decaying;    // osd vertices whose sharpness decays within the isolation level
+    std::vector<int32_t> depth;       // and the levels it takes
     int32_t adaptive_count = 0;
 };
 
@@ -627,6 +629,7 @@ void choose_evaluation(const spia_mesh *m, const spia_adjacency *adj, const spia
         // Infinitely sharp interior edges (non-manifold edges are, in Far).
         int infinitely_sharp = 0;
         bool semi_sharp = vs > 0.0f && vs < kInfiniteSharpness;
+        float sharpest = semi_sharp ? vs : 0.0f;  // of the semi-sharp features
         for (int k = 0; k < ve.size(); ++k) {
             Far::Index e = ve[k];
             if (base.GetEdgeFaces(e).size() == 1 && !base.IsEdgeNonManifold(e)) continue;  // boundary
@@ -635,6 +638,7 @@ void choose_evaluation(const spia_mesh *m, const spia_adjacency *adj, const spia
                 ++infinitely_sharp;
             } else if (es > 0.0f) {
                 semi_sharp = true;
+                sharpest = std::max(sharpest, es);
             }
         }
         // Darts (one infinitely sharp edge at a manifold vertex) and every
@@ -648,6 +652,15 @@ void choose_evaluation(const spia_mesh *m, const spia_adjacency *adj, const spia
                                    base.IsVertexBoundary(lo) && ve.size() == 2;
         bool adaptive = base.IsVertexNonManifold(lo) || smooth_corner;  // Blender is not at the limit there
         if (!adaptive && (semi_sharp || dart)) {
+            // Sharpness falls by one a level: where the vertex's own
+            // features are gone by the isolation level and it is no dart,
+            // Blender's patches give the exact limit point (decayed_rows).
+            const int depth = (int)std::ceil(sharpest);
+            if (blender && !dart && depth <= opt->quality) {
+                ev.decaying.push_back(o);
+                ev.depth.push_back(depth);
+                continue;
+            }
             if (blender) approx[o] = 1;
             else adaptive = true;
         }
@@ -714,6 +727,284 @@ void choose_evaluation(const spia_mesh *m, const spia_adjacency *adj, const spia
             }
         }
     }
+}
+
+// A sparse stencil for Far::PrimvarRefiner in double precision.
+struct SparseStencilD {
+    std::vector<std::pair<int32_t, double>> w;
+    void Clear(void * = nullptr) { w.clear(); }
+    void AddWithWeight(const SparseStencilD &src, double weight) {
+        for (const auto &e : src.w) w.emplace_back(e.first, weight * e.second);
+    }
+    void Compact() {
+        std::sort(w.begin(), w.end());
+        size_t out = 0;
+        for (size_t i = 0; i < w.size();) {
+            int32_t j = w[i].first;
+            double sum = 0.0;
+            while (i < w.size() && w[i].first == j) sum += w[i++].second;
+            w[out++] = std::make_pair(j, sum);
+        }
+        w.resize(out);
+    }
+};
+
+// The limit point of vertex c of a refined level (all faces quads) as
+// OpenSubdiv's limit masks give it, for a vertex with no semi-sharp
+// feature left: itself at a corner (sharp vertex, or three or more sharp or
+// boundary edges), (a + 4 c + b) / 6 on a crease or boundary, else
+// (n^2 c + 4 sum e + sum d) / (n (n + 5)) over its edge neighbours e and
+// the opposite corners d of its faces.  Rows of the points' stencils.
+bool limit_mask(const Far::TopologyLevel &level, Far::Index c, const std::vector<SparseStencilD> &points,
+                std::vector<std::pair<int32_t, double>> &row) {
+    std::vector<std::pair<Far::Index, double>> mask;
+    Far::ConstIndexArray ve = level.GetVertexEdges(c);
+    Far::Index sharp[2];
+    int n_sharp = 0;
+    for (int k = 0; k < ve.size(); ++k) {
+        const Far::Index e = ve[k];
+        const float es = level.GetEdgeSharpness(e);
+        if (level.GetEdgeFaces(e).size() != 1 && es < kInfiniteSharpness) {
+            if (es > 0.0f) return false;
+            continue;
+        }
+        Far::ConstIndexArray ends = level.GetEdgeVertices(e);
+        if (n_sharp < 2) sharp[n_sharp] = ends[0] == c ? ends[1] : ends[0];
+        ++n_sharp;
+    }
+    const float vs = level.GetVertexSharpness(c);
+    if (vs > 0.0f && vs < kInfiniteSharpness) return false;
+    if (vs >= kInfiniteSharpness || n_sharp >= 3) {
+        mask.emplace_back(c, 1.0);
+    } else if (n_sharp == 2) {
+        mask.emplace_back(sharp[0], 1.0 / 6.0);
+        mask.emplace_back(c, 4.0 / 6.0);
+        mask.emplace_back(sharp[1], 1.0 / 6.0);
+    } else if (n_sharp == 0) {
+        Far::ConstIndexArray vf = level.GetVertexFaces(c);
+        Far::ConstLocalIndexArray where = level.GetVertexFaceLocalIndices(c);
+        const double n = (double)ve.size(), scale = 1.0 / (n * (n + 5.0));
+        if (vf.size() != ve.size() || ve.size() < 3) return false;
+        mask.emplace_back(c, n * n * scale);
+        for (int k = 0; k < ve.size(); ++k) {
+            Far::ConstIndexArray ends = level.GetEdgeVertices(ve[k]);
+            mask.emplace_back(ends[0] == c ? ends[1] : ends[0], 4.0 * scale);
+        }
+        for (int k = 0; k < vf.size(); ++k) {
+            Far::ConstIndexArray fv = level.GetFaceVertices(vf[k]);
+            if (fv.size() != 4) return false;
+            mask.emplace_back(fv[(where[k] + 2) % 4], scale);
+        }
+    } else {
+        return false;  // a dart
+    }
+    row.clear();
+    for (const auto &m : mask)
+        for (const auto &e : points[(size_t)m.first].w) row.emplace_back(e.first, m.second * e.second);
+    std::sort(row.begin(), row.end());
+    size_t out = 0;
+    for (size_t i = 0; i < row.size();) {
+        const int32_t j = row[i].first;
+        double sum = 0.0;
+        while (i < row.size() && row[i].first == j) sum += row[i++].second;
+        if (sum != 0.0) row[out++] = std::make_pair(j, sum);
+    }
+    row.resize(out);
+    return true;
+}
+
+// 6b. Vertices whose semi-sharp features (their own sharpness and their
+//     edges') have decayed within the isolation level: Blender's patches
+//     give the exact limit point there, which is the limit mask of the
+//     vertex after `depth` levels of refinement.  Each level is refined
+//     only on the faces within two rings of the vertices' children (what
+//     the next level's points near them depend on), so the cost grows with
+//     the depth, not with 4^depth; the points carry sparse stencils over the
+//     control vertices.  Batches of consecutive vertices, on the threads.
+spia_result decayed_rows(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, Prepared &p,
+                         const Evaluation &ev, HeldRows &held, spia_status *status) {
+    const int32_t count = (int32_t)ev.decaying.size();
+    if (count == 0) return SPIA_OK;
+    const int32_t batch_size = 64;
+    const int32_t batches = (count + batch_size - 1) / batch_size;
+    struct BatchRows {
+        std::vector<int32_t> vertex;
+        std::vector<std::vector<std::pair<int32_t, double>>> rows;  // osd numbering
+        bool failed = false;
+    };
+    std::vector<BatchRows> results((size_t)batches);
+    auto run_batch = [&](int32_t b, BatchRows &out) {
+        const int32_t first = b * batch_size, n_batch = std::min(count - first, batch_size);
+        std::vector<int32_t> marked(ev.decaying.begin() + first, ev.decaying.begin() + first + n_batch);
+        std::vector<int32_t> depth(ev.depth.begin() + first, ev.depth.begin() + first + n_batch);
+        Part sub;
+        spia_status local_status;
+        if (make_part(m, adj, opt, p, two_ring_faces(m, adj, p, marked), false, sub, &local_status) != SPIA_OK) {
+            out.failed = true;
+            return;
+        }
+        // The current level's mesh: topology, sharpness, and stencils.
+        int32_t nv = (int32_t)sub.osd_of_local.size();
+        std::vector<int32_t> sizes(sub.sizes), fv(sub.fv), pairs(sub.crease_pairs), corners(sub.corner_indices);
+        std::vector<float> pair_w(sub.crease_weights), corner_w(sub.corner_weights);
+        // Each level's kept points as stencils over the previous level's
+        // points (a few weights each); a finished vertex's row is carried
+        // back through them to the control vertices.
+        std::vector<std::vector<SparseStencilD>> steps;
+        std::vector<SparseStencilD> identity;
+        auto back = [&](std::vector<std::pair<int32_t, double>> &row) {
+            for (size_t l = steps.size(); l-- > 0;) {
+                std::vector<std::pair<int32_t, double>> wider;
+                for (const auto &e : row)
+                    for (const auto &x : steps[l][(size_t)e.first].w) wider.emplace_back(x.first, e.second * x.second);
+                std::sort(wider.begin(), wider.end());
+                row.clear();
+                for (size_t i = 0; i < wider.size();) {
+                    const int32_t j = wider[i].first;
+                    double sum = 0.0;
+                    while (i < wider.size() && wider[i].first == j) sum += wider[i++].second;
+                    if (sum != 0.0) row.emplace_back(j, sum);
+                }
+            }
+        };
+        std::vector<int32_t> at((size_t)n_batch);  // each vertex's point in the current mesh
+        for (int32_t i = 0; i < n_batch; ++i) at[(size_t)i] = sub.local_of[(size_t)marked[(size_t)i]];
+        std::vector<char> done((size_t)n_batch, 0);
+        int32_t left = n_batch;
+        for (int level = 1; left > 0; ++level) {
+            std::unique_ptr<Far::TopologyRefiner> r(create_refiner(nv, (int32_t)sizes.size(), sizes.data(), fv.data(),
+                                                                   pairs, pair_w, corners, corner_w, p.scheme, p.sdc));
+            if (!r) {
+                out.failed = true;
+                return;
+            }
+            Far::TopologyRefiner::UniformOptions uniform(1);
+            uniform.fullTopologyInLastLevel = true;
+            r->RefineUniform(uniform);
+            const Far::TopologyLevel &l0 = r->GetLevel(0), &l1 = r->GetLevel(1);
+            std::vector<SparseStencilD> next((size_t)l1.GetNumVertices());
+            Far::PrimvarRefinerReal<double> primvar(*r);
+            identity.resize((size_t)nv);
+            for (int32_t i = 0; i < nv; ++i) {
+                identity[(size_t)i].w.assign(1, std::make_pair(i, 1.0));
+            }
+            SparseStencilD *src = identity.data(), *dst = next.data();
+            primvar.Interpolate(1, src, dst);
+            for (SparseStencilD &st : next) st.Compact();
+            std::vector<int32_t> child((size_t)n_batch, -1);
+            for (int32_t i = 0; i < n_batch; ++i) {
+                if (done[(size_t)i]) continue;
+                child[(size_t)i] = l0.GetVertexChildVertex(at[(size_t)i]);
+                if (depth[(size_t)i] != level) continue;
+                std::vector<std::pair<int32_t, double>> row;
+                if (!limit_mask(l1, child[(size_t)i], next, row)) {
+                    out.failed = true;
+                    return;
+                }
+                back(row);
+                for (auto &e : row) e.first = sub.osd_of_local[(size_t)e.first];
+                out.vertex.push_back(marked[(size_t)i]);
+                out.rows.push_back(std::move(row));
+                done[(size_t)i] = 1;
+                --left;
+            }
+            if (left == 0) break;
+            // The next mesh: the faces of level 1 within two rings of the
+            // children of the vertices not done.
+            std::vector<char> near((size_t)l1.GetNumVertices(), 0), keep((size_t)l1.GetNumFaces(), 0);
+            for (int32_t i = 0; i < n_batch; ++i) {
+                if (done[(size_t)i]) continue;
+                Far::ConstIndexArray vf = l1.GetVertexFaces(child[(size_t)i]);
+                for (int k = 0; k < vf.size(); ++k) {
+                    Far::ConstIndexArray fvs = l1.GetFaceVertices(vf[k]);
+                    for (int j = 0; j < fvs.size(); ++j) near[(size_t)fvs[j]] = 1;
+                }
+            }
+            for (int32_t u = 0; u < l1.GetNumVertices(); ++u) {
+                if (!near[(size_t)u]) continue;
+                Far::ConstIndexArray uf = l1.GetVertexFaces(u);
+                for (int k = 0; k < uf.size(); ++k) keep[(size_t)uf[k]] = 1;
+            }
+            std::vector<int32_t> local((size_t)l1.GetNumVertices(), -1);
+            std::vector<SparseStencilD> kept;
+            sizes.clear();
+            fv.clear();
+            for (int32_t f = 0; f < l1.GetNumFaces(); ++f) {
+                if (!keep[(size_t)f]) continue;
+                Far::ConstIndexArray fvs = l1.GetFaceVertices(f);
+                sizes.push_back(fvs.size());
+                for (int j = 0; j < fvs.size(); ++j) {
+                    int32_t &lv = local[(size_t)fvs[j]];
+                    if (lv < 0) {
+                        lv = (int32_t)kept.size();
+                        kept.push_back(std::move(next[(size_t)fvs[j]]));
+                    }
+                    fv.push_back(lv);
+                }
+            }
+            pairs.clear();
+            pair_w.clear();
+            corners.clear();
+            corner_w.clear();
+            for (int32_t e = 0; e < l1.GetNumEdges(); ++e) {
+                const float es = l1.GetEdgeSharpness(e);
+                if (es <= 0.0f) continue;
+                Far::ConstIndexArray ev2 = l1.GetEdgeVertices(e);
+                const int32_t a = local[(size_t)ev2[0]], c = local[(size_t)ev2[1]];
+                if (a < 0 || c < 0) continue;
+                bool present = false;  // only edges of the kept faces
+                Far::ConstIndexArray ef = l1.GetEdgeFaces(e);
+                for (int k = 0; k < ef.size() && !present; ++k) present = keep[(size_t)ef[k]] != 0;
+                if (!present) continue;
+                pairs.push_back(a);
+                pairs.push_back(c);
+                pair_w.push_back(es);
+            }
+            for (int32_t u = 0; u < l1.GetNumVertices(); ++u) {
+                const float us = l1.GetVertexSharpness(u);
+                if (us > 0.0f && local[(size_t)u] >= 0) {
+                    corners.push_back(local[(size_t)u]);
+                    corner_w.push_back(us);
+                }
+            }
+            for (int32_t i = 0; i < n_batch; ++i)
+                if (!done[(size_t)i]) at[(size_t)i] = local[(size_t)child[(size_t)i]];
+            nv = (int32_t)kept.size();
+            steps.push_back(std::move(kept));
+        }
+    };
+    std::atomic<bool> out_of_memory(false);
+    const int batch_threads = std::max(1, std::min(opt->threads, batches));
+    parallel_for(batch_threads, batches, 1, [&](int64_t b0, int64_t b1, int) {
+        for (int64_t b = b0; b < b1; ++b) {
+            try {
+                run_batch((int32_t)b, results[(size_t)b]);
+            } catch (const std::bad_alloc &) {
+                out_of_memory = true;
+            } catch (...) {
+                results[(size_t)b].failed = true;
+            }
+        }
+    });
+    if (out_of_memory) throw std::bad_alloc();
+    for (BatchRows &out : results)
+        if (out.failed)
+            return spia__fail(status, SPIA_ERROR_TOPOLOGY, -1, "OpenSubdiv rejected the topology around semi-sharp creases");
+    if (held.start.empty()) {
+        held.start.assign((size_t)p.osd_n, -1);
+        held.size.assign((size_t)p.osd_n, 0);
+    }
+    for (BatchRows &out : results)
+        for (size_t r = 0; r < out.vertex.size(); ++r) {
+            const int32_t o = out.vertex[r];
+            held.start[(size_t)o] = (int64_t)held.indices.size();
+            held.size[(size_t)o] = (int32_t)out.rows[r].size();
+            for (const auto &e : out.rows[r]) {
+                held.indices.push_back(p.vertex_of[(size_t)e.first]);
+                held.weights.push_back(e.second);
+            }
+        }
+    return SPIA_OK;
 }
 
 // 7. The vertices marked adaptive: Blender's adaptive patches at quality,
@@ -877,8 +1168,10 @@ spia_result adaptive_rows(const spia_mesh *m, const spia_adjacency *adj, const s
     if (out_of_memory) throw std::bad_alloc();
     for (BatchRows &out : results)
         if (out.code != SPIA_OK) return spia__fail(status, out.code, out.index, "%s", out.message);
-    held.start.assign((size_t)osd_n, -1);
-    held.size.assign((size_t)osd_n, 0);
+    if (held.start.empty()) {
+        held.start.assign((size_t)osd_n, -1);
+        held.size.assign((size_t)osd_n, 0);
+    }
     for (BatchRows &out : results) {
         for (size_t r = 0; r < out.vertex.size(); ++r) {
             const int32_t o = out.vertex[r];
@@ -1207,6 +1500,8 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
         choose_evaluation(m, adj, opt, p, part, wanted, ev);
         r = adaptive_rows(m, adj, opt, p, ev, held, status);
         if (r != SPIA_OK) return r;
+        r = decayed_rows(m, adj, opt, p, ev, held, status);
+        if (r != SPIA_OK) return r;
     }
     // Vertices no face uses, and the adaptive rows.
     {
@@ -1219,7 +1514,7 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
                 row.emplace_back(v, smoothed ? 4.0 / 6.0 : 1.0);
                 if (smoothed)
                     for (int k = 0; k < 2; ++k) row.emplace_back(loose_ends[2 * (size_t)v + k], 1.0 / 6.0);
-            } else if (!ev.adaptive.empty() && ev.adaptive[o]) {
+            } else if (!held.start.empty() && held.start[o] >= 0) {
                 for (int32_t k = 0; k < held.size[o]; ++k)
                     row.emplace_back(held.indices[held.start[o] + k], held.weights[held.start[o] + k]);
             } else {
