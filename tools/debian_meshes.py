@@ -29,7 +29,8 @@ CACHE = os.path.join(ROOT, "build", "meshes-debian")
 # The benchmark's files: name -> (package, path inside the package, what it is).
 MESHES = {
     "lulzbot_taz_pro_bed": ("cura", "/usr/share/cura/resources/meshes/lulzbot_taz_pro_bed.stl",
-                            "printer bed (CAD export): triangle fans up to valence 351, parts touching at vertices and edges"),
+                            "printer bed (CAD export): triangle fans up to valence 351, "
+                            "parts touching at vertices and edges"),
     "zav_maxpro": ("cura", "/usr/share/cura/resources/meshes/zav_maxpro.stl",
                    "printer frame (CAD export): fans up to valence 205, two fans at thousands of vertices"),
     "trimaker_nebula_platform": ("cura", "/usr/share/cura/resources/meshes/trimaker_nebula_platform.stl",
