@@ -23,7 +23,7 @@ PACKAGE = dist/subdiv_pia-$(VERSION)-linux-x64.zip
 WINDOWS_PACKAGE = dist/subdiv_pia-$(VERSION)-windows-x64.zip
 
 .PHONY: all deps build package test test-c test-asan test-tsan test-fuzz fuzz test-python test-package test-blender \
-        blenders demo bench bench-scale bench-closest bench-live clean
+        blenders demo bench bench-scale bench-closest bench-live bench-hard clean
 
 all: build
 
@@ -130,6 +130,16 @@ bench-scale: build
 # Live cages: the update time per edit at 1k, 10k and 50k vertices.
 bench-live: build
 	$(BLENDER_RUN) --python bench/bench_live.py
+
+# The hard set (bench/bench_hard.py): stencils + solve per vertex, one thread,
+# at qualities 1, 3, 6 and 10 with and without creases, on messy meshes
+# (high-valence fans, non-manifold vertices and edges, large n-gons, darts,
+# shuffled scans, printer beds and parts from Debian packages, which are
+# downloaded with apt-get into build/meshes-debian the first time), each case
+# in its own process with a time budget.  The table goes to out/bench/hard.md;
+# `bench/bench_hard.py --quick --only NAME` for a short run.
+bench-hard: build
+	$(PYTHON) bench/bench_hard.py
 
 # Closest points: the library's hierarchy against Embree's point query (the
 # system's Embree 4 or 3, linked into the benchmark only; without one the
