@@ -376,6 +376,20 @@ def read_positions(mesh):
     return out.reshape(n, 3)
 
 
+def write_positions(mesh, points):
+    """Set mesh's vertex positions (and its reference shape key's) to points (N, 3)."""
+    flat = np.ascontiguousarray(points, np.float32).reshape(-1)
+    attr = position_attribute(mesh)
+    if attr is not None:
+        attr.data.foreach_set("vector", flat)
+    else:
+        mesh.vertices.foreach_set("co", flat)
+    keys = mesh.shape_keys
+    if keys is not None and keys.reference_key is not None:
+        keys.reference_key.data.foreach_set("co", flat)
+    mesh.update()
+
+
 def _corner_vertices(mesh):
     count = len(mesh.loops)
     out = np.empty(count, np.int32)
@@ -668,10 +682,18 @@ def _new_mesh(name, points, face_sizes, face_vertices):
     face_sizes = np.ascontiguousarray(face_sizes, np.int32).ravel()
     mesh = bpy.data.meshes.new(name)
     mesh.vertices.add(len(points))
-    mesh.vertices.foreach_set("co", points.ravel())
+    attr = position_attribute(mesh)
+    if attr is not None:
+        attr.data.foreach_set("vector", points.ravel())
+    else:
+        mesh.vertices.foreach_set("co", points.ravel())
     count = len(face_sizes)
     mesh.loops.add(len(faces))
-    mesh.loops.foreach_set("vertex_index", faces)
+    attr = _builtin_attribute(mesh, ".corner_vert", len(faces))
+    if attr is not None:
+        attr.data.foreach_set("value", faces)
+    else:
+        mesh.loops.foreach_set("vertex_index", faces)
     mesh.polygons.add(count)
     starts = np.zeros(count, np.int32)
     if count > 1:
@@ -1007,12 +1029,7 @@ def build_object(source, cage, report, settings, context=None, name=None, mesh=N
     if mesh is None:
         mesh = source.data.copy()
     mesh.name = name
-    flat = np.ascontiguousarray(cage, dtype=np.float32).reshape(-1)
-    mesh.vertices.foreach_set("co", flat)
-    keys = mesh.shape_keys
-    if keys is not None and keys.reference_key is not None:
-        keys.reference_key.data.foreach_set("co", flat)
-    mesh.update()
+    write_positions(mesh, cage)
 
     new_obj = bpy.data.objects.new(name, mesh)
     _link_like(source, new_obj, context)
