@@ -314,7 +314,9 @@ def read_creases(mesh):
         if layer is not None and len(layer.data) == len(mesh.edges):
             edge = np.empty(len(mesh.edges), np.float32)
             layer.data.foreach_get("value", edge)
-        elif len(mesh.edges) and hasattr(mesh.edges[0], "crease"):  # Blender 3.4
+        elif layer is None and hasattr(mesh, "edge_creases"):
+            pass  # 3.4 to 3.6 without a crease layer: MeshEdge.crease is 0 on every edge
+        elif len(mesh.edges) and hasattr(mesh.edges[0], "crease"):
             edge = np.empty(len(mesh.edges), np.float32)
             mesh.edges.foreach_get("crease", edge)
     vertex = _float_attribute(mesh, "crease_vert", 'POINT')       # Blender 4.x
