@@ -27,6 +27,7 @@ any transforms. The new object carries the distances as a point attribute
 (``pia_distance``) and a heat-map colour attribute (``pia_distance_color``).
 """
 
+import ctypes
 import os
 import sys
 
@@ -392,10 +393,52 @@ def write_positions(mesh, points):
     mesh.update()
 
 
+# Some of the arrays have no attribute to read them through: the faces from
+# 4.0 (Blender's face offsets, which loop_start reads one by one), and in 3.4
+# and 3.5 the loops, edges and faces (arrays of MLoop, MEdge and MPoly).
+# Their items' as_pointer() shows where Blender keeps them: where the first,
+# second, middle and last items lie in one array of items of the expected
+# size, and items spread over it read through RNA as in that array, the array
+# is copied at once (a million faces: 0.002 s against 0.05 to 0.1 s; 3.4's
+# four million loops: 0.01 s against 0.35 s).  Anything else is read item by
+# item, as before.
+_MLOOP = np.dtype({"names": ["v"], "formats": ["<u4"], "offsets": [0], "itemsize": 8})  # v, e
+_MEDGE = np.dtype({"names": ["v"], "formats": [("<u4", 2)], "offsets": [0],
+                   "itemsize": 12})  # v1, v2, crease and bevel weight (unused since 3.4), flag
+_MPOLY = np.dtype({"names": ["loopstart", "totloop"], "formats": ["<i4", "<i4"], "offsets": [0, 4],
+                   "itemsize": 12})  # loopstart, totloop, mat_nr, flag
+_FACE_OFFSET = np.dtype({"names": ["loop_start"], "formats": ["<i4"], "offsets": [0], "itemsize": 4})
+_SAMPLES = 17
+
+
+def _items_array(collection, count, dtype, rna_values):
+    """The fields of dtype (int32 copies) of the count items of a Blender
+    collection, read from the array of dtype items Blender keeps them in; None
+    where they are not in one such array, or read otherwise through RNA
+    (rna_values(item): the item's field values, in dtype's order)."""
+    if count < 2 or not isinstance(collection, bpy.types.bpy_prop_collection):
+        return None
+    size = dtype.itemsize
+    first = collection[0].as_pointer()
+    if not first or any(collection[i].as_pointer() - first != i * size for i in (1, count // 2, count - 1)):
+        return None
+    items = np.frombuffer((ctypes.c_char * (count * size)).from_address(first), dtype, count)
+    fields = [np.array(items[name], np.int32) for name in dtype.names]
+    del items
+    for i in sorted(set(np.linspace(0, count - 1, _SAMPLES).astype(int).tolist())):
+        if tuple(rna_values(collection[i])) != tuple(a[i].tolist() for a in fields):
+            return None
+    return fields
+
+
 def _corner_vertices(mesh):
     count = len(mesh.loops)
-    out = np.empty(count, np.int32)
     attr = _builtin_attribute(mesh, ".corner_vert", count)
+    if attr is None and not _FACE_OFFSETS:
+        fields = _items_array(mesh.loops, count, _MLOOP, lambda loop: (loop.vertex_index,))
+        if fields is not None:
+            return fields[0]
+    out = np.empty(count, np.int32)
     if attr is not None:
         attr.data.foreach_get("value", out)
     else:
@@ -405,8 +448,12 @@ def _corner_vertices(mesh):
 
 def _edge_vertices(mesh):
     count = len(mesh.edges)
-    out = np.empty(count * 2, np.int32)
     attr = _builtin_attribute(mesh, ".edge_verts", count)
+    if attr is None and not _FACE_OFFSETS:
+        fields = _items_array(mesh.edges, count, _MEDGE, lambda edge: (list(edge.vertices),))
+        if fields is not None:
+            return fields[0]
+    out = np.empty(count * 2, np.int32)
     if attr is not None:
         attr.data.foreach_get("value", out)
     else:
@@ -420,9 +467,16 @@ def _faces_of(mesh):
     f = len(mesh.polygons)
     if _FACE_OFFSETS and isinstance(mesh, bpy.types.Mesh):
         offsets = np.empty(f + 1, np.int32)
-        mesh.polygons.foreach_get("loop_start", offsets[:f])
+        fields = _items_array(mesh.polygons, f, _FACE_OFFSET, lambda face: (face.loop_start,))
+        if fields is not None:
+            offsets[:f] = fields[0]
+        else:
+            mesh.polygons.foreach_get("loop_start", offsets[:f])
         offsets[f] = len(mesh.loops)
         return offsets[:f], np.diff(offsets), True  # loop_total, as Blender derives it
+    fields = _items_array(mesh.polygons, f, _MPOLY, lambda face: (face.loop_start, face.loop_total))
+    if fields is not None:
+        return fields[0], fields[1], False
     loop_start = np.empty(f, np.int32)
     face_sizes = np.empty(f, np.int32)
     mesh.polygons.foreach_get("loop_start", loop_start)
