@@ -155,27 +155,6 @@ def set_live(cage, enable=True, source=None):
     return is_live(cage)
 
 
-def _position_attribute(mesh):
-    attributes = getattr(mesh, "attributes", None)
-    attr = attributes.get("position") if attributes is not None else None
-    if attr is not None and attr.data_type == 'FLOAT_VECTOR' and attr.domain == 'POINT':
-        return attr
-    return None
-
-
-def read_positions(mesh):
-    """(N, 3) float32 vertex positions (the position attribute where there is
-    one: much faster than vertices' co in recent Blenders)."""
-    n = len(mesh.vertices)
-    out = np.empty(n * 3, np.float32)
-    attr = _position_attribute(mesh)
-    if attr is not None:
-        attr.data.foreach_get("vector", out)
-    else:
-        mesh.vertices.foreach_get("co", out)
-    return out.reshape(n, 3)
-
-
 def _quick_key(mesh, shapes):
     """What is cheap to read each update: element counts, creases and the
     Doo-Sabin shape values. Reading the faces themselves costs more than
@@ -206,20 +185,6 @@ def _stencils(cage, settings):
     return native.limit_stencils(api.native_mesh(cage.data), **options)
 
 
-def _write_positions(obj, points):
-    mesh = obj.data
-    flat = np.ascontiguousarray(points, np.float32).reshape(-1)
-    attr = _position_attribute(mesh)
-    if attr is not None:
-        attr.data.foreach_set("vector", flat)
-    else:
-        mesh.vertices.foreach_set("co", flat)
-    keys = mesh.shape_keys
-    if keys is not None and keys.reference_key is not None:
-        keys.reference_key.data.foreach_set("co", flat)
-    mesh.update()
-
-
 def _store_report(cage, report, settings):
     if isinstance(report, native.FitReport):
         api.store_fit(cage, report, settings)
@@ -239,7 +204,7 @@ def _refresh_limit(cage, settings):
     child = api.find_limit_object(cage)
     if (child is not None and child.data is not None and len(child.data.vertices) == len(limit[0])
             and len(child.data.polygons) == len(limit[1])):
-        _write_positions(child, limit[0])
+        api.write_positions(child.data, limit[0])
     else:
         api.set_limit_object(cage, limit)
 
@@ -293,7 +258,7 @@ def sync(cage, force=False):
         if source.mode == 'EDIT':
             source.update_from_editmode()
         mesh = source.data
-        targets = read_positions(mesh)
+        targets = api.read_positions(mesh)
         settings = settings_of(cage)
         shapes = api.face_shape_parameters(mesh, settings) if settings["scheme"] == 'DOO_SABIN' else None
         key = _quick_key(mesh, shapes)
@@ -327,20 +292,20 @@ def sync(cage, force=False):
             state.stencils = None
         elif scan is not None:
             positions, report = api.compute_cage(source, settings, scan=scan)
-            _write_positions(cage, positions)
+            api.write_positions(cage.data, positions)
         else:
             if new_stencils or state.stencils is None:
                 state.stencils = _stencils(cage, settings)
                 initial = None
             else:  # the same topology: start from the cage solved for the last positions
-                initial = read_positions(cage.data)
+                initial = api.read_positions(cage.data)
             positions, report = state.stencils.solve(
                 targets, initial=initial, method=settings["method"], tolerance=settings["tolerance"],
                 max_iterations=settings["max_iterations"],
                 staged=settings["staged"] and settings["scheme"] == 'LOOP')
             if not np.isfinite(positions).all():
                 raise ValueError("the solve gave non-finite positions")
-            _write_positions(cage, positions)
+            api.write_positions(cage.data, positions)
         state.topology = (key, faces)
         state.positions = targets
         _store_report(cage, report, settings)

@@ -377,10 +377,10 @@ class Mesh:
         self.edges = None if edges is None else _as(edges, np.int32, (2,))
         self.edge_creases = None if edge_creases is None else _as(edge_creases, np.float32).ravel()
         self.vertex_creases = None if vertex_creases is None else _as(vertex_creases, np.float32).ravel()
-        if self.face_vertices.size != int(self.face_sizes.astype(np.int64).sum()):
+        corners = int(self.face_sizes.sum(dtype=np.int64))
+        if self.face_vertices.size != corners:
             raise PiaError("INVALID_ARGUMENT",
-                           f"face_vertices has {self.face_vertices.size} entries but face_sizes add up to "
-                           f"{int(self.face_sizes.astype(np.int64).sum())}")
+                           f"face_vertices has {self.face_vertices.size} entries but face_sizes add up to {corners}")
         if self.edge_creases is not None and (self.edges is None or len(self.edge_creases) != len(self.edges)):
             raise PiaError("INVALID_ARGUMENT", "edge_creases needs one value per edge")
         if self.vertex_creases is not None and len(self.vertex_creases) != len(self.positions):

@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Reading a mesh into flat arrays: face order, loops stored out of order,
-creases from Blender's own storage."""
+creases from Blender's own storage, whole arrays read at once as item by item."""
 
 import numpy as np
 
@@ -66,3 +66,57 @@ def test_creases_are_read():
     # the copy on the new object carries them along
     new_obj, _ = subdiv_pia.interpolate(obj)
     np.testing.assert_array_equal(api.read_creases(new_obj.data)[1], vertex)
+
+
+def _degenerate_faces():
+    """Faces of two corners and one repeated corner, as from_pydata leaves them without validate()."""
+    from conftest import object_from_pydata
+    return object_from_pydata("Degenerate", [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (2, 0, 0)],
+                              [(0, 1, 2, 3), (1, 4), (1, 4, 4, 2), (0, 3, 2)], validate=False)
+
+
+def _item_by_item(monkeypatch):
+    """Make api read every array element by element, as it does where Blender
+    keeps them neither as attributes nor as arrays it can copy at once."""
+    monkeypatch.setattr(api, "_builtin_attribute", lambda *args: None)
+    monkeypatch.setattr(api, "_items_array", lambda *args: None)
+
+
+def test_arrays_read_at_once_are_those_read_item_by_item(monkeypatch):
+    objects = [make() for make in shapes.ALL] + [_degenerate_faces()]
+    at_once = [api.mesh_arrays(obj.data) for obj in objects]
+    _item_by_item(monkeypatch)
+    for obj, fast in zip(objects, at_once):
+        slow = api.mesh_arrays(obj.data)
+        for key, value in slow.items():
+            if value is None:
+                assert fast[key] is None, (obj.name, key)
+                continue
+            assert fast[key].dtype == value.dtype and fast[key].flags.c_contiguous, (obj.name, key)
+            np.testing.assert_array_equal(fast[key], value, err_msg="%s: %s" % (obj.name, key))
+
+
+def test_faces_are_read_at_once(monkeypatch):
+    # Blender keeps the faces (4.0+: their offsets; 3.4, 3.5 also the loops and
+    # edges) in arrays that api copies at once: each read finds its array.
+    obj = shapes.ngon_cylinder()
+    found = []
+    read = api._items_array
+
+    def recording(*args):
+        fields = read(*args)
+        found.append(fields is not None)
+        return fields
+    monkeypatch.setattr(api, "_items_array", recording)
+    api.mesh_arrays(obj.data)
+    assert found and all(found), found
+
+
+def test_positions_are_written_where_they_are_read():
+    obj = shapes.uv_sphere()
+    points = np.arange(len(obj.data.vertices) * 3, dtype=np.float32).reshape(-1, 3)
+    api.write_positions(obj.data, points)
+    np.testing.assert_array_equal(api.read_positions(obj.data), points)
+    co = np.empty(points.size, np.float32)
+    obj.data.vertices.foreach_get("co", co)
+    np.testing.assert_array_equal(co.reshape(-1, 3), points)
