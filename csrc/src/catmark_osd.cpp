@@ -656,7 +656,9 @@ void choose_evaluation(const spia_mesh *m, const spia_adjacency *adj, const spia
             // features are gone by the isolation level and it is no dart,
             // Blender's patches give the exact limit point (decayed_rows).
             const int depth = (int)std::ceil(sharpest);
-            if (blender && !dart && depth <= opt->quality) {
+            const int faces = base.GetVertexFaces(lo).size();
+            const bool fan = base.IsVertexBoundary(lo) ? faces >= 2 : faces >= 3 && faces == ve.size();
+            if (blender && !dart && fan && depth <= opt->quality) {
                 ev.decaying.push_back(o);
                 ev.depth.push_back(depth);
                 continue;
@@ -727,6 +729,42 @@ void choose_evaluation(const spia_mesh *m, const spia_adjacency *adj, const spia
             }
         }
     }
+}
+
+// Orders osd vertices along a Morton curve through their positions (ties
+// by index), so that batches of consecutive ones are close together and
+// share their sub-meshes whatever the mesh's vertex order.
+void spatial_order(const spia_mesh *m, const Prepared &p, std::vector<int32_t> &list) {
+    if (list.size() < 2) return;
+    float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (int32_t o : list)
+        for (int a = 0; a < 3; ++a) {
+            const float x = m->positions[3 * (int64_t)p.vertex_of[o] + a];
+            lo[a] = std::min(lo[a], x);
+            hi[a] = std::max(hi[a], x);
+        }
+    auto spread = [](uint64_t x) {  // 21 bits to every third of 63
+        x &= 0x1fffff;
+        x = (x | x << 32) & 0x1f00000000ffffULL;
+        x = (x | x << 16) & 0x1f0000ff0000ffULL;
+        x = (x | x << 8) & 0x100f00f00f00f00fULL;
+        x = (x | x << 4) & 0x10c30c30c30c30c3ULL;
+        x = (x | x << 2) & 0x1249249249249249ULL;
+        return x;
+    };
+    std::vector<std::pair<uint64_t, int32_t>> keyed;
+    keyed.reserve(list.size());
+    for (int32_t o : list) {
+        uint64_t key = 0;
+        for (int a = 0; a < 3; ++a) {
+            const float x = m->positions[3 * (int64_t)p.vertex_of[o] + a];
+            const double t = hi[a] > lo[a] ? ((double)x - lo[a]) / ((double)hi[a] - lo[a]) : 0.0;
+            key |= spread((uint64_t)std::min(2097151.0, std::max(0.0, t * 2097151.0))) << a;
+        }
+        keyed.emplace_back(key, o);
+    }
+    std::sort(keyed.begin(), keyed.end());
+    for (size_t i = 0; i < list.size(); ++i) list[i] = keyed[i].second;
 }
 
 // A sparse stencil for Far::PrimvarRefiner in double precision.
@@ -825,6 +863,9 @@ spia_result decayed_rows(const spia_mesh *m, const spia_adjacency *adj, const sp
                          const Evaluation &ev, HeldRows &held, spia_status *status) {
     const int32_t count = (int32_t)ev.decaying.size();
     if (count == 0) return SPIA_OK;
+    std::vector<int32_t> depth_of((size_t)p.osd_n, 0), order(ev.decaying);
+    for (int32_t i = 0; i < count; ++i) depth_of[(size_t)ev.decaying[(size_t)i]] = ev.depth[(size_t)i];
+    spatial_order(m, p, order);
     const int32_t batch_size = 64;
     const int32_t batches = (count + batch_size - 1) / batch_size;
     struct BatchRows {
@@ -835,8 +876,8 @@ spia_result decayed_rows(const spia_mesh *m, const spia_adjacency *adj, const sp
     std::vector<BatchRows> results((size_t)batches);
     auto run_batch = [&](int32_t b, BatchRows &out) {
         const int32_t first = b * batch_size, n_batch = std::min(count - first, batch_size);
-        std::vector<int32_t> marked(ev.decaying.begin() + first, ev.decaying.begin() + first + n_batch);
-        std::vector<int32_t> depth(ev.depth.begin() + first, ev.depth.begin() + first + n_batch);
+        std::vector<int32_t> marked(order.begin() + first, order.begin() + first + n_batch), depth;
+        for (int32_t o : marked) depth.push_back(depth_of[(size_t)o]);
         Part sub;
         spia_status local_status;
         if (make_part(m, adj, opt, p, two_ring_faces(m, adj, p, marked), false, sub, &local_status) != SPIA_OK) {
@@ -1014,7 +1055,8 @@ spia_result decayed_rows(const spia_mesh *m, const spia_adjacency *adj, const sp
 //    mesh's sharpness.  The vertices are taken in batches of consecutive
 //    vertices, each with its own sub-mesh, so that OpenSubdiv's tables
 //    (which hold every refined vertex) stay small, and batches run on the
-//    threads.  The batches do not depend on the thread count.
+//    threads.  The batches (consecutive along a Morton curve, spatial_order)
+//    do not depend on the thread count.
 spia_result adaptive_rows(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, Prepared &p,
                           const Evaluation &ev, HeldRows &held, spia_status *status) {
     const int32_t osd_n = p.osd_n;
@@ -1025,6 +1067,7 @@ spia_result adaptive_rows(const spia_mesh *m, const spia_adjacency *adj, const s
         if (ev.adaptive[o]) features.push_back(o);
     const int32_t feature_count = (int32_t)features.size();
     if (feature_count == 0) return SPIA_OK;
+    spatial_order(m, p, features);
     const int32_t batch_size =
         std::max<int32_t>(kFeatureBatch, (feature_count + kMaxFeatureBatches - 1) / kMaxFeatureBatches);
     const int32_t batches = (feature_count + batch_size - 1) / batch_size;
