@@ -31,6 +31,7 @@
 
 #include <opensubdiv/bfr/refinerSurfaceFactory.h>
 #include <opensubdiv/bfr/surface.h>
+#include <opensubdiv/far/patchMap.h>
 #include <opensubdiv/far/patchTableFactory.h>
 #include <opensubdiv/far/primvarRefiner.h>
 #include <opensubdiv/far/ptexIndices.h>
@@ -1162,35 +1163,105 @@ spia_result adaptive_rows(const spia_mesh *m, const spia_adjacency *adj, const s
             }
             locations.push_back(loc);
         }
-        LimitFactory::Options limit_options;
-        limit_options.generate1stDerivatives = false;
-        limit_options.generate2ndDerivatives = false;
-        std::unique_ptr<const LimitTable> table(
-            LimitFactory::Create(*sub.refiner, locations, nullptr, nullptr, limit_options));
-        if (!table || table->GetNumStencils() != batch_count) {
-            failed(SPIA_ERROR_INTERNAL, -1, "OpenSubdiv returned %d limit stencils for %d vertices",
-                   table ? table->GetNumStencils() : -1, (int)batch_count);
+        // What LimitStencilTableFactory computes, with the same patch
+        // options, but without its stencil for every refined point (whose
+        // merging costs the square of its length, hundreds of weights
+        // around vertices of high valence): each level's points as
+        // stencils over the previous level's (a few weights each), and each
+        // vertex's row carried down from its patch's points.
+        Far::TopologyRefiner &sr = *sub.refiner;
+        const int max_level = sr.GetMaxLevel();
+        std::vector<int64_t> level_start((size_t)max_level + 2, 0);
+        for (int l = 0; l <= max_level; ++l)
+            level_start[(size_t)l + 1] = level_start[(size_t)l] + sr.GetLevel(l).GetNumVertices();
+        std::vector<std::vector<SparseStencilD>> steps((size_t)max_level + 1);
+        {
+            Far::PrimvarRefinerReal<double> primvar(sr);
+            std::vector<SparseStencilD> identity;
+            for (int l = 1; l <= max_level; ++l) {
+                const int32_t prev = sr.GetLevel(l - 1).GetNumVertices();
+                identity.resize((size_t)prev);
+                for (int32_t i = 0; i < prev; ++i) identity[(size_t)i].w.assign(1, std::make_pair(i, 1.0));
+                steps[(size_t)l].resize((size_t)sr.GetLevel(l).GetNumVertices());
+                SparseStencilD *src = identity.data(), *dst = steps[(size_t)l].data();
+                primvar.Interpolate(l, src, dst);
+                for (SparseStencilD &st : steps[(size_t)l]) st.Compact();
+            }
+        }
+        Far::PatchTableFactory::Options patch_options;
+        patch_options.SetPatchPrecision<double>();
+        patch_options.includeBaseLevelIndices = true;
+        patch_options.SetEndCapType(Far::PatchTableFactory::Options::ENDCAP_GREGORY_BASIS);
+        patch_options.useInfSharpPatch = true;
+        std::unique_ptr<Far::PatchTable> patches(Far::PatchTableFactory::Create(
+            sr, patch_options, Far::ConstIndexArray(feature_faces.data(), (int)feature_faces.size())));
+        if (!patches) {
+            failed(SPIA_ERROR_INTERNAL, -1, "OpenSubdiv built no patches around %d vertices", (int)batch_count, 0);
             return;
         }
-        const std::vector<int> &sizes = table->GetSizes();
-        const std::vector<Far::Index> &offsets = table->GetOffsets();
-        const std::vector<Far::Index> &indices = table->GetControlIndices();
-        const std::vector<double> &weights = table->GetWeights();
+        const Far::StencilTableReal<double> *local = patches->GetLocalPointStencilTable<double>();
+        Far::PatchMap patch_map(*patches);
+        const int64_t total = level_start[(size_t)max_level + 1];
+        std::vector<std::pair<int64_t, double>> row, wider;  // global point index, weight
+        double basis[64];
         for (int32_t i = 0; i < batch_count; ++i) {
             const int32_t o = marked[(size_t)i];
+            const LimitFactory::LocationArray &loc = locations[(size_t)i];
+            const Far::PatchTable::PatchHandle *handle = patch_map.FindPatch(loc.ptexIdx, loc.s[0], loc.t[0]);
+            if (!handle) {
+                failed(SPIA_ERROR_INTERNAL, p.vertex_of[o], "OpenSubdiv found no patch at vertex %d", p.vertex_of[o], 0);
+                return;
+            }
+            Far::ConstIndexArray cvs = patches->GetPatchVertices(*handle);
+            if (cvs.size() > 64) {
+                failed(SPIA_ERROR_INTERNAL, p.vertex_of[o], "a patch with %d points at vertex %d", cvs.size(),
+                       p.vertex_of[o]);
+                return;
+            }
+            patches->EvaluateBasis(*handle, loc.s[0], loc.t[0], basis);
+            row.clear();
+            for (int k = 0; k < cvs.size(); ++k) {
+                if (cvs[k] < total) {
+                    row.emplace_back(cvs[k], basis[k]);
+                } else if (local) {
+                    const Far::StencilReal<double> st = local->GetStencil((Far::Index)(cvs[k] - total));
+                    for (int j = 0; j < st.GetSize(); ++j)
+                        row.emplace_back(st.GetVertexIndices()[j], basis[k] * st.GetWeights()[j]);
+                }
+            }
+            // Down the levels: points of level l in terms of level l - 1's.
+            for (int l = max_level; l >= 1; --l) {
+                wider.clear();
+                for (const auto &e : row) {
+                    if (e.first >= level_start[(size_t)l] && e.first < level_start[(size_t)l + 1]) {
+                        for (const auto &x : steps[(size_t)l][(size_t)(e.first - level_start[(size_t)l])].w)
+                            wider.emplace_back(level_start[(size_t)l - 1] + x.first, e.second * x.second);
+                    } else {
+                        wider.push_back(e);
+                    }
+                }
+                std::sort(wider.begin(), wider.end());
+                row.clear();
+                for (size_t k = 0; k < wider.size();) {
+                    const int64_t j = wider[k].first;
+                    double sum = 0.0;
+                    while (k < wider.size() && wider[k].first == j) sum += wider[k++].second;
+                    row.emplace_back(j, sum);
+                }
+            }
             out.vertex.push_back(o);
             out.start.push_back((int64_t)out.indices.size());
-            for (int k = 0; k < sizes[i]; ++k) {
-                Far::Index j = indices[offsets[i] + k];
-                if (j < 0 || j >= sub_n) {
+            std::sort(row.begin(), row.end());
+            for (const auto &e : row) {
+                if (e.first < 0 || e.first >= sub_n) {
                     failed(SPIA_ERROR_INTERNAL, p.vertex_of[o],
-                           "OpenSubdiv stencil refers to point %d, not a control vertex", (int)j, 0);
+                           "OpenSubdiv stencil refers to point %d, not a control vertex", (int)e.first, 0);
                     return;
                 }
-                out.indices.push_back(sub.osd_of_local[(size_t)j]);
+                if (e.second == 0.0) continue;
+                out.indices.push_back(sub.osd_of_local[(size_t)e.first]);
+                out.weights.push_back(e.second);
             }
-            out.weights.insert(out.weights.end(), weights.begin() + offsets[i],
-                               weights.begin() + offsets[i] + sizes[i]);
         }
         out.start.push_back((int64_t)out.indices.size());
     };
