@@ -590,6 +590,18 @@ struct Evaluation {
     int32_t adaptive_count = 0;
 };
 
+// Whether a vertex of one of the faces around vertex v has more than 12
+// faces.
+bool next_to_high_valence(const Far::TopologyLevel &base, Far::Index v) {
+    Far::ConstIndexArray vf = base.GetVertexFaces(v);
+    for (int k = 0; k < vf.size(); ++k) {
+        Far::ConstIndexArray fv = base.GetFaceVertices(vf[k]);
+        for (int j = 0; j < fv.size(); ++j)
+            if (base.GetVertexFaces(fv[j]).size() > 12) return true;
+    }
+    return false;
+}
+
 // 5. How each vertex of `wanted` (osd numbering) is evaluated.  At
 //    semi-sharp features and darts of manifold meshes Blender's surface
 //    depends on the isolation level; there Bfr with its approximation
@@ -664,7 +676,11 @@ void choose_evaluation(const spia_mesh *m, const spia_adjacency *adj, const spia
                 ev.depth.push_back(depth);
                 continue;
             }
-            if (blender) approx[o] = 1;
+            // Bfr is the faster of the two where the faces around are of
+            // low valence; next to a vertex of high valence its irregular
+            // patches cost more than Far's adaptive ones (measured on the
+            // hard set: a sphere with poles of valence 400, a printer bed).
+            if (blender && !next_to_high_valence(base, lo)) approx[o] = 1;
             else adaptive = true;
         }
         if (!adaptive) {
