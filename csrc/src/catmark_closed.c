@@ -201,13 +201,14 @@ int32_t spia__catmark_closed_row(const spia_mesh *m, const spia_adjacency *adj, 
     const double n = (double)k, scale = 1.0 / (n * (n + 5.0));
     double centre = (n * n - n) * scale;
     int32_t count = 1;
+    for (int32_t i = 0; i < k; ++i) fan[i].inverse_size = 1.0 / (double)fan[i].size;
     for (int32_t i = 0; i < k; ++i) {
         const int64_t c = fan[i].corner, c0 = fan[i].start, c1 = c0 + fan[i].size;
-        const double wf = 4.0 * scale / (double)fan[i].size;
+        const double wf = 4.0 * scale * fan[i].inverse_size;
         centre += wf;
         /* The edge to next lies on face i and the face after it. */
         e[count].column = fan[i].next;
-        e[count++].weight = 2.0 * scale + wf + 4.0 * scale / (double)fan[fan[i].succ].size;
+        e[count++].weight = 2.0 * scale + wf + 4.0 * scale * fan[fan[i].succ].inverse_size;
         /* The face's vertices from the one after next to the one before
          * prev. */
         int64_t d = c + 2 < c1 ? c + 2 : c + 2 - fan[i].size;

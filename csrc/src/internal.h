@@ -144,6 +144,7 @@ typedef struct spia_row_entry {
 typedef struct spia_fan_corner {
     int64_t corner, start; /* v's corner, and its face's first */
     int32_t size, next, prev, succ;
+    double inverse_size;
 } spia_fan_corner;
 typedef struct spia_row_scratch {
     spia_row_entry *entries;
