@@ -1,0 +1,400 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
+/* The sweep layout of a stencil table, for GS_PIA_FAST (see spia_plan in
+ * internal.h and fast.c).
+ *
+ * Gauss-Seidel in vertex order is a chain: each row reads the row swept
+ * just before it, so a sweep runs at the speed of one row's latency, on one
+ * thread.  The layout here breaks the chain in two ways.  The rows are
+ * grouped by the levels of a breadth-first search through the stencils, so
+ * that a row refers only to its own level and the two beside it; within a
+ * level they are ordered by a colouring of the level, so that the rows
+ * swept one after another are not neighbours.  And the levels, gathered in
+ * chunks, let a sweep start on the first chunks while the sweep before it
+ * is still on later ones: a chunk may be swept again once the chunks it
+ * refers to have been, so several sweeps run at once, each on a thread,
+ * and do exactly what they would one after another.
+ *
+ * The layout depends on the table alone, never on the thread count; it is
+ * built once, with the table. */
+#include "internal.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+void spia__plan_free(spia_plan *p) {
+    if (!p) return;
+    free(p->order);
+    free(p->chunk_start);
+    free(p->chunk_entry);
+    free(p->length);
+    free(p->code8);
+    free(p->code16);
+    free(p->delta16);
+    free(p->delta32);
+    free(p->weight);
+    free(p->weight_f);
+    free(p->inverse_f);
+    free(p);
+}
+
+/* ------------------------------------------------------------------------ */
+/* The order: breadth-first levels, coloured                                 */
+/* ------------------------------------------------------------------------ */
+
+/* The stencils as an undirected graph: row r's own columns and, through the
+ * transposed pattern, the rows whose columns hold r (a boundary vertex's
+ * stencil leaves out the interior vertices whose stencils hold it). */
+typedef struct graph {
+    const spia_stencils *s;
+    int64_t *in_offsets; /* rows + 1 */
+    int32_t *in_rows;
+} graph;
+
+static int graph_build(graph *g, const spia_stencils *s) {
+    const int32_t n = s->rows;
+    g->s = s;
+    g->in_offsets = (int64_t *)calloc((size_t)n + 1, sizeof(int64_t));
+    if (!g->in_offsets) return 0;
+    for (int32_t r = 0; r < n; ++r)
+        for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k)
+            if (s->indices[k] != r) g->in_offsets[s->indices[k] + 1]++;
+    for (int32_t r = 0; r < n; ++r) g->in_offsets[r + 1] += g->in_offsets[r];
+    g->in_rows = (int32_t *)malloc(sizeof(int32_t) * (size_t)(g->in_offsets[n] > 0 ? g->in_offsets[n] : 1));
+    if (!g->in_rows) return 0;
+    /* Filled through the offsets themselves (each ends up at the next
+     * row's start), then shifted back. */
+    for (int32_t r = 0; r < n; ++r)
+        for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k) {
+            const int32_t j = s->indices[k];
+            if (j != r) g->in_rows[g->in_offsets[j]++] = r;
+        }
+    for (int32_t r = n; r > 0; --r) g->in_offsets[r] = g->in_offsets[r - 1];
+    g->in_offsets[0] = 0;
+    return 1;
+}
+
+static void graph_free(graph *g) {
+    free(g->in_offsets);
+    free(g->in_rows);
+}
+
+/* Runs `body` for every neighbour u of v (u != v; some twice). */
+#define FOR_NEIGHBOURS(g, v, u, body)                                                         \
+    do {                                                                                      \
+        for (int64_t k_ = (g)->s->offsets[v]; k_ < (g)->s->offsets[(v) + 1]; ++k_) {          \
+            const int32_t u = (g)->s->indices[k_];                                            \
+            if (u != (v)) body                                                                \
+        }                                                                                     \
+        for (int64_t k_ = (g)->in_offsets[v]; k_ < (g)->in_offsets[(v) + 1]; ++k_) {         \
+            const int32_t u = (g)->in_rows[k_];                                               \
+            body                                                                              \
+        }                                                                                     \
+    } while (0)
+
+/* Breadth-first search from `root` through rows whose level is -1, written
+ * to queue[begin ..]; returns the end. */
+static int32_t bfs(const graph *g, int32_t root, int32_t *queue, int32_t begin, int32_t *level) {
+    int32_t head = begin, tail = begin;
+    queue[tail++] = root;
+    level[root] = 0;
+    while (head < tail) {
+        const int32_t v = queue[head++];
+        FOR_NEIGHBOURS(g, v, u, {
+            if (level[u] < 0) {
+                level[u] = level[v] + 1;
+                queue[tail++] = u;
+            }
+        });
+    }
+    return tail;
+}
+
+/* The level order: p->order and p->chunk_start filled; chunk_of[r] (rows
+ * entries) the chunk of table row r and position[r] its position.  Returns
+ * 0 when out of memory. */
+static int level_order(const spia_stencils *s, spia_plan *p, int32_t *chunk_of, int32_t *position) {
+    const int32_t n = s->rows;
+    graph g;
+    memset(&g, 0, sizeof g);
+    int32_t *queue = (int32_t *)malloc(sizeof(int32_t) * (size_t)n);
+    int32_t *level = chunk_of; /* the level of each row, until it becomes the chunk */
+    int32_t *rank = position;  /* the rank in breadth-first order, until it becomes the position */
+    unsigned char *colour = (unsigned char *)malloc((size_t)n);
+    p->order = (int32_t *)malloc(sizeof(int32_t) * (size_t)n);
+    int ok = queue && colour && p->order && graph_build(&g, s);
+    if (ok) {
+        /* Levels: a search from the row found last by a first search is
+         * one from a far end of the part, which makes the levels many and
+         * small (the bandwidth of the order low). */
+        for (int32_t r = 0; r < n; ++r) level[r] = -1;
+        int32_t begin = 0, base = 0;
+        for (int32_t root = 0; root < n; ++root) {
+            if (level[root] >= 0) continue;
+            const int32_t end = bfs(&g, root, queue, begin, level);
+            const int32_t far = queue[end - 1];
+            for (int32_t q = begin; q < end; ++q) level[queue[q]] = -1;
+            bfs(&g, far, queue, begin, level);
+            int32_t top = 0;
+            for (int32_t q = begin; q < end; ++q) {
+                const int32_t v = queue[q];
+                if (level[v] > top) top = level[v];
+                level[v] += base;
+            }
+            base += top + 1;
+            begin = end;
+        }
+        /* Colours within each level, greedily in breadth-first order: the
+         * first not used by a neighbour of the same level already coloured
+         * (at most 32; more share the last). */
+        for (int32_t q = 0; q < n; ++q) rank[queue[q]] = q;
+        for (int32_t q = 0; q < n; ++q) {
+            const int32_t v = queue[q];
+            uint32_t used = 0;
+            FOR_NEIGHBOURS(&g, v, u, {
+                if (level[u] == level[v] && rank[u] < q) used |= 1u << colour[u];
+            });
+            int c = 0;
+            while (c < 31 && (used >> c & 1u)) ++c;
+            colour[v] = (unsigned char)c;
+        }
+        /* Each level sorted by colour (stably), and the chunks. */
+        int32_t chunks = 0, chunk_rows = 0;
+        for (int32_t a = 0; a < n;) {
+            int32_t b = a;
+            while (b < n && level[queue[b]] == level[queue[a]]) ++b;
+            int32_t count[33] = {0};
+            for (int32_t q = a; q < b; ++q) count[colour[queue[q]] + 1]++;
+            for (int c = 0; c < 32; ++c) count[c + 1] += count[c];
+            for (int32_t q = a; q < b; ++q) p->order[a + count[colour[queue[q]]]++] = queue[q];
+            if (chunk_rows == 0) ++chunks;
+            chunk_rows += b - a;
+            if (chunk_rows >= SPIA_PLAN_CHUNK_ROWS) chunk_rows = 0;
+            a = b;
+        }
+        p->chunks = chunks;
+        p->chunk_start = (int32_t *)malloc(sizeof(int32_t) * ((size_t)chunks + 1));
+        ok = p->chunk_start != NULL;
+        if (ok) {
+            /* The same walk again, now over the sorted order, writing the
+             * chunks, each row's chunk and position. */
+            int32_t c = -1;
+            chunk_rows = 0;
+            for (int32_t a = 0; a < n;) {
+                int32_t b = a;
+                const int32_t lv = level[p->order[a]];
+                while (b < n && level[p->order[b]] == lv) ++b;
+                if (chunk_rows == 0) p->chunk_start[++c] = a;
+                chunk_rows += b - a;
+                if (chunk_rows >= SPIA_PLAN_CHUNK_ROWS) chunk_rows = 0;
+                for (int32_t q = a; q < b; ++q) queue[q] = c; /* chunk by position, for now */
+                a = b;
+            }
+            p->chunk_start[chunks] = n;
+            for (int32_t q = 0; q < n; ++q) {
+                chunk_of[p->order[q]] = queue[q];
+                position[p->order[q]] = q;
+            }
+        }
+    }
+    graph_free(&g);
+    free(queue);
+    free(colour);
+    return ok;
+}
+
+/* ------------------------------------------------------------------------ */
+/* The dictionary of weights                                                 */
+/* ------------------------------------------------------------------------ */
+
+enum { DICTIONARY_BITS = 17, DICTIONARY_LIMIT = 65536 };
+
+typedef struct dictionary {
+    uint64_t *keys; /* the bits of the weight; 0 (the weight +0.0, never in a table) when empty */
+    int32_t *codes;
+    double *weight; /* DICTIONARY_LIMIT */
+    int32_t count;
+} dictionary;
+
+static uint64_t bits_of(double w) {
+    uint64_t b;
+    memcpy(&b, &w, sizeof b);
+    return b;
+}
+
+/* The code of w, added if new; -1 past DICTIONARY_LIMIT weights. */
+static int32_t dictionary_code(dictionary *d, double w) {
+    const uint64_t key = bits_of(w);
+    const uint64_t mask = ((uint64_t)1 << DICTIONARY_BITS) - 1;
+    uint64_t slot = (key * 0x9E3779B97F4A7C15ull) >> (64 - DICTIONARY_BITS);
+    for (;;) {
+        if (d->keys[slot] == key) return d->codes[slot];
+        if (d->keys[slot] == 0) break;
+        slot = (slot + 1) & mask;
+    }
+    if (d->count >= DICTIONARY_LIMIT) return -1;
+    d->keys[slot] = key;
+    d->codes[slot] = d->count;
+    d->weight[d->count] = w;
+    return d->count++;
+}
+
+/* ------------------------------------------------------------------------ */
+/* The plan                                                                  */
+/* ------------------------------------------------------------------------ */
+
+/* Table row r's entries in plan order: its own entry first, then the others
+ * as the table has them. */
+static int64_t own_entry(const spia_stencils *s, int32_t r) {
+    for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k)
+        if (s->indices[k] == r) return k;
+    return -1;
+}
+
+spia_result spia__plan_build(spia_stencils *s, spia_status *status) {
+    const int32_t n = s->rows;
+    s->plan = NULL;
+    for (int32_t r = 0; r < n; ++r)
+        if (s->offsets[r + 1] - s->offsets[r] > 65535) return SPIA_OK; /* no plan: GS_PIA_FAST falls back */
+    spia_plan *p = (spia_plan *)calloc(1, sizeof *p);
+    int32_t *chunk_of = NULL, *position = NULL;
+    dictionary d;
+    memset(&d, 0, sizeof d);
+    uint16_t *codes = NULL;
+    if (!p) goto out_of_memory;
+    p->rows = n;
+    if (n >= SPIA_PARALLEL_ROWS) {
+        chunk_of = (int32_t *)malloc(sizeof(int32_t) * (size_t)n);
+        position = (int32_t *)malloc(sizeof(int32_t) * (size_t)n);
+        if (!chunk_of || !position || !level_order(s, p, chunk_of, position)) goto out_of_memory;
+    } else {
+        p->chunks = 1;
+        p->chunk_start = (int32_t *)malloc(sizeof(int32_t) * 2);
+        if (!p->chunk_start) goto out_of_memory;
+        p->chunk_start[0] = 0;
+        p->chunk_start[1] = n;
+    }
+#define POSITION(r) (position ? position[r] : (r))
+#define CHUNK(r) (chunk_of ? chunk_of[r] : 0)
+
+    /* Lengths, reach, offsets' range, own entries. */
+    p->length = (uint16_t *)malloc(sizeof(uint16_t) * (size_t)(n > 0 ? n : 1));
+    p->chunk_entry = (int64_t *)malloc(sizeof(int64_t) * ((size_t)p->chunks + 1));
+    if (!p->length || !p->chunk_entry) goto out_of_memory;
+    int64_t widest = 0;
+    p->diagonal_first = 1;
+    for (int32_t i = 0; i < n; ++i) {
+        const int32_t r = p->order ? p->order[i] : i;
+        p->length[i] = (uint16_t)(s->offsets[r + 1] - s->offsets[r]);
+        const int64_t own = own_entry(s, r);
+        if (own < 0 || !(s->weights[own] > 0.0)) p->diagonal_first = 0;
+        for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k) {
+            const int32_t j = s->indices[k];
+            const int64_t delta = (int64_t)POSITION(j) - i;
+            if (delta > widest || -delta > widest) widest = delta > 0 ? delta : -delta;
+            const int32_t apart = CHUNK(j) > CHUNK(r) ? CHUNK(j) - CHUNK(r) : CHUNK(r) - CHUNK(j);
+            if (apart > p->reach) p->reach = apart;
+        }
+    }
+    {
+        int64_t e = 0;
+        for (int32_t c = 0; c < p->chunks; ++c) {
+            p->chunk_entry[c] = e;
+            for (int32_t i = p->chunk_start[c]; i < p->chunk_start[c + 1]; ++i) e += p->length[i];
+        }
+        p->chunk_entry[p->chunks] = e;
+    }
+
+    /* Codes and offsets. */
+    const size_t entries = (size_t)(s->nnz > 0 ? s->nnz : 1);
+    d.keys = (uint64_t *)calloc((size_t)1 << DICTIONARY_BITS, sizeof(uint64_t));
+    d.codes = (int32_t *)malloc(sizeof(int32_t) * ((size_t)1 << DICTIONARY_BITS));
+    d.weight = (double *)malloc(sizeof(double) * DICTIONARY_LIMIT);
+    codes = (uint16_t *)malloc(sizeof(uint16_t) * entries);
+    if (widest <= 32767)
+        p->delta16 = (int16_t *)malloc(sizeof(int16_t) * entries);
+    else
+        p->delta32 = (int32_t *)malloc(sizeof(int32_t) * entries);
+    if (!d.keys || !d.codes || !d.weight || !codes || (!p->delta16 && !p->delta32)) goto out_of_memory;
+    {
+        /* Most rows repeat the weights of the row before, in the same
+         * places: those are looked up there first. */
+        int64_t e = 0, previous = -1;
+        int32_t previous_length = 0;
+        for (int32_t i = 0; i < n; ++i) {
+            const int32_t r = p->order ? p->order[i] : i;
+            const int64_t own = own_entry(s, r);
+            int32_t q = 0;
+            for (int pass = 0; pass < 2; ++pass)
+                for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k) {
+                    if ((k == own) != (pass == 0)) continue;
+                    const double w = s->weights[k];
+                    int32_t code;
+                    if (q < previous_length && d.weight[codes[previous + q]] == w &&
+                        bits_of(d.weight[codes[previous + q]]) == bits_of(w))
+                        code = codes[previous + q];
+                    else
+                        code = dictionary_code(&d, w);
+                    if (code < 0) {
+                        /* Too many distinct weights (shape parameters per
+                         * face, say): no plan. */
+                        free(d.keys);
+                        free(d.codes);
+                        free(d.weight);
+                        free(codes);
+                        free(chunk_of);
+                        free(position);
+                        spia__plan_free(p);
+                        return SPIA_OK;
+                    }
+                    codes[e + q] = (uint16_t)code;
+                    const int64_t delta = (int64_t)POSITION(s->indices[k]) - i;
+                    if (p->delta16)
+                        p->delta16[e + q] = (int16_t)delta;
+                    else
+                        p->delta32[e + q] = (int32_t)delta;
+                    ++q;
+                }
+            previous = e;
+            previous_length = q;
+            e += q;
+        }
+    }
+#undef POSITION
+#undef CHUNK
+    p->words = d.count;
+    p->weight = (double *)malloc(sizeof(double) * (size_t)(d.count > 0 ? d.count : 1));
+    p->weight_f = (float *)malloc(sizeof(float) * (size_t)(d.count > 0 ? d.count : 1));
+    p->inverse_f = (float *)malloc(sizeof(float) * (size_t)(d.count > 0 ? d.count : 1));
+    if (!p->weight || !p->weight_f || !p->inverse_f) goto out_of_memory;
+    for (int32_t c = 0; c < d.count; ++c) {
+        p->weight[c] = d.weight[c];
+        p->weight_f[c] = (float)d.weight[c];
+        p->inverse_f[c] = (float)(1.0 / d.weight[c]);
+    }
+    if (d.count <= 256) {
+        p->code8 = (uint8_t *)malloc(entries);
+        if (!p->code8) goto out_of_memory;
+        for (int64_t e = 0; e < s->nnz; ++e) p->code8[e] = (uint8_t)codes[e];
+        free(codes);
+    } else {
+        p->code16 = codes;
+    }
+    codes = NULL;
+    free(d.keys);
+    free(d.codes);
+    free(d.weight);
+    free(chunk_of);
+    free(position);
+    s->plan = p;
+    return SPIA_OK;
+
+out_of_memory:
+    free(d.keys);
+    free(d.codes);
+    free(d.weight);
+    free(codes);
+    free(chunk_of);
+    free(position);
+    spia__plan_free(p);
+    return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory laying out the stencils for the solver");
+}
