@@ -1,0 +1,838 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
+/* GS_PIA_FAST: Gauss-Seidel PIA on the table's sweep layout (plan.c).
+ *
+ * The update is GS-PIA's, V_i += (P_i - (L V)_i) / L_ii, row after row in
+ * place, but
+ *
+ * - in the plan's order: vertex order on small tables; breadth-first levels
+ *   of the stencils, each ordered by a colouring, on large ones, where
+ *   several sweeps run at once, one behind the other, on the threads (a
+ *   chunk of levels is swept again once the chunks it refers to have been:
+ *   the sweeps do exactly what they would one after another, whatever the
+ *   number of threads);
+ * - on the correction Y to the first iterate S: the sweeps solve L Y = B,
+ *   B = P - L S, in float32 with the weights' float32 copies, four floats a
+ *   row (x, y, z and a zero lane, one vector operation per weight);
+ * - with the residual and the stopping test in double: the residual of the
+ *   cage as it will be stored, float(S + Y), with the table's exact
+ *   weights; the cage is written only once that meets the tolerance.
+ *   Float32 sweeps hold Y to about 1e-7 of its own size, far below the
+ *   rounding of the cage itself; where a tolerance asks for more (or the
+ *   cage's coordinates are so far from the origin that float rounding of
+ *   the cage misses it), the solve goes on with GS_PIA's double sweeps
+ *   from where it got to.
+ *
+ * As GS-PIA, the error of an iteration (history, progress, the stopping
+ * test's trigger) is the largest residual met during the sweep; the full
+ * residual is computed when that reaches the tolerance.
+ *
+ * With SPIA_SOLVE_FIRST_STEP the first iterate is improved first by one
+ * step of a local approximate inverse of the limit mask: Y_i = w_i sum_j
+ * s_ij L_ij B_j, with s_ij = -1 where L_ij is one of the larger weights of
+ * the row (the edge neighbours of a Catmull-Clark limit mask, 4 times a
+ * face corner's), +1 elsewhere, and w_i = 1.28 / L_ii^2.  On a regular
+ * quad grid that is 6.48 times the limit mask with alternating signs,
+ * whose symbol is 1 / the limit mask's at the ends of the spectrum: it
+ * brings the conditioning of L from 9 to 16/9.
+ */
+#include "internal.h"
+#include "threads.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+enum {
+    FAST_BLOCK = 2048,      /* rows per partial sum of the residual, as solve.c's BLOCK */
+    FAST_WINDOW = 50,       /* solve.c's STAGNATION_WINDOW */
+    FIRST_RUN = 4,          /* sweeps of the first run on a pipelined plan */
+    LONGEST_RUN = 16,       /* the most sweeps run at once */
+    FLOAT_FLOOR_CHECKS = 2  /* failed checks with the sweeps at the tolerance before handing over */
+};
+#define FAST_DIVERGENCE 1e4
+#define FAST_DRIFT 50.0
+#define FIRST_STEP_SCALE 1.28
+/* The float32 sweeps are used when the tolerance is at least this much of
+ * the first iterate's residual (about 30 float32 ulps of it). */
+#define FLOAT_REACH 4e-6
+
+enum { STUCK = 1, FROZEN = 2 };
+
+/* ------------------------------------------------------------------------ */
+/* Four-lane vectors                                                         */
+/* ------------------------------------------------------------------------ */
+
+#if defined(__GNUC__) || defined(__clang__)
+typedef float f4 __attribute__((vector_size(16)));
+typedef double d4 __attribute__((vector_size(32)));
+#define V4_SPLAT(T, a) ((T){(a), (a), (a), (a)})
+#define V4_ZERO(T) ((T){0, 0, 0, 0})
+#define V4_ADD(a, b) ((a) + (b))
+#define V4_SUB(a, b) ((a) - (b))
+#define V4_SCALE(a, s) ((a) * (s))
+#define V4_LANE(a, i) ((a)[i])
+#else
+typedef struct f4 {
+    float v[4];
+} f4;
+typedef struct d4 {
+    double v[4];
+} d4;
+#define V4_LANE(a, i) ((a).v[i])
+static inline f4 f4_make(float a, float b, float c, float d) {
+    f4 r = {{a, b, c, d}};
+    return r;
+}
+static inline d4 d4_make(double a, double b, double c, double d) {
+    d4 r = {{a, b, c, d}};
+    return r;
+}
+#define V4_SPLAT(T, a) T##_make((a), (a), (a), (a))
+#define V4_ZERO(T) T##_make(0, 0, 0, 0)
+static inline f4 f4_add(f4 a, f4 b) { return f4_make(a.v[0] + b.v[0], a.v[1] + b.v[1], a.v[2] + b.v[2], a.v[3] + b.v[3]); }
+static inline f4 f4_sub(f4 a, f4 b) { return f4_make(a.v[0] - b.v[0], a.v[1] - b.v[1], a.v[2] - b.v[2], a.v[3] - b.v[3]); }
+static inline f4 f4_scale(f4 a, float s) { return f4_make(a.v[0] * s, a.v[1] * s, a.v[2] * s, a.v[3] * s); }
+static inline d4 d4_add(d4 a, d4 b) { return d4_make(a.v[0] + b.v[0], a.v[1] + b.v[1], a.v[2] + b.v[2], a.v[3] + b.v[3]); }
+static inline d4 d4_sub(d4 a, d4 b) { return d4_make(a.v[0] - b.v[0], a.v[1] - b.v[1], a.v[2] - b.v[2], a.v[3] - b.v[3]); }
+static inline d4 d4_scale(d4 a, double s) { return d4_make(a.v[0] * s, a.v[1] * s, a.v[2] * s, a.v[3] * s); }
+#define V4_ADD(a, b) _Generic((a), f4: f4_add, d4: d4_add)((a), (b))
+#define V4_SUB(a, b) _Generic((a), f4: f4_sub, d4: d4_sub)((a), (b))
+#define V4_SCALE(a, s) _Generic((a), f4: f4_scale, d4: d4_scale)((a), (s))
+#endif
+
+/* ------------------------------------------------------------------------ */
+/* The solver's state                                                        */
+/* ------------------------------------------------------------------------ */
+
+typedef struct fast {
+    const spia_plan *p;
+    int32_t n;
+    int threads;
+    int wide;          /* double sweeps (SPIA_SOLVE_DOUBLE_SWEEPS) */
+    float *P;          /* the targets by position, 3 floats a row */
+    float *S;          /* the first iterate by position (P itself when none is given) */
+    void *Y, *B;       /* correction and right-hand side, 4 floats (or doubles) a row */
+    unsigned char *flags;
+    double *inverse;   /* wide: 1 / weight */
+    int64_t blocks;
+    double *partial;   /* blocks * 4 */
+} fast;
+
+static inline int row_active(const fast *f, int32_t i) { return f->flags[i] == 0; }
+
+/* The coordinate a of the cage as it will be stored. */
+static inline double cage_value(const fast *f, int32_t i, int a) {
+    if (f->flags[i] & STUCK) return f->P[3 * (int64_t)i + a];
+    const double y = f->wide ? ((const double *)f->Y)[4 * (int64_t)i + a] : ((const float *)f->Y)[4 * (int64_t)i + a];
+    return (double)(float)((double)f->S[3 * (int64_t)i + a] + y);
+}
+
+/* Sticky largest value: a NaN stays. */
+static inline double keep_max(double worst, double d) { return (!(d <= worst) && worst == worst) ? d : worst; }
+
+/* ------------------------------------------------------------------------ */
+/* Kernels, for each width of codes and offsets                              */
+/* ------------------------------------------------------------------------ */
+
+/* One sweep over the rows of chunk c; returns the largest |g|^2 met. */
+typedef double (*sweep_fn)(const fast *f, int32_t c);
+/* The first step over the rows of chunk c. */
+typedef void (*first_fn)(const fast *f, int32_t c);
+/* Rows [i0, i1): R = P - L x with x the first iterate (mode 0, and B = R)
+ * or the stored cage (mode 1); per row the distance |R|, then per block
+ * of FAST_BLOCK rows its largest (all rows, active rows), sum and sum of
+ * squares (active rows) into f->partial.  Mode 2: the distance of the
+ * cage and of the first iterate, into out[2 * i], out[2 * i + 1]. */
+typedef void (*residual_fn)(fast *f, int64_t b0, int64_t b1, int mode, double *out);
+
+#define DEFINE_KERNELS(SUFFIX, CODE, DELTA)                                                                      \
+    static double sweep_f_##SUFFIX(const fast *f, int32_t c) {                                                   \
+        const spia_plan *p = f->p;                                                                               \
+        f4 *Y = (f4 *)f->Y;                                                                                      \
+        const f4 *B = (const f4 *)f->B;                                                                          \
+        const float *w = p->weight_f;                                                                            \
+        int64_t k = p->chunk_entry[c];                                                                           \
+        double worst = 0.0;                                                                                      \
+        for (int32_t i = p->chunk_start[c]; i < p->chunk_start[c + 1]; ++i) {                                    \
+            const int32_t e = p->length[i];                                                                      \
+            if (!row_active(f, i)) {                                                                             \
+                k += e;                                                                                          \
+                continue;                                                                                        \
+            }                                                                                                    \
+            const f4 *y = Y + i;                                                                                 \
+            f4 a0 = V4_SCALE(y[0], w[CODE[k]]), a1 = V4_ZERO(f4), a2 = V4_ZERO(f4);                            \
+            int32_t q = 1;                                                                                       \
+            for (; q + 2 < e; q += 3) {                                                                          \
+                a0 = V4_ADD(a0, V4_SCALE(y[DELTA[k + q]], w[CODE[k + q]]));                                     \
+                a1 = V4_ADD(a1, V4_SCALE(y[DELTA[k + q + 1]], w[CODE[k + q + 1]]));                             \
+                a2 = V4_ADD(a2, V4_SCALE(y[DELTA[k + q + 2]], w[CODE[k + q + 2]]));                             \
+            }                                                                                                    \
+            for (; q < e; ++q) a0 = V4_ADD(a0, V4_SCALE(y[DELTA[k + q]], w[CODE[k + q]]));                      \
+            const f4 g = V4_SUB(B[i], V4_ADD(a0, V4_ADD(a1, a2)));                                               \
+            Y[i] = V4_ADD(Y[i], V4_SCALE(g, p->inverse_f[CODE[k]]));                                             \
+            const float g0 = V4_LANE(g, 0), g1 = V4_LANE(g, 1), g2 = V4_LANE(g, 2);                              \
+            worst = keep_max(worst, (double)(g0 * g0 + g1 * g1 + g2 * g2));                                     \
+            k += e;                                                                                              \
+        }                                                                                                        \
+        return worst;                                                                                            \
+    }                                                                                                            \
+    static double sweep_d_##SUFFIX(const fast *f, int32_t c) {                                                   \
+        const spia_plan *p = f->p;                                                                               \
+        d4 *Y = (d4 *)f->Y;                                                                                      \
+        const d4 *B = (const d4 *)f->B;                                                                          \
+        const double *w = p->weight;                                                                             \
+        int64_t k = p->chunk_entry[c];                                                                           \
+        double worst = 0.0;                                                                                      \
+        for (int32_t i = p->chunk_start[c]; i < p->chunk_start[c + 1]; ++i) {                                    \
+            const int32_t e = p->length[i];                                                                      \
+            if (!row_active(f, i)) {                                                                             \
+                k += e;                                                                                          \
+                continue;                                                                                        \
+            }                                                                                                    \
+            const d4 *y = Y + i;                                                                                 \
+            d4 a0 = V4_SCALE(y[0], w[CODE[k]]), a1 = V4_ZERO(d4), a2 = V4_ZERO(d4);                            \
+            int32_t q = 1;                                                                                       \
+            for (; q + 2 < e; q += 3) {                                                                          \
+                a0 = V4_ADD(a0, V4_SCALE(y[DELTA[k + q]], w[CODE[k + q]]));                                     \
+                a1 = V4_ADD(a1, V4_SCALE(y[DELTA[k + q + 1]], w[CODE[k + q + 1]]));                             \
+                a2 = V4_ADD(a2, V4_SCALE(y[DELTA[k + q + 2]], w[CODE[k + q + 2]]));                             \
+            }                                                                                                    \
+            for (; q < e; ++q) a0 = V4_ADD(a0, V4_SCALE(y[DELTA[k + q]], w[CODE[k + q]]));                      \
+            const d4 g = V4_SUB(B[i], V4_ADD(a0, V4_ADD(a1, a2)));                                               \
+            Y[i] = V4_ADD(Y[i], V4_SCALE(g, f->inverse[CODE[k]]));                                               \
+            const double g0 = V4_LANE(g, 0), g1 = V4_LANE(g, 1), g2 = V4_LANE(g, 2);                             \
+            worst = keep_max(worst, g0 * g0 + g1 * g1 + g2 * g2);                                                \
+            k += e;                                                                                              \
+        }                                                                                                        \
+        return worst;                                                                                            \
+    }                                                                                                            \
+    static void first_##SUFFIX(const fast *f, int32_t c) {                                                       \
+        const spia_plan *p = f->p;                                                                               \
+        int64_t k = p->chunk_entry[c];                                                                           \
+        for (int32_t i = p->chunk_start[c]; i < p->chunk_start[c + 1]; ++i) {                                    \
+            const int32_t e = p->length[i];                                                                      \
+            if (row_active(f, i)) {                                                                              \
+                double largest = 0.0, sum[3] = {0.0, 0.0, 0.0};                                                  \
+                for (int32_t q = 1; q < e; ++q)                                                                  \
+                    if (p->weight[CODE[k + q]] > largest) largest = p->weight[CODE[k + q]];                      \
+                for (int32_t q = 0; q < e; ++q) {                                                                \
+                    const double lw = p->weight[CODE[k + q]];                                                    \
+                    const double sw = q > 0 && lw >= 0.5 * largest ? -lw : lw;                                   \
+                    const int64_t j = (int64_t)i + DELTA[k + q];                                                 \
+                    for (int a = 0; a < 3; ++a)                                                                  \
+                        sum[a] += sw * (f->wide ? ((const double *)f->B)[4 * j + a]                              \
+                                                : (double)((const float *)f->B)[4 * j + a]);                     \
+                }                                                                                                \
+                const double d = p->weight[CODE[k]], scale = FIRST_STEP_SCALE / (d * d);                         \
+                for (int a = 0; a < 3; ++a) {                                                                    \
+                    if (f->wide)                                                                                 \
+                        ((double *)f->Y)[4 * (int64_t)i + a] = scale * sum[a];                                   \
+                    else                                                                                         \
+                        ((float *)f->Y)[4 * (int64_t)i + a] = (float)(scale * sum[a]);                           \
+                }                                                                                                \
+            }                                                                                                    \
+            k += e;                                                                                              \
+        }                                                                                                        \
+    }                                                                                                            \
+    static void residual_##SUFFIX(fast *f, int64_t b0, int64_t b1, int mode, double *out) {                      \
+        const spia_plan *p = f->p;                                                                               \
+        const int32_t n = f->n;                                                                                  \
+        for (int64_t b = b0; b < b1; ++b) {                                                                      \
+            double maxd = 0.0, maxa = 0.0, sum = 0.0, norm2 = 0.0;                                               \
+            const int32_t i0 = (int32_t)(b * FAST_BLOCK), i1 = (int32_t)((b + 1) * FAST_BLOCK < n ? (b + 1) * FAST_BLOCK : n); \
+            int64_t k = 0;                                                                                       \
+            {                                                                                                    \
+                /* the first entry of row i0: from its chunk's */                                                \
+                int32_t lo = 0, hi = p->chunks - 1;                                                              \
+                while (lo < hi) {                                                                                \
+                    const int32_t mid = (lo + hi + 1) / 2;                                                       \
+                    if (p->chunk_start[mid] <= i0) lo = mid; else hi = mid - 1;                                  \
+                }                                                                                                \
+                k = p->chunk_entry[lo];                                                                          \
+                for (int32_t i = p->chunk_start[lo]; i < i0; ++i) k += p->length[i];                             \
+            }                                                                                                    \
+            for (int32_t i = i0; i < i1; ++i) {                                                                  \
+                const int32_t e = p->length[i];                                                                  \
+                double s[3] = {0.0, 0.0, 0.0}, s0[3] = {0.0, 0.0, 0.0};                                          \
+                for (int32_t q = 0; q < e; ++q) {                                                                \
+                    const double lw = p->weight[CODE[k + q]];                                                    \
+                    const int32_t j = i + DELTA[k + q];                                                          \
+                    for (int a = 0; a < 3; ++a) {                                                                \
+                        if (mode != 0) s[a] += lw * cage_value(f, j, a);                                         \
+                        if (mode != 1) s0[a] += lw * (double)f->S[3 * (int64_t)j + a];                           \
+                    }                                                                                            \
+                }                                                                                                \
+                k += e;                                                                                          \
+                double r[3], r0[3];                                                                              \
+                for (int a = 0; a < 3; ++a) {                                                                    \
+                    r[a] = (double)f->P[3 * (int64_t)i + a] - s[a];                                              \
+                    r0[a] = (double)f->P[3 * (int64_t)i + a] - s0[a];                                            \
+                }                                                                                                \
+                if (mode == 2) {                                                                                 \
+                    out[2 * (int64_t)i] = sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]);                         \
+                    out[2 * (int64_t)i + 1] = sqrt(r0[0] * r0[0] + r0[1] * r0[1] + r0[2] * r0[2]);               \
+                    continue;                                                                                    \
+                }                                                                                                \
+                if (mode == 0) {                                                                                 \
+                    for (int a = 0; a < 3; ++a) {                                                                \
+                        r[a] = r0[a];                                                                            \
+                        if (f->wide)                                                                             \
+                            ((double *)f->B)[4 * (int64_t)i + a] = r0[a];                                        \
+                        else                                                                                     \
+                            ((float *)f->B)[4 * (int64_t)i + a] = (float)r0[a];                                  \
+                    }                                                                                            \
+                }                                                                                                \
+                const double d = sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]);                                  \
+                maxd = keep_max(maxd, d);                                                                        \
+                if (row_active(f, i)) {                                                                          \
+                    maxa = keep_max(maxa, d);                                                                    \
+                    norm2 += d * d;                                                                              \
+                }                                                                                                \
+                sum += d;                                                                                        \
+            }                                                                                                    \
+            if (mode != 2) {                                                                                     \
+                double *q = f->partial + 4 * b;                                                                  \
+                q[0] = maxd;                                                                                     \
+                q[1] = maxa;                                                                                     \
+                q[2] = sum;                                                                                      \
+                q[3] = norm2;                                                                                    \
+            }                                                                                                    \
+        }                                                                                                        \
+    }
+
+DEFINE_KERNELS(c8d16, p->code8, p->delta16)
+DEFINE_KERNELS(c16d16, p->code16, p->delta16)
+DEFINE_KERNELS(c8d32, p->code8, p->delta32)
+DEFINE_KERNELS(c16d32, p->code16, p->delta32)
+
+typedef struct kernels {
+    sweep_fn sweep;
+    first_fn first;
+    residual_fn residual;
+} kernels;
+
+static kernels kernels_for(const fast *f) {
+    const spia_plan *p = f->p;
+    kernels k;
+    if (p->code8 && p->delta16) {
+        k.sweep = f->wide ? sweep_d_c8d16 : sweep_f_c8d16;
+        k.first = first_c8d16;
+        k.residual = residual_c8d16;
+    } else if (p->delta16) {
+        k.sweep = f->wide ? sweep_d_c16d16 : sweep_f_c16d16;
+        k.first = first_c16d16;
+        k.residual = residual_c16d16;
+    } else if (p->code8) {
+        k.sweep = f->wide ? sweep_d_c8d32 : sweep_f_c8d32;
+        k.first = first_c8d32;
+        k.residual = residual_c8d32;
+    } else {
+        k.sweep = f->wide ? sweep_d_c16d32 : sweep_f_c16d32;
+        k.first = first_c16d32;
+        k.residual = residual_c16d32;
+    }
+    return k;
+}
+
+/* ------------------------------------------------------------------------ */
+/* Residual passes                                                           */
+/* ------------------------------------------------------------------------ */
+
+typedef struct residual_task {
+    fast *f;
+    residual_fn fn;
+    int mode;
+    double *out;
+} residual_task;
+
+static void residual_blocks(void *context, int64_t b0, int64_t b1, int thread) {
+    (void)thread;
+    residual_task *t = (residual_task *)context;
+    t->fn(t->f, b0, b1, t->mode, t->out);
+}
+
+/* Mode 0 (first iterate, B written) or 1 (stored cage): returns the largest
+ * distance over all rows, writes the mean and the largest over active
+ * rows; the partial sums are added in block order. */
+static double residual_pass(fast *f, const kernels *k, int mode, double *mean, double *max_active) {
+    residual_task t = {f, k->residual, mode, NULL};
+    spia__parallel_for(f->threads, f->blocks, 0, residual_blocks, &t);
+    double maxd = 0.0, maxa = 0.0, sum = 0.0;
+    for (int64_t b = 0; b < f->blocks; ++b) {
+        maxd = keep_max(maxd, f->partial[4 * b]);
+        maxa = keep_max(maxa, f->partial[4 * b + 1]);
+        sum += f->partial[4 * b + 2];
+    }
+    *mean = sum / f->n;
+    *max_active = maxa;
+    return maxd;
+}
+
+/* ------------------------------------------------------------------------ */
+/* Pipelined sweeps                                                          */
+/* ------------------------------------------------------------------------ */
+
+typedef struct pipeline {
+    fast *f;
+    kernels k;
+    int32_t stages;     /* sweeps, and the first step before them when first_step */
+    int first_step;
+    int32_t *pairs;     /* (chunk, stage) in the order they are handed out */
+    int64_t pair_count;
+    spia__counter next;
+    spia__counter *done;     /* per chunk: stages done */
+    spia__counter *finished; /* per stage: chunks done */
+    spia__counter stop;
+    double *worst;           /* per thread and stage */
+    int threads;
+    /* Reported by the calling thread as stages finish: */
+    int32_t reported;
+    double *estimate;        /* per stage: the sweep's error */
+    int32_t iteration;       /* iterations before this run */
+    double scale;
+    const spia_options *opt;
+    spia_report *report;
+    int cancelled;
+} pipeline;
+
+/* Stages finished so far, in order, from the calling thread: each sweep's
+ * error into the history and to the progress callback, which may cancel. */
+static void report_finished(pipeline *u) {
+    const int32_t chunks = u->f->p->chunks;
+    while (u->reported < u->stages && spia__counter_get(&u->finished[u->reported]) == chunks) {
+        const int32_t st = u->reported++;
+        if (u->first_step && st == 0) continue;
+        double w = 0.0;
+        for (int t = 0; t < u->threads; ++t) w = keep_max(w, u->worst[(int64_t)t * u->stages + st]);
+        const double err = sqrt(w);
+        u->estimate[st] = err;
+        const int32_t it = u->iteration + st + (u->first_step ? 0 : 1);
+        spia_report *rep = u->report;
+        if (rep && rep->history && it <= rep->history_capacity) {
+            rep->history[it - 1] = err / u->scale;
+            rep->history_count = it;
+        }
+        if (!u->cancelled && u->opt->progress && u->opt->progress(u->opt->progress_user_data, it, err / u->scale)) {
+            u->cancelled = 1;
+            spia__counter_set(&u->stop, 1);
+        }
+    }
+}
+
+static void pipeline_worker(void *context, int64_t piece0, int64_t piece1, int thread) {
+    (void)piece0;
+    (void)piece1;
+    pipeline *u = (pipeline *)context;
+    const spia_plan *p = u->f->p;
+    const int32_t reach = p->reach, last = p->chunks - 1;
+    for (;;) {
+        if (spia__counter_get(&u->stop)) break;
+        const int64_t ticket = spia__counter_add(&u->next, 1);
+        if (ticket >= u->pair_count) break;
+        const int32_t c = u->pairs[2 * ticket], st = u->pairs[2 * ticket + 1];
+        /* As one sweep after another would have it: the chunks before this
+         * one that it refers to have had this stage (and are done reading
+         * it), those after it the stage before (and not yet this one: that
+         * waits for this chunk). */
+        const int32_t lo = c - reach > 0 ? c - reach : 0, hi = c + reach < last ? c + reach : last;
+        for (int32_t j = lo; j <= hi; ++j) {
+            int rounds = 0;
+            while (spia__counter_get(&u->done[j]) < st + (j < c ? 1 : 0)) {
+                if (spia__counter_get(&u->stop)) return;
+                spia__wait(&rounds);
+            }
+        }
+        if (u->first_step && st == 0) {
+            u->k.first(u->f, c);
+        } else {
+            double *w = &u->worst[(int64_t)thread * u->stages + st];
+            *w = keep_max(*w, u->k.sweep(u->f, c));
+        }
+        spia__counter_add(&u->done[c], 1);
+        spia__counter_add(&u->finished[st], 1);
+        if (thread == 0) report_finished(u);
+    }
+}
+
+/* Runs `sweeps` sweeps (after the first step when first_step), their
+ * errors into estimate[0 ..]; returns 0 when out of memory, -1 when
+ * cancelled. */
+static int run_sweeps(fast *f, const kernels *k, int first_step, int32_t sweeps, int32_t iteration, double scale,
+                      const spia_options *opt, spia_report *report, double *estimate) {
+    const spia_plan *p = f->p;
+    pipeline u;
+    memset(&u, 0, sizeof u);
+    u.f = f;
+    u.k = *k;
+    u.first_step = first_step;
+    u.stages = sweeps + (first_step ? 1 : 0);
+    u.threads = f->threads;
+    u.iteration = iteration;
+    u.scale = scale;
+    u.opt = opt;
+    u.report = report;
+    const int32_t chunks = p->chunks, lag = p->reach + 1;
+    u.pair_count = (int64_t)chunks * u.stages;
+    u.pairs = (int32_t *)malloc(sizeof(int32_t) * 2 * (size_t)u.pair_count);
+    u.done = (spia__counter *)malloc(sizeof(spia__counter) * (size_t)chunks);
+    u.finished = (spia__counter *)malloc(sizeof(spia__counter) * (size_t)u.stages);
+    u.worst = (double *)calloc((size_t)u.threads * (size_t)u.stages, sizeof(double));
+    u.estimate = (double *)calloc((size_t)u.stages, sizeof(double));
+    if (!u.pairs || !u.done || !u.finished || !u.worst || !u.estimate) {
+        free(u.pairs);
+        free(u.done);
+        free(u.finished);
+        free(u.worst);
+        free(u.estimate);
+        return 0;
+    }
+    /* Chunk c of stage s at step c + lag * s: everything it waits for
+     * (the chunk before it in its stage, the chunk `reach` after it in the
+     * stage before) comes at an earlier step, and the pairs of one step
+     * are lag chunks apart, too far to touch each other's rows. */
+    int64_t m = 0;
+    const int64_t steps = (int64_t)chunks + (int64_t)lag * (u.stages - 1);
+    for (int64_t t = 0; t < steps; ++t)
+        for (int32_t s = 0; s < u.stages; ++s) {
+            const int64_t c = t - (int64_t)lag * s;
+            if (c < 0 || c >= chunks) continue;
+            u.pairs[2 * m] = (int32_t)c;
+            u.pairs[2 * m + 1] = s;
+            ++m;
+        }
+    for (int32_t c = 0; c < chunks; ++c) spia__counter_set(&u.done[c], 0);
+    for (int32_t s = 0; s < u.stages; ++s) spia__counter_set(&u.finished[s], 0);
+    spia__counter_set(&u.next, 0);
+    spia__counter_set(&u.stop, 0);
+    spia__parallel_for(u.threads, u.threads, 0, pipeline_worker, &u);
+    if (!u.cancelled) report_finished(&u);
+    for (int32_t s = 0; s < sweeps; ++s) estimate[s] = u.estimate[s + (first_step ? 1 : 0)];
+    const int cancelled = u.cancelled;
+    free(u.pairs);
+    free(u.done);
+    free(u.finished);
+    free(u.worst);
+    free(u.estimate);
+    return cancelled ? -1 : 1;
+}
+
+/* ------------------------------------------------------------------------ */
+/* Unreachable rows                                                          */
+/* ------------------------------------------------------------------------ */
+
+typedef struct mark_task {
+    fast *f;
+    const kernels *k;
+    double *distances; /* 2 per row: now, and for the first iterate */
+} mark_task;
+
+static void mark_blocks(void *context, int64_t b0, int64_t b1, int thread) {
+    (void)thread;
+    mark_task *t = (mark_task *)context;
+    t->k->residual(t->f, b0, b1, 2, t->distances);
+}
+
+/* solve.c's mark_stuck on the plan's rows: a row whose residual has not
+ * fallen below half its first iterate's, or whose cage vertex has drifted
+ * DRIFT_FACTOR times the largest first distance, is put back on its target
+ * and left there.  Returns the number marked, -1 when out of memory. */
+static int32_t mark_stuck(fast *f, const kernels *k, double threshold) {
+    const int32_t n = f->n;
+    double *dist = (double *)malloc(sizeof(double) * 2 * (size_t)n);
+    if (!dist) return -1;
+    mark_task t = {f, k, dist};
+    spia__parallel_for(f->threads, f->blocks, 0, mark_blocks, &t);
+    double initial_max = threshold;
+    for (int32_t i = 0; i < n; ++i)
+        if (row_active(f, i) && dist[2 * (int64_t)i + 1] > initial_max) initial_max = dist[2 * (int64_t)i + 1];
+    int32_t count = 0;
+    for (int32_t i = 0; i < n; ++i) {
+        if (!row_active(f, i)) continue;
+        double moved2 = 0.0;
+        for (int a = 0; a < 3; ++a) {
+            const double m = cage_value(f, i, a) - (double)f->S[3 * (int64_t)i + a];
+            moved2 += m * m;
+        }
+        const double d = dist[2 * (int64_t)i], d0 = dist[2 * (int64_t)i + 1];
+        if ((d > threshold && d > 0.5 * d0) || sqrt(moved2) > FAST_DRIFT * initial_max) {
+            f->flags[i] |= STUCK;
+            for (int a = 0; a < 3; ++a) {
+                const double y = (double)f->P[3 * (int64_t)i + a] - (double)f->S[3 * (int64_t)i + a];
+                if (f->wide)
+                    ((double *)f->Y)[4 * (int64_t)i + a] = y;
+                else
+                    ((float *)f->Y)[4 * (int64_t)i + a] = (float)y;
+            }
+            ++count;
+        }
+    }
+    free(dist);
+    return count;
+}
+
+/* ------------------------------------------------------------------------ */
+/* The solve                                                                 */
+/* ------------------------------------------------------------------------ */
+
+typedef struct stage_result {
+    double err_all, mean, err; /* the last residual pass */
+    int current;               /* that pass is of the cage as it is now */
+    int float_floor;           /* the double sweeps should take over */
+} stage_result;
+
+/* The next run's length: on a pipelined plan, as many sweeps as the last
+ * two errors' ratio says are still needed (at least one, at most
+ * LONGEST_RUN; FIRST_RUN before there is a ratio); one at a time on a
+ * plan of one chunk. */
+static int32_t run_length(const fast *f, const double *history, int32_t known, double threshold) {
+    if (f->p->chunks == 1) return 1;
+    if (known < 2) return FIRST_RUN;
+    const double last = history[known - 1], before = history[known - 2];
+    if (!(last > 0.0) || !(before > 0.0) || !isfinite(last)) return 1;
+    double rho = last / before;
+    if (!(rho >= 0.05)) rho = 0.05;
+    if (rho > 0.95) rho = 0.95;
+    const double need = ceil(log(threshold / last) / log(rho));
+    if (!(need >= 1.0)) return 1;
+    return need > LONGEST_RUN ? LONGEST_RUN : (int32_t)need;
+}
+
+static spia_result fast_stage(fast *f, const kernels *k, const spia_options *opt, double threshold, double scale,
+                              int first_step, int32_t *it, int32_t *stuck_count, stage_result *out,
+                              spia_report *report, spia_status *status) {
+    double mean, err;
+    double err_all = residual_pass(f, k, 1, &mean, &err);
+    out->current = 1;
+    const double initial = err;
+    double best = err, recent[2] = {0.0, 0.0};
+    int32_t it_best = *it, known = 0, failed_checks = 0;
+    int stuck_checked = 0;
+    spia_result res = SPIA_OK;
+    double estimate[LONGEST_RUN];
+    while (!(err <= threshold)) {
+        if (*it >= opt->max_iterations) {
+            res = SPIA_MAX_ITERATIONS;
+            break;
+        }
+        int32_t sweeps = run_length(f, recent, known, threshold);
+        if (sweeps > opt->max_iterations - *it) sweeps = opt->max_iterations - *it;
+        if (sweeps > it_best + FAST_WINDOW - *it) sweeps = it_best + FAST_WINDOW - *it;
+        if (sweeps < 1) sweeps = 1;
+        const int ran = run_sweeps(f, k, first_step, sweeps, *it, scale, opt, report, estimate);
+        first_step = 0;
+        if (ran == 0) return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver");
+        if (ran < 0) return spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled after %d iterations", (int)*it);
+        out->current = 0;
+        for (int32_t s = 0; s < sweeps; ++s) {
+            ++*it;
+            err = err_all = estimate[s];
+            if (!isfinite(err) || err > FAST_DIVERGENCE * (initial > threshold ? initial : threshold))
+                return spia__fail(status, SPIA_ERROR_DIVERGED, -1,
+                                  "the iteration diverged after %d iterations (max error %g of the diagonal)", (int)*it,
+                                  err / scale);
+            if (err < best * (1.0 - 1e-3)) {
+                best = err;
+                it_best = *it;
+            }
+            recent[0] = recent[1];
+            recent[1] = err;
+            if (known < 2) ++known;
+        }
+        if (!(err <= threshold) && *it - it_best < FAST_WINDOW) continue;
+        /* The sweeps say the tolerance is reached, or the error has not
+         * fallen for a while: the residual in double. */
+        const int at_tolerance = err <= threshold;
+        err_all = residual_pass(f, k, 1, &mean, &err);
+        out->current = 1;
+        if (err <= threshold) break;
+        if (at_tolerance && ++failed_checks >= FLOAT_FLOOR_CHECKS) {
+            out->float_floor = 1;
+            break;
+        }
+        if (err < best * (1.0 - 1e-3)) {
+            best = err;
+            it_best = *it;
+        } else if (*it - it_best >= FAST_WINDOW) {
+            if (stuck_checked) {
+                res = SPIA_STAGNATED;
+                break;
+            }
+            stuck_checked = 1;
+            const int32_t found = mark_stuck(f, k, threshold);
+            if (found < 0) return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver");
+            if (found == 0) {
+                res = SPIA_STAGNATED;
+                break;
+            }
+            *stuck_count += found;
+            err_all = residual_pass(f, k, 1, &mean, &err);
+            best = err;
+            it_best = *it;
+            known = 0;
+        }
+    }
+    out->err_all = err_all;
+    out->mean = mean;
+    out->err = err;
+    return res;
+}
+
+typedef struct write_task {
+    fast *f;
+    float *cage;
+} write_task;
+
+static void write_rows(void *context, int64_t i0, int64_t i1, int thread) {
+    (void)thread;
+    write_task *t = (write_task *)context;
+    const fast *f = t->f;
+    for (int64_t i = i0; i < i1; ++i) {
+        const int64_t r = f->p->order ? f->p->order[i] : i;
+        for (int a = 0; a < 3; ++a) t->cage[3 * r + a] = (float)cage_value(f, (int32_t)i, a);
+    }
+}
+
+typedef struct gather_task {
+    fast *f;
+    const float *targets, *start;
+} gather_task;
+
+static void gather_rows(void *context, int64_t i0, int64_t i1, int thread) {
+    (void)thread;
+    gather_task *t = (gather_task *)context;
+    fast *f = t->f;
+    for (int64_t i = i0; i < i1; ++i) {
+        const int64_t r = f->p->order ? f->p->order[i] : i;
+        for (int a = 0; a < 3; ++a) {
+            f->P[3 * i + a] = t->targets[3 * r + a];
+            if (f->S != f->P) f->S[3 * i + a] = t->start[3 * r + a];
+        }
+    }
+}
+
+spia_result spia__solve_fast(const spia_stencils *L, const float *targets, const spia_options *opt, double diagonal,
+                             int automatic, float *cage, float **handover, int32_t *handover_iterations,
+                             spia_report *report, spia_status *status) {
+    const int32_t n = L->rows;
+    const spia_plan *p = L->plan;
+    const double scale = diagonal > 0.0 ? diagonal : 1.0;
+    const double threshold = opt->tolerance * scale;
+    *handover = NULL;
+    *handover_iterations = 0;
+    if (report) report->diagonal = diagonal;
+    fast f;
+    memset(&f, 0, sizeof f);
+    f.p = p;
+    f.n = n;
+    f.threads = opt->threads > 0 && n >= SPIA_PARALLEL_ROWS ? opt->threads : 1;
+    f.wide = (opt->solve_flags & SPIA_SOLVE_DOUBLE_SWEEPS) != 0;
+    const size_t lane = f.wide ? sizeof(double) : sizeof(float);
+    f.blocks = ((int64_t)n + FAST_BLOCK - 1) / FAST_BLOCK;
+    f.P = (float *)malloc(sizeof(float) * 3 * (size_t)n);
+    f.S = opt->initial_cage ? (float *)malloc(sizeof(float) * 3 * (size_t)n) : f.P;
+    f.Y = calloc(4 * (size_t)n, lane);
+    f.B = calloc(4 * (size_t)n, lane);
+    f.flags = (unsigned char *)calloc((size_t)n, 1);
+    f.partial = (double *)malloc(sizeof(double) * 4 * (size_t)f.blocks);
+    if (f.wide) f.inverse = (double *)malloc(sizeof(double) * (size_t)(p->words > 0 ? p->words : 1));
+    spia_result res;
+    int32_t it = 0, stuck_count = 0;
+    stage_result sr;
+    memset(&sr, 0, sizeof sr);
+    if (!f.P || !f.S || !f.Y || !f.B || !f.flags || !f.partial || (f.wide && !f.inverse)) {
+        res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
+        goto done;
+    }
+    if (f.wide)
+        for (int32_t c = 0; c < p->words; ++c) f.inverse[c] = 1.0 / p->weight[c];
+    {
+        gather_task g = {&f, targets, opt->initial_cage ? opt->initial_cage : targets};
+        spia__parallel_for(f.threads, n, 0, gather_rows, &g);
+    }
+    const kernels k = kernels_for(&f);
+    double mean, err;
+    const double err_all0 = residual_pass(&f, &k, 0, &mean, &err);
+    if (report) {
+        report->initial_max_error_relative = err_all0 / scale;
+        report->method = automatic && err <= threshold ? SPIA_METHOD_PIA : SPIA_METHOD_GS_PIA_FAST;
+    }
+    if (!(err <= threshold) && !f.wide && threshold < FLOAT_REACH * err) {
+        /* Beyond what float32 sweeps hold: GS-PIA from the start. */
+        res = SPIA__HAND_OVER;
+        goto done;
+    }
+    const int first_step = (opt->solve_flags & SPIA_SOLVE_FIRST_STEP) != 0;
+    const int staged = opt->staged && L->boundary_count > 0 && L->boundary_count < n;
+    if (staged) {
+        for (int32_t i = 0; i < n; ++i) f.flags[i] = L->boundary[p->order ? p->order[i] : i] ? 0 : FROZEN;
+        res = fast_stage(&f, &k, opt, threshold, scale, first_step, &it, &stuck_count, &sr, report, status);
+        if (report) report->stage_iterations[0] = it;
+        if (res == SPIA_OK && !sr.float_floor) {
+            for (int32_t i = 0; i < n; ++i)
+                f.flags[i] = (unsigned char)((f.flags[i] & STUCK) | (L->boundary[p->order ? p->order[i] : i] ? FROZEN : 0));
+            res = fast_stage(&f, &k, opt, threshold, scale, 0, &it, &stuck_count, &sr, report, status);
+            for (int32_t i = 0; i < n; ++i) f.flags[i] &= STUCK;
+            sr.current = 0;
+        }
+        if (report) report->stage_iterations[1] = it - report->stage_iterations[0];
+    } else {
+        res = fast_stage(&f, &k, opt, threshold, scale, first_step, &it, &stuck_count, &sr, report, status);
+    }
+    if (res >= 0 && sr.float_floor) {
+        /* The cage's own rounding (or the sweeps' float32) stands between it
+         * and the tolerance: GS-PIA's double sweeps go on from here. */
+        *handover = (float *)malloc(sizeof(float) * 3 * (size_t)n);
+        if (!*handover) {
+            res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
+            goto done;
+        }
+        write_task w = {&f, *handover};
+        spia__parallel_for(f.threads, n, 0, write_rows, &w);
+        *handover_iterations = it;
+        res = SPIA__HAND_OVER;
+        goto done;
+    }
+    if (res >= 0) {
+        if (!sr.current) sr.err_all = residual_pass(&f, &k, 1, &sr.mean, &sr.err);
+        write_task w = {&f, cage};
+        spia__parallel_for(f.threads, n, 0, write_rows, &w);
+        if (stuck_count > 0 && res == SPIA_OK) res = SPIA_STAGNATED;
+        if (res == SPIA_OK)
+            spia__ok(status);
+        else if (res == SPIA_MAX_ITERATIONS)
+            spia__fail(status, res, -1,
+                       "stopped at max_iterations (%d) with max error %.3g of the diagonal, above the tolerance %.3g",
+                       (int)it, sr.err_all / scale, opt->tolerance);
+        else if (stuck_count > 0)
+            spia__fail(status, res, -1,
+                       "%d vertices cannot reach their targets: their limit points are tied to other vertices' "
+                       "(as on double-sided faces); they keep their positions, with max error %.3g of the diagonal. "
+                       "The other vertices reach %.3g",
+                       (int)stuck_count, sr.err_all / scale, sr.err / scale);
+        else
+            spia__fail(status, res, -1,
+                       "the error stopped falling after %d iterations at %.3g of the diagonal, above the tolerance %.3g",
+                       (int)it, sr.err_all / scale, opt->tolerance);
+        if (report) {
+            report->max_error = sr.err_all;
+            report->mean_error = sr.mean;
+            report->max_error_relative = sr.err_all / scale;
+            report->mean_error_relative = sr.mean / scale;
+            report->reachable_max_error_relative = sr.err / scale;
+            report->unreachable_count = stuck_count;
+            if (report->unreachable)
+                for (int32_t i = 0; i < n; ++i)
+                    report->unreachable[p->order ? p->order[i] : i] = (uint8_t)((f.flags[i] & STUCK) != 0);
+        }
+    }
+    if (report) report->iterations = it;
+done:
+    free(f.P);
+    if (f.S != f.P) free(f.S);
+    free(f.Y);
+    free(f.B);
+    free(f.flags);
+    free(f.partial);
+    free(f.inverse);
+    return res;
+}
