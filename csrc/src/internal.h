@@ -153,10 +153,10 @@ int32_t spia__max_corners_per_vertex(const spia_adjacency *adj);
 int32_t spia__vertex_neighbours(const spia_mesh *mesh, const spia_adjacency *adj, int32_t v, int32_t *nb,
                                 int32_t *faces_on_edge, int32_t cap);
 
-/* Builds s->plan (plan.c).  SPIA_OK also when the table does not fit a plan
- * (s->plan stays NULL); SPIA_ERROR_OUT_OF_MEMORY when memory runs out.
- * Independent of the thread count. */
-spia_result spia__plan_build(spia_stencils *s, spia_status *status);
+/* Builds s->plan (plan.c) on `threads` threads.  SPIA_OK also when the
+ * table does not fit a plan (s->plan stays NULL); SPIA_ERROR_OUT_OF_MEMORY
+ * when memory runs out.  The plan does not depend on the thread count. */
+spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status);
 void spia__plan_free(spia_plan *p);
 
 /* GS_PIA_FAST (fast.c), called by spia_solve once the arguments are checked

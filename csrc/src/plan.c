@@ -17,6 +17,7 @@
  * The layout depends on the table alone, never on the thread count; it is
  * built once, with the table. */
 #include "internal.h"
+#include "threads.h"
 
 #include <stdlib.h>
 #include <string.h>
@@ -76,6 +77,8 @@ static int graph_build(graph *g, const spia_stencils *s) {
 static void graph_free(graph *g) {
     free(g->in_offsets);
     free(g->in_rows);
+    g->in_offsets = NULL;
+    g->in_rows = NULL;
 }
 
 /* Runs `body` for every neighbour u of v (u != v; some twice). */
@@ -91,20 +94,42 @@ static void graph_free(graph *g) {
         }                                                                                     \
     } while (0)
 
+#if defined(__GNUC__) || defined(__clang__)
+#define PREFETCH(address) __builtin_prefetch(address)
+#else
+#define PREFETCH(address) ((void)0)
+#endif
+/* Rows ahead in the queue whose stencils are fetched early. */
+enum { LOOKAHEAD = 8, UNCOLOURED = 0xff };
+
 /* Breadth-first search from `root` through rows whose level is -1, written
- * to queue[begin ..]; returns the end. */
-static int32_t bfs(const graph *g, int32_t root, int32_t *queue, int32_t begin, int32_t *level) {
+ * to queue[begin ..]; returns the end.  Each row is coloured as it leaves
+ * the queue: the first colour (of 32; more share the last) that no
+ * neighbour of its level has taken, those having left the queue before
+ * it. */
+static int32_t bfs(const graph *g, int32_t root, int32_t *queue, int32_t begin, int32_t *level, unsigned char *colour) {
     int32_t head = begin, tail = begin;
     queue[tail++] = root;
     level[root] = 0;
     while (head < tail) {
+        if (head + LOOKAHEAD < tail) {
+            const int32_t ahead = queue[head + LOOKAHEAD];
+            PREFETCH(&g->s->indices[g->s->offsets[ahead]]);
+            PREFETCH(&g->in_rows[g->in_offsets[ahead]]);
+        }
         const int32_t v = queue[head++];
+        uint32_t used = 0;
         FOR_NEIGHBOURS(g, v, u, {
             if (level[u] < 0) {
                 level[u] = level[v] + 1;
                 queue[tail++] = u;
+            } else if (level[u] == level[v] && colour[u] != UNCOLOURED) {
+                used |= 1u << colour[u];
             }
         });
+        int c = 0;
+        while (c < 31 && (used >> c & 1u)) ++c;
+        colour[v] = (unsigned char)c;
     }
     return tail;
 }
@@ -118,22 +143,18 @@ static int level_order(const spia_stencils *s, spia_plan *p, int32_t *chunk_of, 
     memset(&g, 0, sizeof g);
     int32_t *queue = (int32_t *)malloc(sizeof(int32_t) * (size_t)n);
     int32_t *level = chunk_of; /* the level of each row, until it becomes the chunk */
-    int32_t *rank = position;  /* the rank in breadth-first order, until it becomes the position */
     unsigned char *colour = (unsigned char *)malloc((size_t)n);
     p->order = (int32_t *)malloc(sizeof(int32_t) * (size_t)n);
     int ok = queue && colour && p->order && graph_build(&g, s);
     if (ok) {
-        /* Levels: a search from the row found last by a first search is
-         * one from a far end of the part, which makes the levels many and
-         * small (the bandwidth of the order low). */
+        /* Levels from the first row of each connected part, one part after
+         * another. */
+        memset(colour, UNCOLOURED, (size_t)n);
         for (int32_t r = 0; r < n; ++r) level[r] = -1;
         int32_t begin = 0, base = 0;
         for (int32_t root = 0; root < n; ++root) {
             if (level[root] >= 0) continue;
-            const int32_t end = bfs(&g, root, queue, begin, level);
-            const int32_t far = queue[end - 1];
-            for (int32_t q = begin; q < end; ++q) level[queue[q]] = -1;
-            bfs(&g, far, queue, begin, level);
+            const int32_t end = bfs(&g, root, queue, begin, level, colour);
             int32_t top = 0;
             for (int32_t q = begin; q < end; ++q) {
                 const int32_t v = queue[q];
@@ -143,20 +164,7 @@ static int level_order(const spia_stencils *s, spia_plan *p, int32_t *chunk_of, 
             base += top + 1;
             begin = end;
         }
-        /* Colours within each level, greedily in breadth-first order: the
-         * first not used by a neighbour of the same level already coloured
-         * (at most 32; more share the last). */
-        for (int32_t q = 0; q < n; ++q) rank[queue[q]] = q;
-        for (int32_t q = 0; q < n; ++q) {
-            const int32_t v = queue[q];
-            uint32_t used = 0;
-            FOR_NEIGHBOURS(&g, v, u, {
-                if (level[u] == level[v] && rank[u] < q) used |= 1u << colour[u];
-            });
-            int c = 0;
-            while (c < 31 && (used >> c & 1u)) ++c;
-            colour[v] = (unsigned char)c;
-        }
+        graph_free(&g);
         /* Each level sorted by colour (stably), and the chunks. */
         int32_t chunks = 0, chunk_rows = 0;
         for (int32_t a = 0; a < n;) {
@@ -242,30 +250,127 @@ static int32_t dictionary_code(dictionary *d, double w) {
 /* The plan                                                                  */
 /* ------------------------------------------------------------------------ */
 
-/* Table row r's entries in plan order: its own entry first, then the others
- * as the table has them. */
-static int64_t own_entry(const spia_stencils *s, int32_t r) {
-    for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k)
-        if (s->indices[k] == r) return k;
-    return -1;
+/* The position of table row r, and its chunk. */
+typedef struct placing {
+    const spia_stencils *s;
+    spia_plan *p;
+    const int32_t *position, *chunk_of; /* NULL: vertex order, one chunk */
+    const uint16_t *codes;              /* per table entry */
+    const int64_t *entry;               /* per position: its first entry in the plan */
+    int64_t widest[256];                /* per thread: the largest |column position - row position| */
+    int32_t reach[256];                 /* per thread */
+} placing;
+
+static inline int32_t position_of(const placing *pl, int32_t r) { return pl->position ? pl->position[r] : r; }
+static inline int32_t chunk_of(const placing *pl, int32_t r) { return pl->chunk_of ? pl->chunk_of[r] : 0; }
+
+/* The offsets' range and the reach, over table rows [r0, r1). */
+static void measure_rows(void *context, int64_t r0, int64_t r1, int thread) {
+    placing *pl = (placing *)context;
+    const spia_stencils *s = pl->s;
+    int64_t widest = pl->widest[thread];
+    int32_t reach = pl->reach[thread];
+    for (int64_t r = r0; r < r1; ++r) {
+        const int32_t i = position_of(pl, (int32_t)r), c = chunk_of(pl, (int32_t)r);
+        for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k) {
+            const int32_t j = s->indices[k];
+            const int64_t delta = (int64_t)position_of(pl, j) - i;
+            const int64_t wide = delta > 0 ? delta : -delta;
+            if (wide > widest) widest = wide;
+            const int32_t apart = chunk_of(pl, j) > c ? chunk_of(pl, j) - c : c - chunk_of(pl, j);
+            if (apart > reach) reach = apart;
+        }
+    }
+    pl->widest[thread] = widest;
+    pl->reach[thread] = reach;
 }
 
-spia_result spia__plan_build(spia_stencils *s, spia_status *status) {
+/* Table rows [r0, r1) into the plan, each at its position: its own entry
+ * first, then the others as the table has them. */
+static void place_rows(void *context, int64_t r0, int64_t r1, int thread) {
+    (void)thread;
+    placing *pl = (placing *)context;
+    const spia_stencils *s = pl->s;
+    spia_plan *p = pl->p;
+    for (int64_t r = r0; r < r1; ++r) {
+        const int32_t i = position_of(pl, (int32_t)r);
+        int64_t e = pl->entry[i];
+        for (int pass = 0; pass < 2; ++pass)
+            for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k) {
+                if ((s->indices[k] == r) != (pass == 0)) continue;
+                const int32_t delta = position_of(pl, s->indices[k]) - i;
+                if (p->code8)
+                    p->code8[e] = (uint8_t)pl->codes[k];
+                else
+                    p->code16[e] = pl->codes[k];
+                if (p->delta16)
+                    p->delta16[e] = (int16_t)delta;
+                else
+                    p->delta32[e] = delta;
+                ++e;
+            }
+    }
+}
+
+spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status) {
     const int32_t n = s->rows;
     s->plan = NULL;
+    if (threads < 1) threads = 1;
+    if (threads > 256) threads = 256;
+    if (n < SPIA_PARALLEL_ROWS) threads = 1;
     for (int32_t r = 0; r < n; ++r)
         if (s->offsets[r + 1] - s->offsets[r] > 65535) return SPIA_OK; /* no plan: GS_PIA_FAST falls back */
+    const size_t entries = (size_t)(s->nnz > 0 ? s->nnz : 1);
     spia_plan *p = (spia_plan *)calloc(1, sizeof *p);
-    int32_t *chunk_of = NULL, *position = NULL;
+    int32_t *chunks_of = NULL, *position = NULL;
+    int64_t *entry = NULL;
     dictionary d;
     memset(&d, 0, sizeof d);
     uint16_t *codes = NULL;
     if (!p) goto out_of_memory;
     p->rows = n;
+
+    /* The distinct weights, in table order (most rows repeat the weights of
+     * the row before in the same places: those are looked up there first). */
+    d.keys = (uint64_t *)calloc((size_t)1 << DICTIONARY_BITS, sizeof(uint64_t));
+    d.codes = (int32_t *)malloc(sizeof(int32_t) * ((size_t)1 << DICTIONARY_BITS));
+    d.weight = (double *)malloc(sizeof(double) * DICTIONARY_LIMIT);
+    codes = (uint16_t *)malloc(sizeof(uint16_t) * entries);
+    if (!d.keys || !d.codes || !d.weight || !codes) goto out_of_memory;
+    for (int32_t r = 0; r < n; ++r) {
+        const int64_t b = s->offsets[r], e = s->offsets[r + 1];
+        const int64_t before = r > 0 ? s->offsets[r - 1] : 0;
+        for (int64_t k = b; k < e; ++k) {
+            const double w = s->weights[k];
+            const int64_t same = before + (k - b);
+            int32_t code;
+            if (same < b && bits_of(s->weights[same]) == bits_of(w))
+                code = codes[same];
+            else
+                code = dictionary_code(&d, w);
+            if (code < 0) {
+                /* Too many distinct weights (shape parameters per face, say):
+                 * no plan. */
+                free(d.keys);
+                free(d.codes);
+                free(d.weight);
+                free(codes);
+                spia__plan_free(p);
+                return SPIA_OK;
+            }
+            codes[k] = (uint16_t)code;
+        }
+    }
+    free(d.keys);
+    free(d.codes);
+    d.keys = NULL;
+    d.codes = NULL;
+
+    /* The order. */
     if (n >= SPIA_PARALLEL_ROWS) {
-        chunk_of = (int32_t *)malloc(sizeof(int32_t) * (size_t)n);
+        chunks_of = (int32_t *)malloc(sizeof(int32_t) * (size_t)n);
         position = (int32_t *)malloc(sizeof(int32_t) * (size_t)n);
-        if (!chunk_of || !position || !level_order(s, p, chunk_of, position)) goto out_of_memory;
+        if (!chunks_of || !position || !level_order(s, p, chunks_of, position)) goto out_of_memory;
     } else {
         p->chunks = 1;
         p->chunk_start = (int32_t *)malloc(sizeof(int32_t) * 2);
@@ -273,94 +378,53 @@ spia_result spia__plan_build(spia_stencils *s, spia_status *status) {
         p->chunk_start[0] = 0;
         p->chunk_start[1] = n;
     }
-#define POSITION(r) (position ? position[r] : (r))
-#define CHUNK(r) (chunk_of ? chunk_of[r] : 0)
 
-    /* Lengths, reach, offsets' range, own entries. */
+    /* Lengths and where each position's entries start. */
     p->length = (uint16_t *)malloc(sizeof(uint16_t) * (size_t)(n > 0 ? n : 1));
     p->chunk_entry = (int64_t *)malloc(sizeof(int64_t) * ((size_t)p->chunks + 1));
-    if (!p->length || !p->chunk_entry) goto out_of_memory;
-    int64_t widest = 0;
+    entry = (int64_t *)malloc(sizeof(int64_t) * ((size_t)n + 1));
+    if (!p->length || !p->chunk_entry || !entry) goto out_of_memory;
     p->diagonal_first = 1;
+    entry[0] = 0;
     for (int32_t i = 0; i < n; ++i) {
         const int32_t r = p->order ? p->order[i] : i;
         p->length[i] = (uint16_t)(s->offsets[r + 1] - s->offsets[r]);
-        const int64_t own = own_entry(s, r);
-        if (own < 0 || !(s->weights[own] > 0.0)) p->diagonal_first = 0;
-        for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k) {
-            const int32_t j = s->indices[k];
-            const int64_t delta = (int64_t)POSITION(j) - i;
-            if (delta > widest || -delta > widest) widest = delta > 0 ? delta : -delta;
-            const int32_t apart = CHUNK(j) > CHUNK(r) ? CHUNK(j) - CHUNK(r) : CHUNK(r) - CHUNK(j);
-            if (apart > p->reach) p->reach = apart;
-        }
+        entry[i + 1] = entry[i] + p->length[i];
     }
-    {
-        int64_t e = 0;
-        for (int32_t c = 0; c < p->chunks; ++c) {
-            p->chunk_entry[c] = e;
-            for (int32_t i = p->chunk_start[c]; i < p->chunk_start[c + 1]; ++i) e += p->length[i];
-        }
-        p->chunk_entry[p->chunks] = e;
+    for (int32_t c = 0; c <= p->chunks; ++c) p->chunk_entry[c] = entry[p->chunk_start[c]];
+    for (int32_t r = 0; r < n; ++r) {
+        int own = 0;
+        for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k)
+            if (s->indices[k] == r) own = s->weights[k] > 0.0 ? 1 : -1;
+        if (own <= 0) p->diagonal_first = 0;
     }
 
-    /* Codes and offsets. */
-    const size_t entries = (size_t)(s->nnz > 0 ? s->nnz : 1);
-    d.keys = (uint64_t *)calloc((size_t)1 << DICTIONARY_BITS, sizeof(uint64_t));
-    d.codes = (int32_t *)malloc(sizeof(int32_t) * ((size_t)1 << DICTIONARY_BITS));
-    d.weight = (double *)malloc(sizeof(double) * DICTIONARY_LIMIT);
-    codes = (uint16_t *)malloc(sizeof(uint16_t) * entries);
+    /* Codes and offsets, at their widths. */
+    placing pl;
+    memset(&pl, 0, sizeof pl);
+    pl.s = s;
+    pl.p = p;
+    pl.position = position;
+    pl.chunk_of = chunks_of;
+    pl.codes = codes;
+    pl.entry = entry;
+    spia__parallel_for(threads, n, 0, measure_rows, &pl);
+    int64_t widest = 0;
+    for (int t = 0; t < threads; ++t) {
+        if (pl.widest[t] > widest) widest = pl.widest[t];
+        if (pl.reach[t] > p->reach) p->reach = pl.reach[t];
+    }
     if (widest <= 32767)
         p->delta16 = (int16_t *)malloc(sizeof(int16_t) * entries);
     else
         p->delta32 = (int32_t *)malloc(sizeof(int32_t) * entries);
-    if (!d.keys || !d.codes || !d.weight || !codes || (!p->delta16 && !p->delta32)) goto out_of_memory;
-    {
-        /* Most rows repeat the weights of the row before, in the same
-         * places: those are looked up there first. */
-        int64_t e = 0, previous = -1;
-        int32_t previous_length = 0;
-        for (int32_t i = 0; i < n; ++i) {
-            const int32_t r = p->order ? p->order[i] : i;
-            const int64_t own = own_entry(s, r);
-            int32_t q = 0;
-            for (int pass = 0; pass < 2; ++pass)
-                for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k) {
-                    if ((k == own) != (pass == 0)) continue;
-                    const double w = s->weights[k];
-                    int32_t code;
-                    if (q < previous_length && d.weight[codes[previous + q]] == w &&
-                        bits_of(d.weight[codes[previous + q]]) == bits_of(w))
-                        code = codes[previous + q];
-                    else
-                        code = dictionary_code(&d, w);
-                    if (code < 0) {
-                        /* Too many distinct weights (shape parameters per
-                         * face, say): no plan. */
-                        free(d.keys);
-                        free(d.codes);
-                        free(d.weight);
-                        free(codes);
-                        free(chunk_of);
-                        free(position);
-                        spia__plan_free(p);
-                        return SPIA_OK;
-                    }
-                    codes[e + q] = (uint16_t)code;
-                    const int64_t delta = (int64_t)POSITION(s->indices[k]) - i;
-                    if (p->delta16)
-                        p->delta16[e + q] = (int16_t)delta;
-                    else
-                        p->delta32[e + q] = (int32_t)delta;
-                    ++q;
-                }
-            previous = e;
-            previous_length = q;
-            e += q;
-        }
-    }
-#undef POSITION
-#undef CHUNK
+    if (d.count <= 256)
+        p->code8 = (uint8_t *)malloc(entries);
+    else
+        p->code16 = (uint16_t *)malloc(sizeof(uint16_t) * entries);
+    if ((!p->delta16 && !p->delta32) || (!p->code8 && !p->code16)) goto out_of_memory;
+    spia__parallel_for(threads, n, 0, place_rows, &pl);
+
     p->words = d.count;
     p->weight = (double *)malloc(sizeof(double) * (size_t)(d.count > 0 ? d.count : 1));
     p->weight_f = (float *)malloc(sizeof(float) * (size_t)(d.count > 0 ? d.count : 1));
@@ -371,19 +435,10 @@ spia_result spia__plan_build(spia_stencils *s, spia_status *status) {
         p->weight_f[c] = (float)d.weight[c];
         p->inverse_f[c] = (float)(1.0 / d.weight[c]);
     }
-    if (d.count <= 256) {
-        p->code8 = (uint8_t *)malloc(entries);
-        if (!p->code8) goto out_of_memory;
-        for (int64_t e = 0; e < s->nnz; ++e) p->code8[e] = (uint8_t)codes[e];
-        free(codes);
-    } else {
-        p->code16 = codes;
-    }
-    codes = NULL;
-    free(d.keys);
-    free(d.codes);
     free(d.weight);
-    free(chunk_of);
+    free(codes);
+    free(entry);
+    free(chunks_of);
     free(position);
     s->plan = p;
     return SPIA_OK;
@@ -393,7 +448,8 @@ out_of_memory:
     free(d.codes);
     free(d.weight);
     free(codes);
-    free(chunk_of);
+    free(entry);
+    free(chunks_of);
     free(position);
     spia__plan_free(p);
     return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory laying out the stencils for the solver");
