@@ -110,21 +110,23 @@ typedef struct fast {
     int threads;
     int wide;          /* double sweeps (SPIA_SOLVE_DOUBLE_SWEEPS) */
     float *P;          /* the targets by position, 3 floats a row */
-    float *S;          /* the first iterate by position (P itself when none is given) */
+    float *S;          /* the first iterate by position (P itself when none is given);
+                        * a stuck row's is its target */
     void *Y, *B;       /* correction and right-hand side, 4 floats (or doubles) a row */
     unsigned char *flags;
     double *inverse;   /* wide: 1 / weight */
     int64_t blocks;
+    int64_t *block_entry; /* blocks + 1: the first entry of each block of FAST_BLOCK rows */
     double *partial;   /* blocks * 4 */
 } fast;
 
 static inline int row_active(const fast *f, int32_t i) { return f->flags[i] == 0; }
 
-/* The coordinate a of the cage as it will be stored. */
-static inline double cage_value(const fast *f, int32_t i, int a) {
-    if (f->flags[i] & STUCK) return f->P[3 * (int64_t)i + a];
-    const double y = f->wide ? ((const double *)f->Y)[4 * (int64_t)i + a] : ((const float *)f->Y)[4 * (int64_t)i + a];
-    return (double)(float)((double)f->S[3 * (int64_t)i + a] + y);
+/* The coordinate a of the cage as it will be stored: S + Y in float (a
+ * stuck row has S = P and Y = 0). */
+static inline float cage_value(const fast *f, int32_t i, int a) {
+    if (f->wide) return (float)((double)f->S[3 * (int64_t)i + a] + ((const double *)f->Y)[4 * (int64_t)i + a]);
+    return f->S[3 * (int64_t)i + a] + ((const float *)f->Y)[4 * (int64_t)i + a];
 }
 
 /* Sticky largest value: a NaN stays. */
@@ -138,12 +140,11 @@ static inline double keep_max(double worst, double d) { return (!(d <= worst) &&
 typedef double (*sweep_fn)(const fast *f, int32_t c);
 /* The first step over the rows of chunk c. */
 typedef void (*first_fn)(const fast *f, int32_t c);
-/* Rows [i0, i1): R = P - L x with x the first iterate (mode 0, and B = R)
- * or the stored cage (mode 1); per row the distance |R|, then per block
- * of FAST_BLOCK rows its largest (all rows, active rows), sum and sum of
- * squares (active rows) into f->partial.  Mode 2: the distance of the
- * cage and of the first iterate, into out[2 * i], out[2 * i + 1]. */
-typedef void (*residual_fn)(fast *f, int64_t b0, int64_t b1, int mode, double *out);
+/* Blocks [b0, b1) of FAST_BLOCK rows: R = P - L x, in double with the
+ * exact weights, x the first iterate S (and then B = R) or the cage as
+ * stored, S + Y; per block the largest |R| over all rows and over active
+ * rows, the sum and the sum of squares (active rows) into f->partial. */
+typedef void (*residual_fn)(fast *f, int64_t b0, int64_t b1);
 
 #define DEFINE_KERNELS(SUFFIX, CODE, DELTA)                                                                      \
     static double sweep_f_##SUFFIX(const fast *f, int32_t c) {                                                   \
@@ -234,55 +235,37 @@ typedef void (*residual_fn)(fast *f, int64_t b0, int64_t b1, int mode, double *o
             k += e;                                                                                              \
         }                                                                                                        \
     }                                                                                                            \
-    static void residual_##SUFFIX(fast *f, int64_t b0, int64_t b1, int mode, double *out) {                      \
+    static void residual_first_##SUFFIX(fast *f, int64_t b0, int64_t b1) {                                       \
         const spia_plan *p = f->p;                                                                               \
         const int32_t n = f->n;                                                                                  \
         for (int64_t b = b0; b < b1; ++b) {                                                                      \
             double maxd = 0.0, maxa = 0.0, sum = 0.0, norm2 = 0.0;                                               \
-            const int32_t i0 = (int32_t)(b * FAST_BLOCK), i1 = (int32_t)((b + 1) * FAST_BLOCK < n ? (b + 1) * FAST_BLOCK : n); \
-            int64_t k = 0;                                                                                       \
-            {                                                                                                    \
-                /* the first entry of row i0: from its chunk's */                                                \
-                int32_t lo = 0, hi = p->chunks - 1;                                                              \
-                while (lo < hi) {                                                                                \
-                    const int32_t mid = (lo + hi + 1) / 2;                                                       \
-                    if (p->chunk_start[mid] <= i0) lo = mid; else hi = mid - 1;                                  \
-                }                                                                                                \
-                k = p->chunk_entry[lo];                                                                          \
-                for (int32_t i = p->chunk_start[lo]; i < i0; ++i) k += p->length[i];                             \
-            }                                                                                                    \
-            for (int32_t i = i0; i < i1; ++i) {                                                                  \
+            const int32_t i1 = (int32_t)((b + 1) * FAST_BLOCK < n ? (b + 1) * FAST_BLOCK : n);                  \
+            int64_t k = f->block_entry[b];                                                                       \
+            for (int32_t i = (int32_t)(b * FAST_BLOCK); i < i1; ++i) {                                           \
                 const int32_t e = p->length[i];                                                                  \
-                double s[3] = {0.0, 0.0, 0.0}, s0[3] = {0.0, 0.0, 0.0};                                          \
-                for (int32_t q = 0; q < e; ++q) {                                                                \
-                    const double lw = p->weight[CODE[k + q]];                                                    \
-                    const int32_t j = i + DELTA[k + q];                                                          \
-                    for (int a = 0; a < 3; ++a) {                                                                \
-                        if (mode != 0) s[a] += lw * cage_value(f, j, a);                                         \
-                        if (mode != 1) s0[a] += lw * (double)f->S[3 * (int64_t)j + a];                           \
-                    }                                                                                            \
+                double s0 = 0.0, s1 = 0.0, s2 = 0.0;                                                             \
+                for (int32_t q = 0; q < e; ++q, ++k) {                                                           \
+                    const double w = p->weight[CODE[k]];                                                         \
+                    const float *x = f->S + 3 * ((int64_t)i + DELTA[k]);                                         \
+                    s0 += w * (double)x[0];                                                                      \
+                    s1 += w * (double)x[1];                                                                      \
+                    s2 += w * (double)x[2];                                                                      \
                 }                                                                                                \
-                k += e;                                                                                          \
-                double r[3], r0[3];                                                                              \
-                for (int a = 0; a < 3; ++a) {                                                                    \
-                    r[a] = (double)f->P[3 * (int64_t)i + a] - s[a];                                              \
-                    r0[a] = (double)f->P[3 * (int64_t)i + a] - s0[a];                                            \
+                const float *t = f->P + 3 * (int64_t)i;                                                          \
+                const double r0 = (double)t[0] - s0, r1 = (double)t[1] - s1, r2 = (double)t[2] - s2;            \
+                if (f->wide) {                                                                                   \
+                    double *q = (double *)f->B + 4 * (int64_t)i;                                                 \
+                    q[0] = r0;                                                                                   \
+                    q[1] = r1;                                                                                   \
+                    q[2] = r2;                                                                                   \
+                } else {                                                                                         \
+                    float *q = (float *)f->B + 4 * (int64_t)i;                                                   \
+                    q[0] = (float)r0;                                                                            \
+                    q[1] = (float)r1;                                                                            \
+                    q[2] = (float)r2;                                                                            \
                 }                                                                                                \
-                if (mode == 2) {                                                                                 \
-                    out[2 * (int64_t)i] = sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]);                         \
-                    out[2 * (int64_t)i + 1] = sqrt(r0[0] * r0[0] + r0[1] * r0[1] + r0[2] * r0[2]);               \
-                    continue;                                                                                    \
-                }                                                                                                \
-                if (mode == 0) {                                                                                 \
-                    for (int a = 0; a < 3; ++a) {                                                                \
-                        r[a] = r0[a];                                                                            \
-                        if (f->wide)                                                                             \
-                            ((double *)f->B)[4 * (int64_t)i + a] = r0[a];                                        \
-                        else                                                                                     \
-                            ((float *)f->B)[4 * (int64_t)i + a] = (float)r0[a];                                  \
-                    }                                                                                            \
-                }                                                                                                \
-                const double d = sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]);                                  \
+                const double d = sqrt(r0 * r0 + r1 * r1 + r2 * r2);                                              \
                 maxd = keep_max(maxd, d);                                                                        \
                 if (row_active(f, i)) {                                                                          \
                     maxa = keep_max(maxa, d);                                                                    \
@@ -290,13 +273,59 @@ typedef void (*residual_fn)(fast *f, int64_t b0, int64_t b1, int mode, double *o
                 }                                                                                                \
                 sum += d;                                                                                        \
             }                                                                                                    \
-            if (mode != 2) {                                                                                     \
-                double *q = f->partial + 4 * b;                                                                  \
-                q[0] = maxd;                                                                                     \
-                q[1] = maxa;                                                                                     \
-                q[2] = sum;                                                                                      \
-                q[3] = norm2;                                                                                    \
+            double *q = f->partial + 4 * b;                                                                      \
+            q[0] = maxd;                                                                                         \
+            q[1] = maxa;                                                                                         \
+            q[2] = sum;                                                                                          \
+            q[3] = norm2;                                                                                        \
+        }                                                                                                        \
+    }                                                                                                            \
+    static void residual_cage_##SUFFIX(fast *f, int64_t b0, int64_t b1) {                                        \
+        const spia_plan *p = f->p;                                                                               \
+        const int32_t n = f->n;                                                                                  \
+        const float *Y = (const float *)f->Y;                                                                    \
+        for (int64_t b = b0; b < b1; ++b) {                                                                      \
+            double maxd = 0.0, maxa = 0.0, sum = 0.0, norm2 = 0.0;                                               \
+            const int32_t i1 = (int32_t)((b + 1) * FAST_BLOCK < n ? (b + 1) * FAST_BLOCK : n);                  \
+            int64_t k = f->block_entry[b];                                                                       \
+            for (int32_t i = (int32_t)(b * FAST_BLOCK); i < i1; ++i) {                                           \
+                const int32_t e = p->length[i];                                                                  \
+                double s0 = 0.0, s1 = 0.0, s2 = 0.0;                                                             \
+                for (int32_t q = 0; q < e; ++q, ++k) {                                                           \
+                    const double w = p->weight[CODE[k]];                                                         \
+                    const int64_t j = (int64_t)i + DELTA[k];                                                     \
+                    const float *x = f->S + 3 * j;                                                               \
+                    double c0, c1, c2;                                                                           \
+                    if (f->wide) {                                                                               \
+                        const double *y = (const double *)f->Y + 4 * j;                                          \
+                        c0 = (float)((double)x[0] + y[0]);                                                       \
+                        c1 = (float)((double)x[1] + y[1]);                                                       \
+                        c2 = (float)((double)x[2] + y[2]);                                                       \
+                    } else {                                                                                     \
+                        const float *y = Y + 4 * j;                                                              \
+                        c0 = x[0] + y[0];                                                                        \
+                        c1 = x[1] + y[1];                                                                        \
+                        c2 = x[2] + y[2];                                                                        \
+                    }                                                                                            \
+                    s0 += w * c0;                                                                                \
+                    s1 += w * c1;                                                                                \
+                    s2 += w * c2;                                                                                \
+                }                                                                                                \
+                const float *t = f->P + 3 * (int64_t)i;                                                          \
+                const double r0 = (double)t[0] - s0, r1 = (double)t[1] - s1, r2 = (double)t[2] - s2;            \
+                const double d = sqrt(r0 * r0 + r1 * r1 + r2 * r2);                                              \
+                maxd = keep_max(maxd, d);                                                                        \
+                if (row_active(f, i)) {                                                                          \
+                    maxa = keep_max(maxa, d);                                                                    \
+                    norm2 += d * d;                                                                              \
+                }                                                                                                \
+                sum += d;                                                                                        \
             }                                                                                                    \
+            double *q = f->partial + 4 * b;                                                                      \
+            q[0] = maxd;                                                                                         \
+            q[1] = maxa;                                                                                         \
+            q[2] = sum;                                                                                          \
+            q[3] = norm2;                                                                                        \
         }                                                                                                        \
     }
 
@@ -308,31 +337,35 @@ DEFINE_KERNELS(c16d32, p->code16, p->delta32)
 typedef struct kernels {
     sweep_fn sweep;
     first_fn first;
-    residual_fn residual;
+    residual_fn residual_first, residual_cage;
 } kernels;
+
+#define KERNELS(SUFFIX)                                                                                          \
+    do {                                                                                                         \
+        k.sweep = f->wide ? sweep_d_##SUFFIX : sweep_f_##SUFFIX;                                                 \
+        k.first = first_##SUFFIX;                                                                                \
+        k.residual_first = residual_first_##SUFFIX;                                                              \
+        k.residual_cage = residual_cage_##SUFFIX;                                                                \
+    } while (0)
 
 static kernels kernels_for(const fast *f) {
     const spia_plan *p = f->p;
     kernels k;
-    if (p->code8 && p->delta16) {
-        k.sweep = f->wide ? sweep_d_c8d16 : sweep_f_c8d16;
-        k.first = first_c8d16;
-        k.residual = residual_c8d16;
-    } else if (p->delta16) {
-        k.sweep = f->wide ? sweep_d_c16d16 : sweep_f_c16d16;
-        k.first = first_c16d16;
-        k.residual = residual_c16d16;
-    } else if (p->code8) {
-        k.sweep = f->wide ? sweep_d_c8d32 : sweep_f_c8d32;
-        k.first = first_c8d32;
-        k.residual = residual_c8d32;
-    } else {
-        k.sweep = f->wide ? sweep_d_c16d32 : sweep_f_c16d32;
-        k.first = first_c16d32;
-        k.residual = residual_c16d32;
-    }
+    if (p->code8 && p->delta16)
+        KERNELS(c8d16);
+    else if (p->delta16)
+        KERNELS(c16d16);
+    else if (p->code8)
+        KERNELS(c8d32);
+    else
+        KERNELS(c16d32);
     return k;
 }
+
+/* Entry e's code and column offset, whatever their widths (the rare
+ * passes). */
+static inline int32_t code_at(const spia_plan *p, int64_t e) { return p->code8 ? p->code8[e] : p->code16[e]; }
+static inline int32_t delta_at(const spia_plan *p, int64_t e) { return p->delta16 ? p->delta16[e] : p->delta32[e]; }
 
 /* ------------------------------------------------------------------------ */
 /* Residual passes                                                           */
@@ -341,21 +374,19 @@ static kernels kernels_for(const fast *f) {
 typedef struct residual_task {
     fast *f;
     residual_fn fn;
-    int mode;
-    double *out;
 } residual_task;
 
 static void residual_blocks(void *context, int64_t b0, int64_t b1, int thread) {
     (void)thread;
     residual_task *t = (residual_task *)context;
-    t->fn(t->f, b0, b1, t->mode, t->out);
+    t->fn(t->f, b0, b1);
 }
 
-/* Mode 0 (first iterate, B written) or 1 (stored cage): returns the largest
- * distance over all rows, writes the mean and the largest over active
- * rows; the partial sums are added in block order. */
-static double residual_pass(fast *f, const kernels *k, int mode, double *mean, double *max_active) {
-    residual_task t = {f, k->residual, mode, NULL};
+/* R of the first iterate (first: B written) or of the cage as stored:
+ * returns the largest distance over all rows, writes the mean and the
+ * largest over active rows; the partial sums are added in block order. */
+static double residual_pass(fast *f, const kernels *k, int first, double *mean, double *max_active) {
+    residual_task t = {f, first ? k->residual_first : k->residual_cage};
     spia__parallel_for(f->threads, f->blocks, 0, residual_blocks, &t);
     double maxd = 0.0, maxa = 0.0, sum = 0.0;
     for (int64_t b = 0; b < f->blocks; ++b) {
@@ -392,7 +423,7 @@ typedef struct pipeline {
     double scale;
     const spia_options *opt;
     spia_report *report;
-    int cancelled;
+    int32_t cancelled; /* the iteration after which the callback cancelled, else 0 */
 } pipeline;
 
 /* Stages finished so far, in order, from the calling thread: each sweep's
@@ -413,7 +444,7 @@ static void report_finished(pipeline *u) {
             rep->history_count = it;
         }
         if (!u->cancelled && u->opt->progress && u->opt->progress(u->opt->progress_user_data, it, err / u->scale)) {
-            u->cancelled = 1;
+            u->cancelled = it;
             spia__counter_set(&u->stop, 1);
         }
     }
@@ -456,9 +487,9 @@ static void pipeline_worker(void *context, int64_t piece0, int64_t piece1, int t
 
 /* Runs `sweeps` sweeps (after the first step when first_step), their
  * errors into estimate[0 ..]; returns 0 when out of memory, -1 when
- * cancelled. */
+ * cancelled (after iteration *cancelled_at). */
 static int run_sweeps(fast *f, const kernels *k, int first_step, int32_t sweeps, int32_t iteration, double scale,
-                      const spia_options *opt, spia_report *report, double *estimate) {
+                      const spia_options *opt, spia_report *report, double *estimate, int32_t *cancelled_at) {
     const spia_plan *p = f->p;
     pipeline u;
     memset(&u, 0, sizeof u);
@@ -507,7 +538,8 @@ static int run_sweeps(fast *f, const kernels *k, int first_step, int32_t sweeps,
     spia__parallel_for(u.threads, u.threads, 0, pipeline_worker, &u);
     if (!u.cancelled) report_finished(&u);
     for (int32_t s = 0; s < sweeps; ++s) estimate[s] = u.estimate[s + (first_step ? 1 : 0)];
-    const int cancelled = u.cancelled;
+    const int cancelled = u.cancelled != 0;
+    *cancelled_at = u.cancelled;
     free(u.pairs);
     free(u.done);
     free(u.finished);
@@ -522,25 +554,49 @@ static int run_sweeps(fast *f, const kernels *k, int first_step, int32_t sweeps,
 
 typedef struct mark_task {
     fast *f;
-    const kernels *k;
-    double *distances; /* 2 per row: now, and for the first iterate */
+    double *distances; /* 2 per row: the cage's, and the first iterate's */
 } mark_task;
 
 static void mark_blocks(void *context, int64_t b0, int64_t b1, int thread) {
     (void)thread;
     mark_task *t = (mark_task *)context;
-    t->k->residual(t->f, b0, b1, 2, t->distances);
+    fast *f = t->f;
+    const spia_plan *p = f->p;
+    for (int64_t b = b0; b < b1; ++b) {
+        const int64_t i1 = (b + 1) * FAST_BLOCK < f->n ? (b + 1) * FAST_BLOCK : f->n;
+        int64_t k = f->block_entry[b];
+        for (int64_t i = b * FAST_BLOCK; i < i1; ++i) {
+            double s[3] = {0.0, 0.0, 0.0}, s0[3] = {0.0, 0.0, 0.0};
+            for (int32_t q = 0; q < p->length[i]; ++q, ++k) {
+                const double w = p->weight[code_at(p, k)];
+                const int32_t j = (int32_t)i + delta_at(p, k);
+                for (int a = 0; a < 3; ++a) {
+                    s[a] += w * (double)cage_value(f, j, a);
+                    s0[a] += w * (double)f->S[3 * (int64_t)j + a];
+                }
+            }
+            double d = 0.0, d0 = 0.0;
+            for (int a = 0; a < 3; ++a) {
+                const double t0 = (double)f->P[3 * i + a];
+                d += (t0 - s[a]) * (t0 - s[a]);
+                d0 += (t0 - s0[a]) * (t0 - s0[a]);
+            }
+            t->distances[2 * i] = sqrt(d);
+            t->distances[2 * i + 1] = sqrt(d0);
+        }
+    }
 }
 
 /* solve.c's mark_stuck on the plan's rows: a row whose residual has not
  * fallen below half its first iterate's, or whose cage vertex has drifted
  * DRIFT_FACTOR times the largest first distance, is put back on its target
- * and left there.  Returns the number marked, -1 when out of memory. */
+ * (S = P, Y = 0) and left there; B follows the new S.  Returns the number
+ * marked, -1 when out of memory. */
 static int32_t mark_stuck(fast *f, const kernels *k, double threshold) {
     const int32_t n = f->n;
     double *dist = (double *)malloc(sizeof(double) * 2 * (size_t)n);
     if (!dist) return -1;
-    mark_task t = {f, k, dist};
+    mark_task t = {f, dist};
     spia__parallel_for(f->threads, f->blocks, 0, mark_blocks, &t);
     double initial_max = threshold;
     for (int32_t i = 0; i < n; ++i)
@@ -550,23 +606,30 @@ static int32_t mark_stuck(fast *f, const kernels *k, double threshold) {
         if (!row_active(f, i)) continue;
         double moved2 = 0.0;
         for (int a = 0; a < 3; ++a) {
-            const double m = cage_value(f, i, a) - (double)f->S[3 * (int64_t)i + a];
+            const double m = (double)cage_value(f, i, a) - (double)f->S[3 * (int64_t)i + a];
             moved2 += m * m;
         }
         const double d = dist[2 * (int64_t)i], d0 = dist[2 * (int64_t)i + 1];
         if ((d > threshold && d > 0.5 * d0) || sqrt(moved2) > FAST_DRIFT * initial_max) {
             f->flags[i] |= STUCK;
-            for (int a = 0; a < 3; ++a) {
-                const double y = (double)f->P[3 * (int64_t)i + a] - (double)f->S[3 * (int64_t)i + a];
-                if (f->wide)
-                    ((double *)f->Y)[4 * (int64_t)i + a] = y;
-                else
-                    ((float *)f->Y)[4 * (int64_t)i + a] = (float)y;
-            }
             ++count;
         }
     }
     free(dist);
+    if (count > 0) {
+        for (int32_t i = 0; i < n; ++i) {
+            if (!(f->flags[i] & STUCK)) continue;
+            for (int a = 0; a < 3; ++a) {
+                f->S[3 * (int64_t)i + a] = f->P[3 * (int64_t)i + a];
+                if (f->wide)
+                    ((double *)f->Y)[4 * (int64_t)i + a] = 0.0;
+                else
+                    ((float *)f->Y)[4 * (int64_t)i + a] = 0.0f;
+            }
+        }
+        double mean, err;
+        residual_pass(f, k, 1, &mean, &err);
+    }
     return count;
 }
 
@@ -597,11 +660,20 @@ static int32_t run_length(const fast *f, const double *history, int32_t known, d
     return need > LONGEST_RUN ? LONGEST_RUN : (int32_t)need;
 }
 
+/* One stage (all of the solve unless staged): sweeps until the tolerance,
+ * max_iterations, stagnation or the float32 floor.  `known`: the residual
+ * statistics of the cage as it is (err_all, mean, err), or NULL. */
 static spia_result fast_stage(fast *f, const kernels *k, const spia_options *opt, double threshold, double scale,
-                              int first_step, int32_t *it, int32_t *stuck_count, stage_result *out,
-                              spia_report *report, spia_status *status) {
-    double mean, err;
-    double err_all = residual_pass(f, k, 1, &mean, &err);
+                              int first_step, const double *known_stats, int32_t *it, int32_t *stuck_count,
+                              stage_result *out, spia_report *report, spia_status *status) {
+    double mean, err, err_all;
+    if (known_stats) {
+        err_all = known_stats[0];
+        mean = known_stats[1];
+        err = known_stats[2];
+    } else {
+        err_all = residual_pass(f, k, 0, &mean, &err);
+    }
     out->current = 1;
     const double initial = err;
     double best = err, recent[2] = {0.0, 0.0};
@@ -618,10 +690,14 @@ static spia_result fast_stage(fast *f, const kernels *k, const spia_options *opt
         if (sweeps > opt->max_iterations - *it) sweeps = opt->max_iterations - *it;
         if (sweeps > it_best + FAST_WINDOW - *it) sweeps = it_best + FAST_WINDOW - *it;
         if (sweeps < 1) sweeps = 1;
-        const int ran = run_sweeps(f, k, first_step, sweeps, *it, scale, opt, report, estimate);
+        int32_t cancelled_at = 0;
+        const int ran = run_sweeps(f, k, first_step, sweeps, *it, scale, opt, report, estimate, &cancelled_at);
         first_step = 0;
         if (ran == 0) return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver");
-        if (ran < 0) return spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled after %d iterations", (int)*it);
+        if (ran < 0) {
+            *it = cancelled_at;
+            return spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled after %d iterations", (int)*it);
+        }
         out->current = 0;
         for (int32_t s = 0; s < sweeps; ++s) {
             ++*it;
@@ -642,7 +718,7 @@ static spia_result fast_stage(fast *f, const kernels *k, const spia_options *opt
         /* The sweeps say the tolerance is reached, or the error has not
          * fallen for a while: the residual in double. */
         const int at_tolerance = err <= threshold;
-        err_all = residual_pass(f, k, 1, &mean, &err);
+        err_all = residual_pass(f, k, 0, &mean, &err);
         out->current = 1;
         if (err <= threshold) break;
         if (at_tolerance && ++failed_checks >= FLOAT_FLOOR_CHECKS) {
@@ -665,7 +741,7 @@ static spia_result fast_stage(fast *f, const kernels *k, const spia_options *opt
                 break;
             }
             *stuck_count += found;
-            err_all = residual_pass(f, k, 1, &mean, &err);
+            err_all = residual_pass(f, k, 0, &mean, &err);
             best = err;
             it_best = *it;
             known = 0;
@@ -688,7 +764,7 @@ static void write_rows(void *context, int64_t i0, int64_t i1, int thread) {
     const fast *f = t->f;
     for (int64_t i = i0; i < i1; ++i) {
         const int64_t r = f->p->order ? f->p->order[i] : i;
-        for (int a = 0; a < 3; ++a) t->cage[3 * r + a] = (float)cage_value(f, (int32_t)i, a);
+        for (int a = 0; a < 3; ++a) t->cage[3 * r + a] = cage_value(f, (int32_t)i, a);
     }
 }
 
@@ -734,24 +810,34 @@ spia_result spia__solve_fast(const spia_stencils *L, const float *targets, const
     f.B = calloc(4 * (size_t)n, lane);
     f.flags = (unsigned char *)calloc((size_t)n, 1);
     f.partial = (double *)malloc(sizeof(double) * 4 * (size_t)f.blocks);
+    f.block_entry = (int64_t *)malloc(sizeof(int64_t) * ((size_t)f.blocks + 1));
     if (f.wide) f.inverse = (double *)malloc(sizeof(double) * (size_t)(p->words > 0 ? p->words : 1));
     spia_result res;
     int32_t it = 0, stuck_count = 0;
     stage_result sr;
     memset(&sr, 0, sizeof sr);
-    if (!f.P || !f.S || !f.Y || !f.B || !f.flags || !f.partial || (f.wide && !f.inverse)) {
+    if (!f.P || !f.S || !f.Y || !f.B || !f.flags || !f.partial || !f.block_entry || (f.wide && !f.inverse)) {
         res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
         goto done;
     }
     if (f.wide)
         for (int32_t c = 0; c < p->words; ++c) f.inverse[c] = 1.0 / p->weight[c];
     {
+        int64_t e = 0;
+        for (int32_t i = 0; i < n; ++i) {
+            if (i % FAST_BLOCK == 0) f.block_entry[i / FAST_BLOCK] = e;
+            e += p->length[i];
+        }
+        f.block_entry[f.blocks] = e;
+    }
+    {
         gather_task g = {&f, targets, opt->initial_cage ? opt->initial_cage : targets};
         spia__parallel_for(f.threads, n, 0, gather_rows, &g);
     }
     const kernels k = kernels_for(&f);
     double mean, err;
-    const double err_all0 = residual_pass(&f, &k, 0, &mean, &err);
+    const double err_all0 = residual_pass(&f, &k, 1, &mean, &err);
+    const double stats0[3] = {err_all0, mean, err};
     if (report) {
         report->initial_max_error_relative = err_all0 / scale;
         report->method = automatic && err <= threshold ? SPIA_METHOD_PIA : SPIA_METHOD_GS_PIA_FAST;
@@ -765,18 +851,18 @@ spia_result spia__solve_fast(const spia_stencils *L, const float *targets, const
     const int staged = opt->staged && L->boundary_count > 0 && L->boundary_count < n;
     if (staged) {
         for (int32_t i = 0; i < n; ++i) f.flags[i] = L->boundary[p->order ? p->order[i] : i] ? 0 : FROZEN;
-        res = fast_stage(&f, &k, opt, threshold, scale, first_step, &it, &stuck_count, &sr, report, status);
+        res = fast_stage(&f, &k, opt, threshold, scale, first_step, NULL, &it, &stuck_count, &sr, report, status);
         if (report) report->stage_iterations[0] = it;
         if (res == SPIA_OK && !sr.float_floor) {
             for (int32_t i = 0; i < n; ++i)
                 f.flags[i] = (unsigned char)((f.flags[i] & STUCK) | (L->boundary[p->order ? p->order[i] : i] ? FROZEN : 0));
-            res = fast_stage(&f, &k, opt, threshold, scale, 0, &it, &stuck_count, &sr, report, status);
+            res = fast_stage(&f, &k, opt, threshold, scale, 0, NULL, &it, &stuck_count, &sr, report, status);
             for (int32_t i = 0; i < n; ++i) f.flags[i] &= STUCK;
             sr.current = 0;
         }
         if (report) report->stage_iterations[1] = it - report->stage_iterations[0];
     } else {
-        res = fast_stage(&f, &k, opt, threshold, scale, first_step, &it, &stuck_count, &sr, report, status);
+        res = fast_stage(&f, &k, opt, threshold, scale, first_step, stats0, &it, &stuck_count, &sr, report, status);
     }
     if (res >= 0 && sr.float_floor) {
         /* The cage's own rounding (or the sweeps' float32) stands between it
@@ -793,7 +879,7 @@ spia_result spia__solve_fast(const spia_stencils *L, const float *targets, const
         goto done;
     }
     if (res >= 0) {
-        if (!sr.current) sr.err_all = residual_pass(&f, &k, 1, &sr.mean, &sr.err);
+        if (!sr.current) sr.err_all = residual_pass(&f, &k, 0, &sr.mean, &sr.err);
         write_task w = {&f, cage};
         spia__parallel_for(f.threads, n, 0, write_rows, &w);
         if (stuck_count > 0 && res == SPIA_OK) res = SPIA_STAGNATED;
@@ -833,6 +919,7 @@ done:
     free(f.B);
     free(f.flags);
     free(f.partial);
+    free(f.block_entry);
     free(f.inverse);
     return res;
 }
