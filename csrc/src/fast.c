@@ -100,6 +100,56 @@ static inline d4 d4_scale(d4 a, double s) { return d4_make(a.v[0] * s, a.v[1] * 
 #define V4_SCALE(a, s) _Generic((a), f4: f4_scale, d4: d4_scale)((a), (s))
 #endif
 
+static inline f4 f4_load(const float *p) {
+    f4 v;
+    memcpy(&v, p, sizeof v);
+    return v;
+}
+
+/* Sums in double of weights times float rows (x, y, z and a lane that is
+ * dropped), for the residual: two SSE2 registers where there are some
+ * (the generic 4-double vector would live on the stack there). */
+#if defined(__SSE2__) || defined(_M_X64)
+#include <emmintrin.h>
+typedef struct sum3 {
+    __m128d xy, zw;
+} sum3;
+static inline sum3 sum3_zero(void) {
+    sum3 a = {_mm_setzero_pd(), _mm_setzero_pd()};
+    return a;
+}
+/* a += w * (the row of 4 floats at x [+ the row at y]) */
+static inline void sum3_add(sum3 *a, double w, const float *x, const float *y) {
+    __m128 v = _mm_loadu_ps(x);
+    if (y) v = _mm_add_ps(v, _mm_loadu_ps(y));
+    const __m128d ww = _mm_set1_pd(w);
+    a->xy = _mm_add_pd(a->xy, _mm_mul_pd(_mm_cvtps_pd(v), ww));
+    a->zw = _mm_add_pd(a->zw, _mm_mul_pd(_mm_cvtps_pd(_mm_movehl_ps(v, v)), ww));
+}
+static inline void sum3_get(sum3 a, sum3 b, double out[3]) {
+    double xy[2], zw[2];
+    _mm_storeu_pd(xy, _mm_add_pd(a.xy, b.xy));
+    _mm_storeu_pd(zw, _mm_add_pd(a.zw, b.zw));
+    out[0] = xy[0];
+    out[1] = xy[1];
+    out[2] = zw[0];
+}
+#else
+typedef struct sum3 {
+    double v[3];
+} sum3;
+static inline sum3 sum3_zero(void) {
+    sum3 a = {{0.0, 0.0, 0.0}};
+    return a;
+}
+static inline void sum3_add(sum3 *a, double w, const float *x, const float *y) {
+    for (int c = 0; c < 3; ++c) a->v[c] += w * (double)(y ? x[c] + y[c] : x[c]);
+}
+static inline void sum3_get(sum3 a, sum3 b, double out[3]) {
+    for (int c = 0; c < 3; ++c) out[c] = a.v[c] + b.v[c];
+}
+#endif
+
 /* ------------------------------------------------------------------------ */
 /* The solver's state                                                        */
 /* ------------------------------------------------------------------------ */
@@ -209,28 +259,40 @@ typedef void (*residual_fn)(fast *f, int64_t b0, int64_t b1);
     }                                                                                                            \
     static void first_##SUFFIX(const fast *f, int32_t c) {                                                       \
         const spia_plan *p = f->p;                                                                               \
+        const float *w = p->weight_f;                                                                            \
         int64_t k = p->chunk_entry[c];                                                                           \
         for (int32_t i = p->chunk_start[c]; i < p->chunk_start[c + 1]; ++i) {                                    \
             const int32_t e = p->length[i];                                                                      \
-            if (row_active(f, i)) {                                                                              \
-                double largest = 0.0, sum[3] = {0.0, 0.0, 0.0};                                                  \
-                for (int32_t q = 1; q < e; ++q)                                                                  \
-                    if (p->weight[CODE[k + q]] > largest) largest = p->weight[CODE[k + q]];                      \
-                for (int32_t q = 0; q < e; ++q) {                                                                \
-                    const double lw = p->weight[CODE[k + q]];                                                    \
-                    const double sw = q > 0 && lw >= 0.5 * largest ? -lw : lw;                                   \
-                    const int64_t j = (int64_t)i + DELTA[k + q];                                                 \
-                    for (int a = 0; a < 3; ++a)                                                                  \
-                        sum[a] += sw * (f->wide ? ((const double *)f->B)[4 * j + a]                              \
-                                                : (double)((const float *)f->B)[4 * j + a]);                     \
+            if (!row_active(f, i)) {                                                                             \
+                k += e;                                                                                          \
+                continue;                                                                                        \
+            }                                                                                                    \
+            float largest = 0.0f;                                                                                \
+            for (int32_t q = 1; q < e; ++q)                                                                      \
+                if (w[CODE[k + q]] > largest) largest = w[CODE[k + q]];                                          \
+            const float edge = 0.5f * largest, own = p->inverse_f[CODE[k]];                                      \
+            if (f->wide) {                                                                                       \
+                const d4 *B = (const d4 *)f->B + i;                                                              \
+                d4 acc = V4_SCALE(B[0], (double)w[CODE[k]]);                                                     \
+                for (int32_t q = 1; q < e; ++q) {                                                                \
+                    const double lw = w[CODE[k + q]];                                                            \
+                    acc = V4_ADD(acc, V4_SCALE(B[DELTA[k + q]], lw >= edge ? -lw : lw));                         \
                 }                                                                                                \
-                const double d = p->weight[CODE[k]], scale = FIRST_STEP_SCALE / (d * d);                         \
-                for (int a = 0; a < 3; ++a) {                                                                    \
-                    if (f->wide)                                                                                 \
-                        ((double *)f->Y)[4 * (int64_t)i + a] = scale * sum[a];                                   \
-                    else                                                                                         \
-                        ((float *)f->Y)[4 * (int64_t)i + a] = (float)(scale * sum[a]);                           \
+                ((d4 *)f->Y)[i] = V4_SCALE(acc, FIRST_STEP_SCALE * (double)own * (double)own);                   \
+            } else {                                                                                             \
+                const f4 *B = (const f4 *)f->B + i;                                                              \
+                f4 acc = V4_SCALE(B[0], w[CODE[k]]), acc2 = V4_ZERO(f4);                                         \
+                int32_t q = 1;                                                                                   \
+                for (; q + 1 < e; q += 2) {                                                                      \
+                    const float w0 = w[CODE[k + q]], w1 = w[CODE[k + q + 1]];                                    \
+                    acc = V4_ADD(acc, V4_SCALE(B[DELTA[k + q]], w0 >= edge ? -w0 : w0));                         \
+                    acc2 = V4_ADD(acc2, V4_SCALE(B[DELTA[k + q + 1]], w1 >= edge ? -w1 : w1));                   \
                 }                                                                                                \
+                if (q < e) {                                                                                     \
+                    const float w0 = w[CODE[k + q]];                                                             \
+                    acc = V4_ADD(acc, V4_SCALE(B[DELTA[k + q]], w0 >= edge ? -w0 : w0));                         \
+                }                                                                                                \
+                ((f4 *)f->Y)[i] = V4_SCALE(V4_ADD(acc, acc2), (float)FIRST_STEP_SCALE * own * own);             \
             }                                                                                                    \
             k += e;                                                                                              \
         }                                                                                                        \
@@ -244,26 +306,33 @@ typedef void (*residual_fn)(fast *f, int64_t b0, int64_t b1);
             int64_t k = f->block_entry[b];                                                                       \
             for (int32_t i = (int32_t)(b * FAST_BLOCK); i < i1; ++i) {                                           \
                 const int32_t e = p->length[i];                                                                  \
-                double s0 = 0.0, s1 = 0.0, s2 = 0.0;                                                             \
-                for (int32_t q = 0; q < e; ++q, ++k) {                                                           \
-                    const double w = p->weight[CODE[k]];                                                         \
-                    const float *x = f->S + 3 * ((int64_t)i + DELTA[k]);                                         \
-                    s0 += w * (double)x[0];                                                                      \
-                    s1 += w * (double)x[1];                                                                      \
-                    s2 += w * (double)x[2];                                                                      \
+                const float *S = f->S + 3 * (int64_t)i;                                                          \
+                sum3 a0 = sum3_zero(), a1 = sum3_zero();                                                         \
+                int32_t q = 0;                                                                                   \
+                for (; q + 1 < e; q += 2, k += 2) {                                                              \
+                    sum3_add(&a0, p->weight[CODE[k]], S + 3 * (int64_t)DELTA[k], NULL);                          \
+                    sum3_add(&a1, p->weight[CODE[k + 1]], S + 3 * (int64_t)DELTA[k + 1], NULL);                  \
                 }                                                                                                \
+                if (q < e) {                                                                                     \
+                    sum3_add(&a0, p->weight[CODE[k]], S + 3 * (int64_t)DELTA[k], NULL);                          \
+                    ++k;                                                                                         \
+                }                                                                                                \
+                double lx[3];                                                                                    \
+                sum3_get(a0, a1, lx);                                                                            \
                 const float *t = f->P + 3 * (int64_t)i;                                                          \
-                const double r0 = (double)t[0] - s0, r1 = (double)t[1] - s1, r2 = (double)t[2] - s2;            \
+                const double r0 = (double)t[0] - lx[0], r1 = (double)t[1] - lx[1], r2 = (double)t[2] - lx[2];   \
                 if (f->wide) {                                                                                   \
-                    double *q = (double *)f->B + 4 * (int64_t)i;                                                 \
-                    q[0] = r0;                                                                                   \
-                    q[1] = r1;                                                                                   \
-                    q[2] = r2;                                                                                   \
+                    double *q4 = (double *)f->B + 4 * (int64_t)i;                                                \
+                    q4[0] = r0;                                                                                  \
+                    q4[1] = r1;                                                                                  \
+                    q4[2] = r2;                                                                                  \
+                    q4[3] = 0.0;                                                                                 \
                 } else {                                                                                         \
-                    float *q = (float *)f->B + 4 * (int64_t)i;                                                   \
-                    q[0] = (float)r0;                                                                            \
-                    q[1] = (float)r1;                                                                            \
-                    q[2] = (float)r2;                                                                            \
+                    float *q4 = (float *)f->B + 4 * (int64_t)i;                                                  \
+                    q4[0] = (float)r0;                                                                           \
+                    q4[1] = (float)r1;                                                                           \
+                    q4[2] = (float)r2;                                                                           \
+                    q4[3] = 0.0f;                                                                                \
                 }                                                                                                \
                 const double d = sqrt(r0 * r0 + r1 * r1 + r2 * r2);                                              \
                 maxd = keep_max(maxd, d);                                                                        \
@@ -273,46 +342,47 @@ typedef void (*residual_fn)(fast *f, int64_t b0, int64_t b1);
                 }                                                                                                \
                 sum += d;                                                                                        \
             }                                                                                                    \
-            double *q = f->partial + 4 * b;                                                                      \
-            q[0] = maxd;                                                                                         \
-            q[1] = maxa;                                                                                         \
-            q[2] = sum;                                                                                          \
-            q[3] = norm2;                                                                                        \
+            double *q4 = f->partial + 4 * b;                                                                     \
+            q4[0] = maxd;                                                                                        \
+            q4[1] = maxa;                                                                                        \
+            q4[2] = sum;                                                                                         \
+            q4[3] = norm2;                                                                                       \
         }                                                                                                        \
     }                                                                                                            \
     static void residual_cage_##SUFFIX(fast *f, int64_t b0, int64_t b1) {                                        \
         const spia_plan *p = f->p;                                                                               \
         const int32_t n = f->n;                                                                                  \
-        const float *Y = (const float *)f->Y;                                                                    \
         for (int64_t b = b0; b < b1; ++b) {                                                                      \
             double maxd = 0.0, maxa = 0.0, sum = 0.0, norm2 = 0.0;                                               \
             const int32_t i1 = (int32_t)((b + 1) * FAST_BLOCK < n ? (b + 1) * FAST_BLOCK : n);                  \
             int64_t k = f->block_entry[b];                                                                       \
             for (int32_t i = (int32_t)(b * FAST_BLOCK); i < i1; ++i) {                                           \
                 const int32_t e = p->length[i];                                                                  \
-                double s0 = 0.0, s1 = 0.0, s2 = 0.0;                                                             \
-                for (int32_t q = 0; q < e; ++q, ++k) {                                                           \
-                    const double w = p->weight[CODE[k]];                                                         \
-                    const int64_t j = (int64_t)i + DELTA[k];                                                     \
-                    const float *x = f->S + 3 * j;                                                               \
-                    double c0, c1, c2;                                                                           \
-                    if (f->wide) {                                                                               \
-                        const double *y = (const double *)f->Y + 4 * j;                                          \
-                        c0 = (float)((double)x[0] + y[0]);                                                       \
-                        c1 = (float)((double)x[1] + y[1]);                                                       \
-                        c2 = (float)((double)x[2] + y[2]);                                                       \
-                    } else {                                                                                     \
-                        const float *y = Y + 4 * j;                                                              \
-                        c0 = x[0] + y[0];                                                                        \
-                        c1 = x[1] + y[1];                                                                        \
-                        c2 = x[2] + y[2];                                                                        \
+                sum3 a0 = sum3_zero(), a1 = sum3_zero();                                                         \
+                if (f->wide) {                                                                                   \
+                    for (int32_t q = 0; q < e; ++q, ++k) {                                                       \
+                        const int32_t j = i + DELTA[k];                                                          \
+                        const float x[4] = {cage_value(f, j, 0), cage_value(f, j, 1), cage_value(f, j, 2), 0.0f}; \
+                        sum3_add(&a0, p->weight[CODE[k]], x, NULL);                                              \
                     }                                                                                            \
-                    s0 += w * c0;                                                                                \
-                    s1 += w * c1;                                                                                \
-                    s2 += w * c2;                                                                                \
+                } else {                                                                                         \
+                    const float *S = f->S + 3 * (int64_t)i, *Y = (const float *)f->Y + 4 * (int64_t)i;          \
+                    int32_t q = 0;                                                                               \
+                    for (; q + 1 < e; q += 2, k += 2) {                                                          \
+                        const int64_t j0 = DELTA[k], j1 = DELTA[k + 1];                                          \
+                        sum3_add(&a0, p->weight[CODE[k]], S + 3 * j0, Y + 4 * j0);                               \
+                        sum3_add(&a1, p->weight[CODE[k + 1]], S + 3 * j1, Y + 4 * j1);                           \
+                    }                                                                                            \
+                    if (q < e) {                                                                                 \
+                        const int64_t j0 = DELTA[k];                                                             \
+                        sum3_add(&a0, p->weight[CODE[k]], S + 3 * j0, Y + 4 * j0);                               \
+                        ++k;                                                                                     \
+                    }                                                                                            \
                 }                                                                                                \
+                double lx[3];                                                                                    \
+                sum3_get(a0, a1, lx);                                                                            \
                 const float *t = f->P + 3 * (int64_t)i;                                                          \
-                const double r0 = (double)t[0] - s0, r1 = (double)t[1] - s1, r2 = (double)t[2] - s2;            \
+                const double r0 = (double)t[0] - lx[0], r1 = (double)t[1] - lx[1], r2 = (double)t[2] - lx[2];   \
                 const double d = sqrt(r0 * r0 + r1 * r1 + r2 * r2);                                              \
                 maxd = keep_max(maxd, d);                                                                        \
                 if (row_active(f, i)) {                                                                          \
@@ -321,11 +391,11 @@ typedef void (*residual_fn)(fast *f, int64_t b0, int64_t b1);
                 }                                                                                                \
                 sum += d;                                                                                        \
             }                                                                                                    \
-            double *q = f->partial + 4 * b;                                                                      \
-            q[0] = maxd;                                                                                         \
-            q[1] = maxa;                                                                                         \
-            q[2] = sum;                                                                                          \
-            q[3] = norm2;                                                                                        \
+            double *q4 = f->partial + 4 * b;                                                                     \
+            q4[0] = maxd;                                                                                        \
+            q4[1] = maxa;                                                                                        \
+            q4[2] = sum;                                                                                         \
+            q4[3] = norm2;                                                                                       \
         }                                                                                                        \
     }
 
@@ -804,10 +874,11 @@ spia_result spia__solve_fast(const spia_stencils *L, const float *targets, const
     f.wide = (opt->solve_flags & SPIA_SOLVE_DOUBLE_SWEEPS) != 0;
     const size_t lane = f.wide ? sizeof(double) : sizeof(float);
     f.blocks = ((int64_t)n + FAST_BLOCK - 1) / FAST_BLOCK;
-    f.P = (float *)malloc(sizeof(float) * 3 * (size_t)n);
-    f.S = opt->initial_cage ? (float *)malloc(sizeof(float) * 3 * (size_t)n) : f.P;
+    /* P and S with a float to spare: rows are read four lanes at a time. */
+    f.P = (float *)malloc(sizeof(float) * (3 * (size_t)n + 1));
+    f.S = opt->initial_cage ? (float *)malloc(sizeof(float) * (3 * (size_t)n + 1)) : f.P;
     f.Y = calloc(4 * (size_t)n, lane);
-    f.B = calloc(4 * (size_t)n, lane);
+    f.B = malloc(4 * (size_t)n * lane);
     f.flags = (unsigned char *)calloc((size_t)n, 1);
     f.partial = (double *)malloc(sizeof(double) * 4 * (size_t)f.blocks);
     f.block_entry = (int64_t *)malloc(sizeof(int64_t) * ((size_t)f.blocks + 1));
@@ -833,6 +904,8 @@ spia_result spia__solve_fast(const spia_stencils *L, const float *targets, const
     {
         gather_task g = {&f, targets, opt->initial_cage ? opt->initial_cage : targets};
         spia__parallel_for(f.threads, n, 0, gather_rows, &g);
+        f.P[3 * (size_t)n] = 0.0f;
+        f.S[3 * (size_t)n] = 0.0f;
     }
     const kernels k = kernels_for(&f);
     double mean, err;
