@@ -70,6 +70,7 @@ typedef double d4 __attribute__((vector_size(32)));
 #define V4_ADD(a, b) ((a) + (b))
 #define V4_SUB(a, b) ((a) - (b))
 #define V4_SCALE(a, s) ((a) * (s))
+#define V4_MUL(a, b) ((a) * (b))
 #define V4_LANE(a, i) ((a)[i])
 #else
 typedef struct f4 {
@@ -92,12 +93,14 @@ static inline d4 d4_make(double a, double b, double c, double d) {
 static inline f4 f4_add(f4 a, f4 b) { return f4_make(a.v[0] + b.v[0], a.v[1] + b.v[1], a.v[2] + b.v[2], a.v[3] + b.v[3]); }
 static inline f4 f4_sub(f4 a, f4 b) { return f4_make(a.v[0] - b.v[0], a.v[1] - b.v[1], a.v[2] - b.v[2], a.v[3] - b.v[3]); }
 static inline f4 f4_scale(f4 a, float s) { return f4_make(a.v[0] * s, a.v[1] * s, a.v[2] * s, a.v[3] * s); }
+static inline f4 f4_mul(f4 a, f4 b) { return f4_make(a.v[0] * b.v[0], a.v[1] * b.v[1], a.v[2] * b.v[2], a.v[3] * b.v[3]); }
 static inline d4 d4_add(d4 a, d4 b) { return d4_make(a.v[0] + b.v[0], a.v[1] + b.v[1], a.v[2] + b.v[2], a.v[3] + b.v[3]); }
 static inline d4 d4_sub(d4 a, d4 b) { return d4_make(a.v[0] - b.v[0], a.v[1] - b.v[1], a.v[2] - b.v[2], a.v[3] - b.v[3]); }
 static inline d4 d4_scale(d4 a, double s) { return d4_make(a.v[0] * s, a.v[1] * s, a.v[2] * s, a.v[3] * s); }
 #define V4_ADD(a, b) _Generic((a), f4: f4_add, d4: d4_add)((a), (b))
 #define V4_SUB(a, b) _Generic((a), f4: f4_sub, d4: d4_sub)((a), (b))
 #define V4_SCALE(a, s) _Generic((a), f4: f4_scale, d4: d4_scale)((a), (s))
+#define V4_MUL(a, b) f4_mul((a), (b))
 #endif
 
 static inline f4 f4_load(const float *p) {
@@ -165,6 +168,7 @@ typedef struct fast {
     void *Y, *B;       /* correction and right-hand side, 4 floats (or doubles) a row */
     unsigned char *flags;
     double *inverse;   /* wide: 1 / weight */
+    f4 *weight4, *inverse4; /* each weight and its inverse in float32, in all four lanes */
     int64_t blocks;
     int64_t *block_entry; /* blocks + 1: the first entry of each block of FAST_BLOCK rows */
     double *partial;   /* blocks * 4 */
@@ -201,7 +205,7 @@ typedef void (*residual_fn)(fast *f, int64_t b0, int64_t b1);
         const spia_plan *p = f->p;                                                                               \
         f4 *Y = (f4 *)f->Y;                                                                                      \
         const f4 *B = (const f4 *)f->B;                                                                          \
-        const float *w = p->weight_f;                                                                            \
+        const f4 *w = f->weight4, *inverse = f->inverse4;                                                        \
         int64_t k = p->chunk_entry[c];                                                                           \
         double worst = 0.0;                                                                                      \
         for (int32_t i = p->chunk_start[c]; i < p->chunk_start[c + 1]; ++i) {                                    \
@@ -211,16 +215,29 @@ typedef void (*residual_fn)(fast *f, int64_t b0, int64_t b1);
                 continue;                                                                                        \
             }                                                                                                    \
             const f4 *y = Y + i;                                                                                 \
-            f4 a0 = V4_SCALE(y[0], w[CODE[k]]), a1 = V4_ZERO(f4), a2 = V4_ZERO(f4);                            \
-            int32_t q = 1;                                                                                       \
-            for (; q + 2 < e; q += 3) {                                                                          \
-                a0 = V4_ADD(a0, V4_SCALE(y[DELTA[k + q]], w[CODE[k + q]]));                                     \
-                a1 = V4_ADD(a1, V4_SCALE(y[DELTA[k + q + 1]], w[CODE[k + q + 1]]));                             \
-                a2 = V4_ADD(a2, V4_SCALE(y[DELTA[k + q + 2]], w[CODE[k + q + 2]]));                             \
+            f4 a0, a1, a2;                                                                                       \
+            if (e == 9) {                                                                                        \
+                /* a regular quad mesh's rows: no loop */                                                        \
+                a0 = V4_ADD(V4_ADD(V4_MUL(y[0], w[CODE[k]]), V4_MUL(y[DELTA[k + 1]], w[CODE[k + 1]])),          \
+                            V4_MUL(y[DELTA[k + 2]], w[CODE[k + 2]]));                                            \
+                a1 = V4_ADD(V4_ADD(V4_MUL(y[DELTA[k + 3]], w[CODE[k + 3]]), V4_MUL(y[DELTA[k + 4]], w[CODE[k + 4]])), \
+                            V4_MUL(y[DELTA[k + 5]], w[CODE[k + 5]]));                                            \
+                a2 = V4_ADD(V4_ADD(V4_MUL(y[DELTA[k + 6]], w[CODE[k + 6]]), V4_MUL(y[DELTA[k + 7]], w[CODE[k + 7]])), \
+                            V4_MUL(y[DELTA[k + 8]], w[CODE[k + 8]]));                                            \
+            } else {                                                                                             \
+                a0 = V4_MUL(y[0], w[CODE[k]]);                                                                   \
+                a1 = V4_ZERO(f4);                                                                                \
+                a2 = V4_ZERO(f4);                                                                                \
+                int32_t q = 1;                                                                                   \
+                for (; q + 2 < e; q += 3) {                                                                      \
+                    a0 = V4_ADD(a0, V4_MUL(y[DELTA[k + q]], w[CODE[k + q]]));                                   \
+                    a1 = V4_ADD(a1, V4_MUL(y[DELTA[k + q + 1]], w[CODE[k + q + 1]]));                           \
+                    a2 = V4_ADD(a2, V4_MUL(y[DELTA[k + q + 2]], w[CODE[k + q + 2]]));                           \
+                }                                                                                                \
+                for (; q < e; ++q) a0 = V4_ADD(a0, V4_MUL(y[DELTA[k + q]], w[CODE[k + q]]));                    \
             }                                                                                                    \
-            for (; q < e; ++q) a0 = V4_ADD(a0, V4_SCALE(y[DELTA[k + q]], w[CODE[k + q]]));                      \
             const f4 g = V4_SUB(B[i], V4_ADD(a0, V4_ADD(a1, a2)));                                               \
-            Y[i] = V4_ADD(Y[i], V4_SCALE(g, p->inverse_f[CODE[k]]));                                             \
+            Y[i] = V4_ADD(Y[i], V4_MUL(g, inverse[CODE[k]]));                                                    \
             const float g0 = V4_LANE(g, 0), g1 = V4_LANE(g, 1), g2 = V4_LANE(g, 2);                              \
             worst = keep_max(worst, (double)(g0 * g0 + g1 * g1 + g2 * g2));                                     \
             k += e;                                                                                              \
@@ -883,16 +900,23 @@ spia_result spia__solve_fast(const spia_stencils *L, const float *targets, const
     f.partial = (double *)malloc(sizeof(double) * 4 * (size_t)f.blocks);
     f.block_entry = (int64_t *)malloc(sizeof(int64_t) * ((size_t)f.blocks + 1));
     if (f.wide) f.inverse = (double *)malloc(sizeof(double) * (size_t)(p->words > 0 ? p->words : 1));
+    f.weight4 = (f4 *)malloc(sizeof(f4) * (size_t)(p->words > 0 ? p->words : 1));
+    f.inverse4 = (f4 *)malloc(sizeof(f4) * (size_t)(p->words > 0 ? p->words : 1));
     spia_result res;
     int32_t it = 0, stuck_count = 0;
     stage_result sr;
     memset(&sr, 0, sizeof sr);
-    if (!f.P || !f.S || !f.Y || !f.B || !f.flags || !f.partial || !f.block_entry || (f.wide && !f.inverse)) {
+    if (!f.P || !f.S || !f.Y || !f.B || !f.flags || !f.partial || !f.block_entry || (f.wide && !f.inverse) ||
+        !f.weight4 || !f.inverse4) {
         res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
         goto done;
     }
     if (f.wide)
         for (int32_t c = 0; c < p->words; ++c) f.inverse[c] = 1.0 / p->weight[c];
+    for (int32_t c = 0; c < p->words; ++c) {
+        f.weight4[c] = V4_SPLAT(f4, p->weight_f[c]);
+        f.inverse4[c] = V4_SPLAT(f4, p->inverse_f[c]);
+    }
     {
         int64_t e = 0;
         for (int32_t i = 0; i < n; ++i) {
@@ -994,5 +1018,7 @@ done:
     free(f.partial);
     free(f.block_entry);
     free(f.inverse);
+    free(f.weight4);
+    free(f.inverse4);
     return res;
 }
