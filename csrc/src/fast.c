@@ -129,6 +129,12 @@ static inline void sum3_add(sum3 *a, double w, const float *x, const float *y) {
     a->xy = _mm_add_pd(a->xy, _mm_mul_pd(_mm_cvtps_pd(v), ww));
     a->zw = _mm_add_pd(a->zw, _mm_mul_pd(_mm_cvtps_pd(_mm_movehl_ps(v, v)), ww));
 }
+/* a += w * (the row of 4 doubles at x) */
+static inline void sum3_add_d(sum3 *a, double w, const double *x) {
+    const __m128d ww = _mm_set1_pd(w);
+    a->xy = _mm_add_pd(a->xy, _mm_mul_pd(_mm_loadu_pd(x), ww));
+    a->zw = _mm_add_pd(a->zw, _mm_mul_pd(_mm_loadu_pd(x + 2), ww));
+}
 static inline void sum3_get(sum3 a, sum3 b, double out[3]) {
     double xy[2], zw[2];
     _mm_storeu_pd(xy, _mm_add_pd(a.xy, b.xy));
@@ -147,6 +153,9 @@ static inline sum3 sum3_zero(void) {
 }
 static inline void sum3_add(sum3 *a, double w, const float *x, const float *y) {
     for (int c = 0; c < 3; ++c) a->v[c] += w * (double)(y ? x[c] + y[c] : x[c]);
+}
+static inline void sum3_add_d(sum3 *a, double w, const double *x) {
+    for (int c = 0; c < 3; ++c) a->v[c] += w * x[c];
 }
 static inline void sum3_get(sum3 a, sum3 b, double out[3]) {
     for (int c = 0; c < 3; ++c) out[c] = a.v[c] + b.v[c];
@@ -168,7 +177,8 @@ typedef struct fast {
     void *Y, *B;       /* correction and right-hand side, 4 floats (or doubles) a row */
     unsigned char *flags;
     double *inverse;   /* wide: 1 / weight */
-    f4 *weight4, *inverse4; /* each weight and its inverse in float32, in all four lanes */
+    f4 *weight4, *inverse4, *signed4; /* per code, in float32 in all four lanes: the weight, its inverse, the
+                                       * first step's weight (signed_f) */
     int64_t blocks;
     int64_t *block_entry; /* blocks + 1: the first entry of each block of FAST_BLOCK rows */
     double *partial;   /* blocks * 4 */
@@ -246,9 +256,8 @@ typedef void (*residual_fn)(fast *f, int64_t b0, int64_t b1);
     }                                                                                                            \
     static double sweep_d_##SUFFIX(const fast *f, int32_t c) {                                                   \
         const spia_plan *p = f->p;                                                                               \
-        d4 *Y = (d4 *)f->Y;                                                                                      \
-        const d4 *B = (const d4 *)f->B;                                                                          \
-        const double *w = p->weight;                                                                             \
+        double *Y = (double *)f->Y;                                                                              \
+        const double *B = (const double *)f->B, *w = p->weight;                                                  \
         int64_t k = p->chunk_entry[c];                                                                           \
         double worst = 0.0;                                                                                      \
         for (int32_t i = p->chunk_start[c]; i < p->chunk_start[c + 1]; ++i) {                                    \
@@ -257,26 +266,33 @@ typedef void (*residual_fn)(fast *f, int64_t b0, int64_t b1);
                 k += e;                                                                                          \
                 continue;                                                                                        \
             }                                                                                                    \
-            const d4 *y = Y + i;                                                                                 \
-            d4 a0 = V4_SCALE(y[0], w[CODE[k]]), a1 = V4_ZERO(d4), a2 = V4_ZERO(d4);                            \
+            const double *y = Y + 4 * (int64_t)i;                                                                \
+            sum3 a0 = sum3_zero(), a1 = sum3_zero(), a2 = sum3_zero();                                           \
+            sum3_add_d(&a0, w[CODE[k]], y);                                                                      \
             int32_t q = 1;                                                                                       \
             for (; q + 2 < e; q += 3) {                                                                          \
-                a0 = V4_ADD(a0, V4_SCALE(y[DELTA[k + q]], w[CODE[k + q]]));                                     \
-                a1 = V4_ADD(a1, V4_SCALE(y[DELTA[k + q + 1]], w[CODE[k + q + 1]]));                             \
-                a2 = V4_ADD(a2, V4_SCALE(y[DELTA[k + q + 2]], w[CODE[k + q + 2]]));                             \
+                sum3_add_d(&a0, w[CODE[k + q]], y + 4 * (int64_t)DELTA[k + q]);                                  \
+                sum3_add_d(&a1, w[CODE[k + q + 1]], y + 4 * (int64_t)DELTA[k + q + 1]);                          \
+                sum3_add_d(&a2, w[CODE[k + q + 2]], y + 4 * (int64_t)DELTA[k + q + 2]);                          \
             }                                                                                                    \
-            for (; q < e; ++q) a0 = V4_ADD(a0, V4_SCALE(y[DELTA[k + q]], w[CODE[k + q]]));                      \
-            const d4 g = V4_SUB(B[i], V4_ADD(a0, V4_ADD(a1, a2)));                                               \
-            Y[i] = V4_ADD(Y[i], V4_SCALE(g, f->inverse[CODE[k]]));                                               \
-            const double g0 = V4_LANE(g, 0), g1 = V4_LANE(g, 1), g2 = V4_LANE(g, 2);                             \
-            worst = keep_max(worst, g0 * g0 + g1 * g1 + g2 * g2);                                                \
+            for (; q < e; ++q) sum3_add_d(&a0, w[CODE[k + q]], y + 4 * (int64_t)DELTA[k + q]);                  \
+            double lx[3], m[3];                                                                                  \
+            sum3_get(a0, a1, lx);                                                                                \
+            sum3_get(a2, sum3_zero(), m);                                                                        \
+            const double inv = f->inverse[CODE[k]];                                                              \
+            double d2 = 0.0;                                                                                     \
+            for (int a = 0; a < 3; ++a) {                                                                        \
+                const double g = B[4 * (int64_t)i + a] - (lx[a] + m[a]);                                         \
+                Y[4 * (int64_t)i + a] += g * inv;                                                                \
+                d2 += g * g;                                                                                     \
+            }                                                                                                    \
+            worst = keep_max(worst, d2);                                                                         \
             k += e;                                                                                              \
         }                                                                                                        \
         return worst;                                                                                            \
     }                                                                                                            \
     static void first_##SUFFIX(const fast *f, int32_t c) {                                                       \
         const spia_plan *p = f->p;                                                                               \
-        const float *w = p->weight_f;                                                                            \
         int64_t k = p->chunk_entry[c];                                                                           \
         for (int32_t i = p->chunk_start[c]; i < p->chunk_start[c + 1]; ++i) {                                    \
             const int32_t e = p->length[i];                                                                      \
@@ -284,31 +300,22 @@ typedef void (*residual_fn)(fast *f, int64_t b0, int64_t b1);
                 k += e;                                                                                          \
                 continue;                                                                                        \
             }                                                                                                    \
-            float largest = 0.0f;                                                                                \
-            for (int32_t q = 1; q < e; ++q)                                                                      \
-                if (w[CODE[k + q]] > largest) largest = w[CODE[k + q]];                                          \
-            const float edge = 0.5f * largest, own = p->inverse_f[CODE[k]];                                      \
+            const float own = p->inverse_f[CODE[k]];                                                             \
             if (f->wide) {                                                                                       \
                 const d4 *B = (const d4 *)f->B + i;                                                              \
-                d4 acc = V4_SCALE(B[0], (double)w[CODE[k]]);                                                     \
-                for (int32_t q = 1; q < e; ++q) {                                                                \
-                    const double lw = w[CODE[k + q]];                                                            \
-                    acc = V4_ADD(acc, V4_SCALE(B[DELTA[k + q]], lw >= edge ? -lw : lw));                         \
-                }                                                                                                \
+                d4 acc = V4_ZERO(d4);                                                                            \
+                for (int32_t q = 0; q < e; ++q)                                                                  \
+                    acc = V4_ADD(acc, V4_SCALE(B[DELTA[k + q]], (double)p->signed_f[CODE[k + q]]));              \
                 ((d4 *)f->Y)[i] = V4_SCALE(acc, FIRST_STEP_SCALE * (double)own * (double)own);                   \
             } else {                                                                                             \
-                const f4 *B = (const f4 *)f->B + i;                                                              \
-                f4 acc = V4_SCALE(B[0], w[CODE[k]]), acc2 = V4_ZERO(f4);                                         \
+                const f4 *B = (const f4 *)f->B + i, *w = f->signed4;                                             \
+                f4 acc = V4_MUL(B[0], w[CODE[k]]), acc2 = V4_ZERO(f4);                                          \
                 int32_t q = 1;                                                                                   \
                 for (; q + 1 < e; q += 2) {                                                                      \
-                    const float w0 = w[CODE[k + q]], w1 = w[CODE[k + q + 1]];                                    \
-                    acc = V4_ADD(acc, V4_SCALE(B[DELTA[k + q]], w0 >= edge ? -w0 : w0));                         \
-                    acc2 = V4_ADD(acc2, V4_SCALE(B[DELTA[k + q + 1]], w1 >= edge ? -w1 : w1));                   \
+                    acc = V4_ADD(acc, V4_MUL(B[DELTA[k + q]], w[CODE[k + q]]));                                  \
+                    acc2 = V4_ADD(acc2, V4_MUL(B[DELTA[k + q + 1]], w[CODE[k + q + 1]]));                        \
                 }                                                                                                \
-                if (q < e) {                                                                                     \
-                    const float w0 = w[CODE[k + q]];                                                             \
-                    acc = V4_ADD(acc, V4_SCALE(B[DELTA[k + q]], w0 >= edge ? -w0 : w0));                         \
-                }                                                                                                \
+                if (q < e) acc = V4_ADD(acc, V4_MUL(B[DELTA[k + q]], w[CODE[k + q]]));                           \
                 ((f4 *)f->Y)[i] = V4_SCALE(V4_ADD(acc, acc2), (float)FIRST_STEP_SCALE * own * own);             \
             }                                                                                                    \
             k += e;                                                                                              \
@@ -902,12 +909,13 @@ spia_result spia__solve_fast(const spia_stencils *L, const float *targets, const
     if (f.wide) f.inverse = (double *)malloc(sizeof(double) * (size_t)(p->words > 0 ? p->words : 1));
     f.weight4 = (f4 *)malloc(sizeof(f4) * (size_t)(p->words > 0 ? p->words : 1));
     f.inverse4 = (f4 *)malloc(sizeof(f4) * (size_t)(p->words > 0 ? p->words : 1));
+    f.signed4 = (f4 *)malloc(sizeof(f4) * (size_t)(p->words > 0 ? p->words : 1));
     spia_result res;
     int32_t it = 0, stuck_count = 0;
     stage_result sr;
     memset(&sr, 0, sizeof sr);
     if (!f.P || !f.S || !f.Y || !f.B || !f.flags || !f.partial || !f.block_entry || (f.wide && !f.inverse) ||
-        !f.weight4 || !f.inverse4) {
+        !f.weight4 || !f.inverse4 || !f.signed4) {
         res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
         goto done;
     }
@@ -916,6 +924,7 @@ spia_result spia__solve_fast(const spia_stencils *L, const float *targets, const
     for (int32_t c = 0; c < p->words; ++c) {
         f.weight4[c] = V4_SPLAT(f4, p->weight_f[c]);
         f.inverse4[c] = V4_SPLAT(f4, p->inverse_f[c]);
+        f.signed4[c] = V4_SPLAT(f4, p->signed_f[c]);
     }
     {
         int64_t e = 0;
@@ -1020,5 +1029,6 @@ done:
     free(f.inverse);
     free(f.weight4);
     free(f.inverse4);
+    free(f.signed4);
     return res;
 }

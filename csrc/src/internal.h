@@ -25,9 +25,12 @@ extern "C" {
  * The weights are those of the table, exactly: each row's entries are
  * codes into a dictionary of the table's distinct weights (in double, and
  * their float32 copies for the sweeps), with column positions as offsets
- * from the row's own; the row's own entry first, when it has one.  Codes
- * are 8 or 16 bits and offsets 16 or 32 bits, the least that holds the
- * table. */
+ * from the row's own; the row's own entry first, when it has one.  The
+ * dictionary holds each weight twice: codes from words / 2 on are the
+ * larger off-diagonal weights of their rows (at least half the largest:
+ * the edge neighbours of a Catmull-Clark vertex), whose signs the first
+ * step (SPIA_SOLVE_FIRST_STEP) flips.  Codes are 8 or 16 bits and offsets
+ * 16 or 32 bits, the least that holds the table. */
 enum { SPIA_PLAN_CHUNK_ROWS = 2048 };
 typedef struct spia_plan {
     int32_t rows;
@@ -41,10 +44,11 @@ typedef struct spia_plan {
     uint16_t *code16;
     int16_t *delta16;     /* one of delta16, delta32: column position - row position */
     int32_t *delta32;
-    int32_t words;        /* distinct weights */
+    int32_t words;        /* codes: twice the distinct weights */
     double *weight;
     float *weight_f;
     float *inverse_f;     /* 1 / weight in float (for the rows' own entries) */
+    float *signed_f;      /* weight_f, negative for the second half */
     /* Every row starts with its own entry, of a positive weight: what
      * Gauss-Seidel needs. */
     int diagonal_first;
@@ -63,8 +67,8 @@ struct spia_stencils {
     unsigned char *boundary;
     int32_t boundary_count;
     /* The sweep layout (spia_limit_stencils_create makes it); NULL where the
-     * table does not fit one (more than 65536 distinct weights, or a row of
-     * more than 65535). */
+     * table does not fit one (more than 32768 distinct weights, or a row of
+     * more than 65535 entries). */
     spia_plan *plan;
 };
 

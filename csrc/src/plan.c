@@ -35,6 +35,7 @@ void spia__plan_free(spia_plan *p) {
     free(p->weight);
     free(p->weight_f);
     free(p->inverse_f);
+    free(p->signed_f);
     free(p);
 }
 
@@ -214,7 +215,7 @@ static int level_order(const spia_stencils *s, spia_plan *p, int32_t *chunk_of, 
 /* The dictionary of weights                                                 */
 /* ------------------------------------------------------------------------ */
 
-enum { DICTIONARY_BITS = 17, DICTIONARY_LIMIT = 65536 };
+enum { DICTIONARY_BITS = 17, DICTIONARY_LIMIT = 32768 }; /* each weight takes two codes */
 
 typedef struct dictionary {
     uint64_t *keys; /* the bits of the weight; 0 (the weight +0.0, never in a table) when empty */
@@ -292,17 +293,23 @@ static void place_rows(void *context, int64_t r0, int64_t r1, int thread) {
     placing *pl = (placing *)context;
     const spia_stencils *s = pl->s;
     spia_plan *p = pl->p;
+    const int32_t edges = p->words / 2;
     for (int64_t r = r0; r < r1; ++r) {
         const int32_t i = position_of(pl, (int32_t)r);
         int64_t e = pl->entry[i];
+        double largest = 0.0;
+        for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k)
+            if (s->indices[k] != r && s->weights[k] > largest) largest = s->weights[k];
         for (int pass = 0; pass < 2; ++pass)
             for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k) {
                 if ((s->indices[k] == r) != (pass == 0)) continue;
                 const int32_t delta = position_of(pl, s->indices[k]) - i;
+                const int edge = s->indices[k] != r && s->weights[k] >= 0.5 * largest;
+                const int32_t code = pl->codes[k] + (edge ? edges : 0);
                 if (p->code8)
-                    p->code8[e] = (uint8_t)pl->codes[k];
+                    p->code8[e] = (uint8_t)code;
                 else
-                    p->code16[e] = pl->codes[k];
+                    p->code16[e] = (uint16_t)code;
                 if (p->delta16)
                     p->delta16[e] = (int16_t)delta;
                 else
@@ -418,22 +425,28 @@ spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status)
         p->delta16 = (int16_t *)malloc(sizeof(int16_t) * entries);
     else
         p->delta32 = (int32_t *)malloc(sizeof(int32_t) * entries);
-    if (d.count <= 256)
+    /* Each weight twice: as itself, and where it is one of the larger
+     * off-diagonal weights of its row (the first step's edges). */
+    p->words = 2 * d.count;
+    if (p->words <= 256)
         p->code8 = (uint8_t *)malloc(entries);
     else
         p->code16 = (uint16_t *)malloc(sizeof(uint16_t) * entries);
     if ((!p->delta16 && !p->delta32) || (!p->code8 && !p->code16)) goto out_of_memory;
     spia__parallel_for(threads, n, 0, place_rows, &pl);
 
-    p->words = d.count;
-    p->weight = (double *)malloc(sizeof(double) * (size_t)(d.count > 0 ? d.count : 1));
-    p->weight_f = (float *)malloc(sizeof(float) * (size_t)(d.count > 0 ? d.count : 1));
-    p->inverse_f = (float *)malloc(sizeof(float) * (size_t)(d.count > 0 ? d.count : 1));
-    if (!p->weight || !p->weight_f || !p->inverse_f) goto out_of_memory;
-    for (int32_t c = 0; c < d.count; ++c) {
-        p->weight[c] = d.weight[c];
-        p->weight_f[c] = (float)d.weight[c];
-        p->inverse_f[c] = (float)(1.0 / d.weight[c]);
+    const size_t words = (size_t)(p->words > 0 ? p->words : 1);
+    p->weight = (double *)malloc(sizeof(double) * words);
+    p->weight_f = (float *)malloc(sizeof(float) * words);
+    p->inverse_f = (float *)malloc(sizeof(float) * words);
+    p->signed_f = (float *)malloc(sizeof(float) * words);
+    if (!p->weight || !p->weight_f || !p->inverse_f || !p->signed_f) goto out_of_memory;
+    for (int32_t c = 0; c < p->words; ++c) {
+        const double w = d.weight[c % d.count];
+        p->weight[c] = w;
+        p->weight_f[c] = (float)w;
+        p->inverse_f[c] = (float)(1.0 / w);
+        p->signed_f[c] = c < d.count ? (float)w : -(float)w;
     }
     free(d.weight);
     free(codes);
