@@ -58,8 +58,10 @@ enum { AUTO_PROBE_ROWS = 4096 };
 enum { MULTICOLOURS = 64 };
 /* See first_step. */
 #define FIRST_STEP_SCALE 1.28
-/* SPIA_SOLVE_* flags AUTO adds when it takes GS_PIA_FAST. */
-#define AUTO_FAST_FLAGS 0
+/* SPIA_SOLVE_* flags AUTO adds when it takes GS_PIA_FAST: the first step
+ * saved more sweeps than it cost on the rough sphere and the scans
+ * measured (bench/bench_solve.py). */
+#define AUTO_FAST_FLAGS SPIA_SOLVE_FIRST_STEP
 
 typedef struct solver_state {
     const spia_stencils *L;
@@ -705,19 +707,9 @@ static double first_contraction_probe(const spia_stencils *L, const float *P, co
     double num = 0.0, den = 0.0;
     if (stride == 1) {
         /* Every row: the residual once for all. */
-        double *V = (double *)malloc(sizeof(double) * 3 * (size_t)n);
         double *R = (double *)malloc(sizeof(double) * 3 * (size_t)n);
-        if (!V || !R) {
-            free(V);
-            free(R);
-            return -1.0;
-        }
-        for (int64_t k = 0; k < 3 * (int64_t)n; ++k) V[k] = (double)start[k];
-        for (int32_t r = 0; r < n; ++r) {
-            double lv[3];
-            spia__row_product(L, r, V, lv);
-            for (int a = 0; a < 3; ++a) R[3 * (int64_t)r + a] = P[3 * (int64_t)r + a] - lv[a];
-        }
+        if (!R) return -1.0;
+        for (int32_t r = 0; r < n; ++r) residual_row(L, P, start, r, R + 3 * (int64_t)r);
         for (int32_t r = 0; r < n; ++r) {
             double lr[3];
             spia__row_product(L, r, R, lr);
@@ -727,7 +719,6 @@ static double first_contraction_probe(const spia_stencils *L, const float *P, co
                 den += q * q;
             }
         }
-        free(V);
         free(R);
     } else {
         /* Sampled rows: each one's residual and its stencil's. */
