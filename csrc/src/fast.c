@@ -162,6 +162,31 @@ static inline void sum3_get(sum3 a, sum3 b, double out[3]) {
 }
 #endif
 
+/* The sum of the square roots of x[0 .. count), two at a time where there
+ * is SSE2 (no square root waits for the one before). */
+static double sum_of_roots(const double *x, int32_t count) {
+#if defined(__SSE2__) || defined(_M_X64)
+    __m128d acc = _mm_setzero_pd();
+    int32_t q = 0;
+    for (; q + 1 < count; q += 2) acc = _mm_add_pd(acc, _mm_sqrt_pd(_mm_loadu_pd(x + q)));
+    double pair[2];
+    _mm_storeu_pd(pair, acc);
+    double sum = pair[0] + pair[1];
+    if (q < count) sum += sqrt(x[q]);
+    return sum;
+#else
+    double even = 0.0, odd = 0.0;
+    int32_t q = 0;
+    for (; q + 1 < count; q += 2) {
+        even += sqrt(x[q]);
+        odd += sqrt(x[q + 1]);
+    }
+    double sum = even + odd;
+    if (q < count) sum += sqrt(x[q]);
+    return sum;
+#endif
+}
+
 /* ------------------------------------------------------------------------ */
 /* The solver's state                                                        */
 /* ------------------------------------------------------------------------ */
@@ -228,7 +253,7 @@ typedef void (*residual_fn)(fast *f, int64_t b0, int64_t b1);
             f4 a0, a1, a2;                                                                                       \
             if (e == 9) {                                                                                        \
                 /* a regular quad mesh's rows: no loop */                                                        \
-                a0 = V4_ADD(V4_ADD(V4_MUL(y[0], w[CODE[k]]), V4_MUL(y[DELTA[k + 1]], w[CODE[k + 1]])),          \
+                a0 = V4_ADD(V4_ADD(V4_MUL(y[0], w[CODE[k]]), V4_MUL(y[DELTA[k + 1]], w[CODE[k + 1]])),           \
                             V4_MUL(y[DELTA[k + 2]], w[CODE[k + 2]]));                                            \
                 a1 = V4_ADD(V4_ADD(V4_MUL(y[DELTA[k + 3]], w[CODE[k + 3]]), V4_MUL(y[DELTA[k + 4]], w[CODE[k + 4]])), \
                             V4_MUL(y[DELTA[k + 5]], w[CODE[k + 5]]));                                            \
@@ -240,16 +265,16 @@ typedef void (*residual_fn)(fast *f, int64_t b0, int64_t b1);
                 a2 = V4_ZERO(f4);                                                                                \
                 int32_t q = 1;                                                                                   \
                 for (; q + 2 < e; q += 3) {                                                                      \
-                    a0 = V4_ADD(a0, V4_MUL(y[DELTA[k + q]], w[CODE[k + q]]));                                   \
-                    a1 = V4_ADD(a1, V4_MUL(y[DELTA[k + q + 1]], w[CODE[k + q + 1]]));                           \
-                    a2 = V4_ADD(a2, V4_MUL(y[DELTA[k + q + 2]], w[CODE[k + q + 2]]));                           \
+                    a0 = V4_ADD(a0, V4_MUL(y[DELTA[k + q]], w[CODE[k + q]]));                                    \
+                    a1 = V4_ADD(a1, V4_MUL(y[DELTA[k + q + 1]], w[CODE[k + q + 1]]));                            \
+                    a2 = V4_ADD(a2, V4_MUL(y[DELTA[k + q + 2]], w[CODE[k + q + 2]]));                            \
                 }                                                                                                \
-                for (; q < e; ++q) a0 = V4_ADD(a0, V4_MUL(y[DELTA[k + q]], w[CODE[k + q]]));                    \
+                for (; q < e; ++q) a0 = V4_ADD(a0, V4_MUL(y[DELTA[k + q]], w[CODE[k + q]]));                     \
             }                                                                                                    \
             const f4 g = V4_SUB(B[i], V4_ADD(a0, V4_ADD(a1, a2)));                                               \
             Y[i] = V4_ADD(Y[i], V4_MUL(g, inverse[CODE[k]]));                                                    \
             const float g0 = V4_LANE(g, 0), g1 = V4_LANE(g, 1), g2 = V4_LANE(g, 2);                              \
-            worst = keep_max(worst, (double)(g0 * g0 + g1 * g1 + g2 * g2));                                     \
+            worst = keep_max(worst, (double)(g0 * g0 + g1 * g1 + g2 * g2));                                      \
             k += e;                                                                                              \
         }                                                                                                        \
         return worst;                                                                                            \
@@ -275,7 +300,7 @@ typedef void (*residual_fn)(fast *f, int64_t b0, int64_t b1);
                 sum3_add_d(&a1, w[CODE[k + q + 1]], y + 4 * (int64_t)DELTA[k + q + 1]);                          \
                 sum3_add_d(&a2, w[CODE[k + q + 2]], y + 4 * (int64_t)DELTA[k + q + 2]);                          \
             }                                                                                                    \
-            for (; q < e; ++q) sum3_add_d(&a0, w[CODE[k + q]], y + 4 * (int64_t)DELTA[k + q]);                  \
+            for (; q < e; ++q) sum3_add_d(&a0, w[CODE[k + q]], y + 4 * (int64_t)DELTA[k + q]);                   \
             double lx[3], m[3];                                                                                  \
             sum3_get(a0, a1, lx);                                                                                \
             sum3_get(a2, sum3_zero(), m);                                                                        \
@@ -309,14 +334,14 @@ typedef void (*residual_fn)(fast *f, int64_t b0, int64_t b1);
                 ((d4 *)f->Y)[i] = V4_SCALE(acc, FIRST_STEP_SCALE * (double)own * (double)own);                   \
             } else {                                                                                             \
                 const f4 *B = (const f4 *)f->B + i, *w = f->signed4;                                             \
-                f4 acc = V4_MUL(B[0], w[CODE[k]]), acc2 = V4_ZERO(f4);                                          \
+                f4 acc = V4_MUL(B[0], w[CODE[k]]), acc2 = V4_ZERO(f4);                                           \
                 int32_t q = 1;                                                                                   \
                 for (; q + 1 < e; q += 2) {                                                                      \
                     acc = V4_ADD(acc, V4_MUL(B[DELTA[k + q]], w[CODE[k + q]]));                                  \
                     acc2 = V4_ADD(acc2, V4_MUL(B[DELTA[k + q + 1]], w[CODE[k + q + 1]]));                        \
                 }                                                                                                \
                 if (q < e) acc = V4_ADD(acc, V4_MUL(B[DELTA[k + q]], w[CODE[k + q]]));                           \
-                ((f4 *)f->Y)[i] = V4_SCALE(V4_ADD(acc, acc2), (float)FIRST_STEP_SCALE * own * own);             \
+                ((f4 *)f->Y)[i] = V4_SCALE(V4_ADD(acc, acc2), (float)FIRST_STEP_SCALE * own * own);              \
             }                                                                                                    \
             k += e;                                                                                              \
         }                                                                                                        \
@@ -325,10 +350,11 @@ typedef void (*residual_fn)(fast *f, int64_t b0, int64_t b1);
         const spia_plan *p = f->p;                                                                               \
         const int32_t n = f->n;                                                                                  \
         for (int64_t b = b0; b < b1; ++b) {                                                                      \
-            double maxd = 0.0, maxa = 0.0, sum = 0.0, norm2 = 0.0;                                               \
-            const int32_t i1 = (int32_t)((b + 1) * FAST_BLOCK < n ? (b + 1) * FAST_BLOCK : n);                  \
+            double maxd = 0.0, maxa = 0.0, norm2 = 0.0, squares[FAST_BLOCK];                                     \
+            const int32_t i0 = (int32_t)(b * FAST_BLOCK);                                                        \
+            const int32_t i1 = (int32_t)((b + 1) * FAST_BLOCK < n ? (b + 1) * FAST_BLOCK : n);                   \
             int64_t k = f->block_entry[b];                                                                       \
-            for (int32_t i = (int32_t)(b * FAST_BLOCK); i < i1; ++i) {                                           \
+            for (int32_t i = i0; i < i1; ++i) {                                                                  \
                 const int32_t e = p->length[i];                                                                  \
                 const float *S = f->S + 3 * (int64_t)i;                                                          \
                 sum3 a0 = sum3_zero(), a1 = sum3_zero();                                                         \
@@ -344,7 +370,7 @@ typedef void (*residual_fn)(fast *f, int64_t b0, int64_t b1);
                 double lx[3];                                                                                    \
                 sum3_get(a0, a1, lx);                                                                            \
                 const float *t = f->P + 3 * (int64_t)i;                                                          \
-                const double r0 = (double)t[0] - lx[0], r1 = (double)t[1] - lx[1], r2 = (double)t[2] - lx[2];   \
+                const double r0 = (double)t[0] - lx[0], r1 = (double)t[1] - lx[1], r2 = (double)t[2] - lx[2];    \
                 if (f->wide) {                                                                                   \
                     double *q4 = (double *)f->B + 4 * (int64_t)i;                                                \
                     q4[0] = r0;                                                                                  \
@@ -358,18 +384,18 @@ typedef void (*residual_fn)(fast *f, int64_t b0, int64_t b1);
                     q4[2] = (float)r2;                                                                           \
                     q4[3] = 0.0f;                                                                                \
                 }                                                                                                \
-                const double d = sqrt(r0 * r0 + r1 * r1 + r2 * r2);                                              \
-                maxd = keep_max(maxd, d);                                                                        \
+                const double d2 = r0 * r0 + r1 * r1 + r2 * r2;                                                   \
+                squares[i - i0] = d2;                                                                            \
+                maxd = keep_max(maxd, d2);                                                                       \
                 if (row_active(f, i)) {                                                                          \
-                    maxa = keep_max(maxa, d);                                                                    \
-                    norm2 += d * d;                                                                              \
+                    maxa = keep_max(maxa, d2);                                                                   \
+                    norm2 += d2;                                                                                 \
                 }                                                                                                \
-                sum += d;                                                                                        \
             }                                                                                                    \
             double *q4 = f->partial + 4 * b;                                                                     \
-            q4[0] = maxd;                                                                                        \
-            q4[1] = maxa;                                                                                        \
-            q4[2] = sum;                                                                                         \
+            q4[0] = sqrt(maxd);                                                                                  \
+            q4[1] = sqrt(maxa);                                                                                  \
+            q4[2] = sum_of_roots(squares, i1 - i0);                                                              \
             q4[3] = norm2;                                                                                       \
         }                                                                                                        \
     }                                                                                                            \
@@ -377,10 +403,11 @@ typedef void (*residual_fn)(fast *f, int64_t b0, int64_t b1);
         const spia_plan *p = f->p;                                                                               \
         const int32_t n = f->n;                                                                                  \
         for (int64_t b = b0; b < b1; ++b) {                                                                      \
-            double maxd = 0.0, maxa = 0.0, sum = 0.0, norm2 = 0.0;                                               \
-            const int32_t i1 = (int32_t)((b + 1) * FAST_BLOCK < n ? (b + 1) * FAST_BLOCK : n);                  \
+            double maxd = 0.0, maxa = 0.0, norm2 = 0.0, squares[FAST_BLOCK];                                     \
+            const int32_t i0 = (int32_t)(b * FAST_BLOCK);                                                        \
+            const int32_t i1 = (int32_t)((b + 1) * FAST_BLOCK < n ? (b + 1) * FAST_BLOCK : n);                   \
             int64_t k = f->block_entry[b];                                                                       \
-            for (int32_t i = (int32_t)(b * FAST_BLOCK); i < i1; ++i) {                                           \
+            for (int32_t i = i0; i < i1; ++i) {                                                                  \
                 const int32_t e = p->length[i];                                                                  \
                 sum3 a0 = sum3_zero(), a1 = sum3_zero();                                                         \
                 if (f->wide) {                                                                                   \
@@ -390,7 +417,7 @@ typedef void (*residual_fn)(fast *f, int64_t b0, int64_t b1);
                         sum3_add(&a0, p->weight[CODE[k]], x, NULL);                                              \
                     }                                                                                            \
                 } else {                                                                                         \
-                    const float *S = f->S + 3 * (int64_t)i, *Y = (const float *)f->Y + 4 * (int64_t)i;          \
+                    const float *S = f->S + 3 * (int64_t)i, *Y = (const float *)f->Y + 4 * (int64_t)i;           \
                     int32_t q = 0;                                                                               \
                     for (; q + 1 < e; q += 2, k += 2) {                                                          \
                         const int64_t j0 = DELTA[k], j1 = DELTA[k + 1];                                          \
@@ -406,19 +433,19 @@ typedef void (*residual_fn)(fast *f, int64_t b0, int64_t b1);
                 double lx[3];                                                                                    \
                 sum3_get(a0, a1, lx);                                                                            \
                 const float *t = f->P + 3 * (int64_t)i;                                                          \
-                const double r0 = (double)t[0] - lx[0], r1 = (double)t[1] - lx[1], r2 = (double)t[2] - lx[2];   \
-                const double d = sqrt(r0 * r0 + r1 * r1 + r2 * r2);                                              \
-                maxd = keep_max(maxd, d);                                                                        \
+                const double r0 = (double)t[0] - lx[0], r1 = (double)t[1] - lx[1], r2 = (double)t[2] - lx[2];    \
+                const double d2 = r0 * r0 + r1 * r1 + r2 * r2;                                                   \
+                squares[i - i0] = d2;                                                                            \
+                maxd = keep_max(maxd, d2);                                                                       \
                 if (row_active(f, i)) {                                                                          \
-                    maxa = keep_max(maxa, d);                                                                    \
-                    norm2 += d * d;                                                                              \
+                    maxa = keep_max(maxa, d2);                                                                   \
+                    norm2 += d2;                                                                                 \
                 }                                                                                                \
-                sum += d;                                                                                        \
             }                                                                                                    \
             double *q4 = f->partial + 4 * b;                                                                     \
-            q4[0] = maxd;                                                                                        \
-            q4[1] = maxa;                                                                                        \
-            q4[2] = sum;                                                                                         \
+            q4[0] = sqrt(maxd);                                                                                  \
+            q4[1] = sqrt(maxa);                                                                                  \
+            q4[2] = sum_of_roots(squares, i1 - i0);                                                              \
             q4[3] = norm2;                                                                                       \
         }                                                                                                        \
     }
