@@ -113,6 +113,11 @@ static int32_t bfs(const graph *g, int32_t root, int32_t *queue, int32_t begin, 
     queue[tail++] = root;
     level[root] = 0;
     while (head < tail) {
+        if (head + 2 * LOOKAHEAD < tail) {
+            const int32_t further = queue[head + 2 * LOOKAHEAD];
+            PREFETCH(&g->s->offsets[further]);
+            PREFETCH(&g->in_offsets[further]);
+        }
         if (head + LOOKAHEAD < tail) {
             const int32_t ahead = queue[head + LOOKAHEAD];
             PREFETCH(&g->s->indices[g->s->offsets[ahead]]);
@@ -150,7 +155,7 @@ static int level_order(const spia_stencils *s, spia_plan *p, int32_t *chunk_of, 
     if (ok) {
         /* Levels from the first row of each connected part, one part after
          * another. */
-        memset(colour, UNCOLOURED, (size_t)n);
+        memset(colour, UNCOLOURED, (size_t)(n > 0 ? n : 0));
         for (int32_t r = 0; r < n; ++r) level[r] = -1;
         int32_t begin = 0, base = 0;
         for (int32_t root = 0; root < n; ++root) {
@@ -256,7 +261,8 @@ typedef struct placing {
     const spia_stencils *s;
     spia_plan *p;
     const int32_t *position, *chunk_of; /* NULL: vertex order, one chunk */
-    const uint16_t *codes;              /* per table entry */
+    uint16_t *codes;                    /* per table entry: the dictionary's, then the plan's */
+    int32_t *deltas;                    /* per table entry: column position - row position */
     const int64_t *entry;               /* per position: its first entry in the plan */
     int64_t widest[256];                /* per thread: the largest |column position - row position| */
     int32_t reach[256];                 /* per thread */
@@ -265,17 +271,25 @@ typedef struct placing {
 static inline int32_t position_of(const placing *pl, int32_t r) { return pl->position ? pl->position[r] : r; }
 static inline int32_t chunk_of(const placing *pl, int32_t r) { return pl->chunk_of ? pl->chunk_of[r] : 0; }
 
-/* The offsets' range and the reach, over table rows [r0, r1). */
+/* Table rows [r0, r1), in table order: each entry's code (into the second
+ * half of the dictionary for the larger off-diagonal weights) and column
+ * offset, the offsets' range and the reach. */
 static void measure_rows(void *context, int64_t r0, int64_t r1, int thread) {
     placing *pl = (placing *)context;
     const spia_stencils *s = pl->s;
+    const int32_t edges = pl->p->words / 2;
     int64_t widest = pl->widest[thread];
     int32_t reach = pl->reach[thread];
     for (int64_t r = r0; r < r1; ++r) {
         const int32_t i = position_of(pl, (int32_t)r), c = chunk_of(pl, (int32_t)r);
+        double largest = 0.0;
+        for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k)
+            if (s->indices[k] != r && s->weights[k] > largest) largest = s->weights[k];
         for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k) {
             const int32_t j = s->indices[k];
+            if (j != r && s->weights[k] >= 0.5 * largest) pl->codes[k] = (uint16_t)(pl->codes[k] + edges);
             const int64_t delta = (int64_t)position_of(pl, j) - i;
+            pl->deltas[k] = (int32_t)delta;
             const int64_t wide = delta > 0 ? delta : -delta;
             if (wide > widest) widest = wide;
             const int32_t apart = chunk_of(pl, j) > c ? chunk_of(pl, j) - c : c - chunk_of(pl, j);
@@ -286,34 +300,37 @@ static void measure_rows(void *context, int64_t r0, int64_t r1, int thread) {
     pl->reach[thread] = reach;
 }
 
-/* Table rows [r0, r1) into the plan, each at its position: its own entry
- * first, then the others as the table has them. */
-static void place_rows(void *context, int64_t r0, int64_t r1, int thread) {
+/* Positions [i0, i1) of the plan from their table rows' codes and
+ * offsets: the row's own entry first, then the others as the table has
+ * them.  (By position, so that threads write apart; the rows a few
+ * positions ahead are fetched early.) */
+static void place_rows(void *context, int64_t i0, int64_t i1, int thread) {
     (void)thread;
     placing *pl = (placing *)context;
     const spia_stencils *s = pl->s;
     spia_plan *p = pl->p;
-    const int32_t edges = p->words / 2;
-    for (int64_t r = r0; r < r1; ++r) {
-        const int32_t i = position_of(pl, (int32_t)r);
+    for (int64_t i = i0; i < i1; ++i) {
+        const int32_t r = p->order ? p->order[i] : (int32_t)i;
+        if (p->order) {
+            if (i + 2 * LOOKAHEAD < i1) PREFETCH(&s->offsets[p->order[i + 2 * LOOKAHEAD]]);
+            if (i + LOOKAHEAD < i1) {
+                const int64_t ahead = s->offsets[p->order[i + LOOKAHEAD]];
+                PREFETCH(&pl->codes[ahead]);
+                PREFETCH(&pl->deltas[ahead]);
+            }
+        }
         int64_t e = pl->entry[i];
-        double largest = 0.0;
-        for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k)
-            if (s->indices[k] != r && s->weights[k] > largest) largest = s->weights[k];
         for (int pass = 0; pass < 2; ++pass)
             for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k) {
-                if ((s->indices[k] == r) != (pass == 0)) continue;
-                const int32_t delta = position_of(pl, s->indices[k]) - i;
-                const int edge = s->indices[k] != r && s->weights[k] >= 0.5 * largest;
-                const int32_t code = pl->codes[k] + (edge ? edges : 0);
+                if ((pl->deltas[k] == 0) != (pass == 0)) continue; /* the row's own entry first */
                 if (p->code8)
-                    p->code8[e] = (uint8_t)code;
+                    p->code8[e] = (uint8_t)pl->codes[k];
                 else
-                    p->code16[e] = (uint16_t)code;
+                    p->code16[e] = pl->codes[k];
                 if (p->delta16)
-                    p->delta16[e] = (int16_t)delta;
+                    p->delta16[e] = (int16_t)pl->deltas[k];
                 else
-                    p->delta32[e] = delta;
+                    p->delta32[e] = pl->deltas[k];
                 ++e;
             }
     }
@@ -331,6 +348,7 @@ spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status)
     spia_plan *p = (spia_plan *)calloc(1, sizeof *p);
     int32_t *chunks_of = NULL, *position = NULL;
     int64_t *entry = NULL;
+    int32_t *deltas = NULL;
     dictionary d;
     memset(&d, 0, sizeof d);
     uint16_t *codes = NULL;
@@ -395,6 +413,7 @@ spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status)
     entry[0] = 0;
     for (int32_t i = 0; i < n; ++i) {
         const int32_t r = p->order ? p->order[i] : i;
+        if (p->order && i + 4 * LOOKAHEAD < n) PREFETCH(&s->offsets[p->order[i + 4 * LOOKAHEAD]]);
         p->length[i] = (uint16_t)(s->offsets[r + 1] - s->offsets[r]);
         entry[i + 1] = entry[i] + p->length[i];
     }
@@ -406,7 +425,12 @@ spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status)
         if (own <= 0) p->diagonal_first = 0;
     }
 
-    /* Codes and offsets, at their widths. */
+    /* Codes and offsets, at their widths: each weight has two codes, as
+     * itself and where it is one of the larger off-diagonal weights of its
+     * row (the first step's edges). */
+    p->words = 2 * d.count;
+    deltas = (int32_t *)malloc(sizeof(int32_t) * entries);
+    if (!deltas) goto out_of_memory;
     placing pl;
     memset(&pl, 0, sizeof pl);
     pl.s = s;
@@ -414,6 +438,7 @@ spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status)
     pl.position = position;
     pl.chunk_of = chunks_of;
     pl.codes = codes;
+    pl.deltas = deltas;
     pl.entry = entry;
     spia__parallel_for(threads, n, 0, measure_rows, &pl);
     int64_t widest = 0;
@@ -425,15 +450,14 @@ spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status)
         p->delta16 = (int16_t *)malloc(sizeof(int16_t) * entries);
     else
         p->delta32 = (int32_t *)malloc(sizeof(int32_t) * entries);
-    /* Each weight twice: as itself, and where it is one of the larger
-     * off-diagonal weights of its row (the first step's edges). */
-    p->words = 2 * d.count;
     if (p->words <= 256)
         p->code8 = (uint8_t *)malloc(entries);
     else
         p->code16 = (uint16_t *)malloc(sizeof(uint16_t) * entries);
     if ((!p->delta16 && !p->delta32) || (!p->code8 && !p->code16)) goto out_of_memory;
     spia__parallel_for(threads, n, 0, place_rows, &pl);
+    free(deltas);
+    deltas = NULL;
 
     const size_t words = (size_t)(p->words > 0 ? p->words : 1);
     p->weight = (double *)malloc(sizeof(double) * words);
@@ -457,6 +481,7 @@ spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status)
     return SPIA_OK;
 
 out_of_memory:
+    free(deltas);
     free(d.keys);
     free(d.codes);
     free(d.weight);
