@@ -178,11 +178,16 @@ typedef enum spia_boundary_smooth {
 } spia_boundary_smooth;
 
 typedef enum spia_method {
-    /* Chosen before the first step by how far one PIA step would shrink
-     * the residual (probed on a sample of rows): on smooth targets, where it
-     * shrinks to under 0.15 of itself, CG where it applies, else CHEBYSHEV;
-     * on rough ones (scans) GS-PIA where every vertex has a positive weight
-     * on itself, else CHEBYSHEV.  spia_report.method says which. */
+    /* On tables of 50,000 rows or more, GS_PIA_FAST with
+     * SPIA_SOLVE_FIRST_STEP where every vertex has a positive weight on
+     * itself (else as below).  On smaller ones, chosen before the first
+     * step by how far one PIA step would shrink the residual: on smooth
+     * targets, where it shrinks to under 0.15 of itself, CG where it
+     * applies, else CHEBYSHEV; on rough ones (scans) GS_PIA_FAST with
+     * SPIA_SOLVE_FIRST_STEP where every vertex has a positive weight on
+     * itself, else CHEBYSHEV.  Staged solves choose as smaller tables do,
+     * with GS_PIA for GS_PIA_FAST.  spia_report.method says which (PIA when
+     * the first iterate was within the tolerance already). */
     SPIA_METHOD_AUTO = 0,
     SPIA_METHOD_PIA = 1,   /* V += P - L V (Jacobi-like, the papers' PIA)            */
     /* Gauss-Seidel PIA: vertex by vertex, in place, one stencil product per
