@@ -52,34 +52,27 @@ typedef struct graph {
     int32_t *in_rows;
 } graph;
 
-static int graph_build(graph *g, const spia_stencils *s) {
+/* in_offsets (rows + 1) and in_rows (at least the table's entries) are
+ * the caller's. */
+static void graph_build(graph *g, const spia_stencils *s, int64_t *in_offsets, int32_t *in_rows) {
     const int32_t n = s->rows;
     g->s = s;
-    g->in_offsets = (int64_t *)calloc((size_t)n + 1, sizeof(int64_t));
-    if (!g->in_offsets) return 0;
+    g->in_offsets = in_offsets;
+    g->in_rows = in_rows;
+    memset(in_offsets, 0, sizeof(int64_t) * ((size_t)n + 1));
     for (int32_t r = 0; r < n; ++r)
         for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k)
-            if (s->indices[k] != r) g->in_offsets[s->indices[k] + 1]++;
-    for (int32_t r = 0; r < n; ++r) g->in_offsets[r + 1] += g->in_offsets[r];
-    g->in_rows = (int32_t *)malloc(sizeof(int32_t) * (size_t)(g->in_offsets[n] > 0 ? g->in_offsets[n] : 1));
-    if (!g->in_rows) return 0;
+            if (s->indices[k] != r) in_offsets[s->indices[k] + 1]++;
+    for (int32_t r = 0; r < n; ++r) in_offsets[r + 1] += in_offsets[r];
     /* Filled through the offsets themselves (each ends up at the next
      * row's start), then shifted back. */
     for (int32_t r = 0; r < n; ++r)
         for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k) {
             const int32_t j = s->indices[k];
-            if (j != r) g->in_rows[g->in_offsets[j]++] = r;
+            if (j != r) in_rows[in_offsets[j]++] = r;
         }
-    for (int32_t r = n; r > 0; --r) g->in_offsets[r] = g->in_offsets[r - 1];
-    g->in_offsets[0] = 0;
-    return 1;
-}
-
-static void graph_free(graph *g) {
-    free(g->in_offsets);
-    free(g->in_rows);
-    g->in_offsets = NULL;
-    g->in_rows = NULL;
+    for (int32_t r = n; r > 0; --r) in_offsets[r] = in_offsets[r - 1];
+    in_offsets[0] = 0;
 }
 
 /* Runs `body` for every neighbour u of v (u != v; some twice). */
@@ -140,18 +133,71 @@ static int32_t bfs(const graph *g, int32_t root, int32_t *queue, int32_t begin, 
     return tail;
 }
 
-/* The level order: p->order and p->chunk_start filled; chunk_of[r] (rows
- * entries) the chunk of table row r and position[r] its position.  Returns
- * 0 when out of memory. */
-static int level_order(const spia_stencils *s, spia_plan *p, int32_t *chunk_of, int32_t *position) {
+/* Scratch room for the plan's build, one block (so that all of it goes
+ * back at once): what the search needs, then, in the same room, what
+ * filling the plan needs. */
+typedef struct scratch {
+    uint16_t *codes;     /* per table entry */
+    int32_t *position;   /* per row; NULL in vertex order */
+    int32_t *chunk_of;   /* per row; NULL in vertex order */
+    /* the search: */
+    int64_t *in_offsets; /* rows + 1 */
+    int32_t *in_rows;    /* entries */
+    int32_t *queue;      /* rows */
+    unsigned char *colour;
+    /* then the filling, in the same room: */
+    int64_t *entry;      /* rows + 1 */
+    int32_t *deltas;     /* entries */
+} scratch;
+
+static size_t rounded(size_t bytes) { return (bytes + 15) & ~(size_t)15; }
+
+/* The block for a table of n rows and `entries` entries, cut into its
+ * arrays; NULL when out of memory. */
+static void *scratch_make(scratch *x, size_t n, size_t entries, int levels) {
+    const size_t search = levels ? rounded(8 * (n + 1)) + rounded(4 * entries) + rounded(4 * n) + rounded(n) : 0;
+    const size_t filling = rounded(8 * (n + 1)) + rounded(4 * entries);
+    const size_t bytes = rounded(2 * entries) + (levels ? 2 * rounded(4 * n) : 0) + (search > filling ? search : filling);
+    char *block = (char *)malloc(bytes), *at = block;
+    if (!block) return NULL;
+    memset(x, 0, sizeof *x);
+    x->codes = (uint16_t *)at;
+    at += rounded(2 * entries);
+    if (levels) {
+        x->position = (int32_t *)at;
+        at += rounded(4 * n);
+        x->chunk_of = (int32_t *)at;
+        at += rounded(4 * n);
+    }
+    char *shared = at;
+    if (levels) {
+        x->in_offsets = (int64_t *)at;
+        at += rounded(8 * (n + 1));
+        x->in_rows = (int32_t *)at;
+        at += rounded(4 * entries);
+        x->queue = (int32_t *)at;
+        at += rounded(4 * n);
+        x->colour = (unsigned char *)at;
+    }
+    at = shared;
+    x->entry = (int64_t *)at;
+    at += rounded(8 * (n + 1));
+    x->deltas = (int32_t *)at;
+    return block;
+}
+
+/* The level order: p->order and p->chunk_start filled; x->chunk_of[r] the
+ * chunk of table row r and x->position[r] its position.  Returns 0 when
+ * out of memory. */
+static int level_order(const spia_stencils *s, spia_plan *p, scratch *x) {
     const int32_t n = s->rows;
     graph g;
-    memset(&g, 0, sizeof g);
-    int32_t *queue = (int32_t *)malloc(sizeof(int32_t) * (size_t)n);
+    int32_t *queue = x->queue, *chunk_of = x->chunk_of, *position = x->position;
     int32_t *level = chunk_of; /* the level of each row, until it becomes the chunk */
-    unsigned char *colour = (unsigned char *)malloc((size_t)n);
+    unsigned char *colour = x->colour;
     p->order = (int32_t *)malloc(sizeof(int32_t) * (size_t)n);
-    int ok = queue && colour && p->order && graph_build(&g, s);
+    int ok = p->order != NULL;
+    if (ok) graph_build(&g, s, x->in_offsets, x->in_rows);
     if (ok) {
         /* Levels from the first row of each connected part, one part after
          * another. */
@@ -170,7 +216,6 @@ static int level_order(const spia_stencils *s, spia_plan *p, int32_t *chunk_of, 
             base += top + 1;
             begin = end;
         }
-        graph_free(&g);
         /* Each level sorted by colour (stably), and the chunks. */
         int32_t chunks = 0, chunk_rows = 0;
         for (int32_t a = 0; a < n;) {
@@ -210,9 +255,6 @@ static int level_order(const spia_stencils *s, spia_plan *p, int32_t *chunk_of, 
             }
         }
     }
-    graph_free(&g);
-    free(queue);
-    free(colour);
     return ok;
 }
 
@@ -345,23 +387,22 @@ spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status)
     for (int32_t r = 0; r < n; ++r)
         if (s->offsets[r + 1] - s->offsets[r] > 65535) return SPIA_OK; /* no plan: GS_PIA_FAST falls back */
     const size_t entries = (size_t)(s->nnz > 0 ? s->nnz : 1);
+    const int levels = n >= SPIA_PARALLEL_ROWS;
     spia_plan *p = (spia_plan *)calloc(1, sizeof *p);
-    int32_t *chunks_of = NULL, *position = NULL;
-    int64_t *entry = NULL;
-    int32_t *deltas = NULL;
+    scratch x;
+    void *block = p ? scratch_make(&x, (size_t)n, entries, levels) : NULL;
     dictionary d;
     memset(&d, 0, sizeof d);
-    uint16_t *codes = NULL;
-    if (!p) goto out_of_memory;
+    if (!block) goto out_of_memory;
     p->rows = n;
+    uint16_t *codes = x.codes;
 
     /* The distinct weights, in table order (most rows repeat the weights of
      * the row before in the same places: those are looked up there first). */
     d.keys = (uint64_t *)calloc((size_t)1 << DICTIONARY_BITS, sizeof(uint64_t));
     d.codes = (int32_t *)malloc(sizeof(int32_t) * ((size_t)1 << DICTIONARY_BITS));
     d.weight = (double *)malloc(sizeof(double) * DICTIONARY_LIMIT);
-    codes = (uint16_t *)malloc(sizeof(uint16_t) * entries);
-    if (!d.keys || !d.codes || !d.weight || !codes) goto out_of_memory;
+    if (!d.keys || !d.codes || !d.weight) goto out_of_memory;
     for (int32_t r = 0; r < n; ++r) {
         const int64_t b = s->offsets[r], e = s->offsets[r + 1];
         const int64_t before = r > 0 ? s->offsets[r - 1] : 0;
@@ -379,7 +420,7 @@ spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status)
                 free(d.keys);
                 free(d.codes);
                 free(d.weight);
-                free(codes);
+                free(block);
                 spia__plan_free(p);
                 return SPIA_OK;
             }
@@ -392,10 +433,8 @@ spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status)
     d.codes = NULL;
 
     /* The order. */
-    if (n >= SPIA_PARALLEL_ROWS) {
-        chunks_of = (int32_t *)malloc(sizeof(int32_t) * (size_t)n);
-        position = (int32_t *)malloc(sizeof(int32_t) * (size_t)n);
-        if (!chunks_of || !position || !level_order(s, p, chunks_of, position)) goto out_of_memory;
+    if (levels) {
+        if (!level_order(s, p, &x)) goto out_of_memory;
     } else {
         p->chunks = 1;
         p->chunk_start = (int32_t *)malloc(sizeof(int32_t) * 2);
@@ -404,11 +443,12 @@ spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status)
         p->chunk_start[1] = n;
     }
 
-    /* Lengths and where each position's entries start. */
+    /* Lengths and where each position's entries start (the search's room
+     * is the filling's now). */
+    int64_t *entry = x.entry;
     p->length = (uint16_t *)malloc(sizeof(uint16_t) * (size_t)(n > 0 ? n : 1));
     p->chunk_entry = (int64_t *)malloc(sizeof(int64_t) * ((size_t)p->chunks + 1));
-    entry = (int64_t *)malloc(sizeof(int64_t) * ((size_t)n + 1));
-    if (!p->length || !p->chunk_entry || !entry) goto out_of_memory;
+    if (!p->length || !p->chunk_entry) goto out_of_memory;
     p->diagonal_first = 1;
     entry[0] = 0;
     for (int32_t i = 0; i < n; ++i) {
@@ -429,16 +469,14 @@ spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status)
      * itself and where it is one of the larger off-diagonal weights of its
      * row (the first step's edges). */
     p->words = 2 * d.count;
-    deltas = (int32_t *)malloc(sizeof(int32_t) * entries);
-    if (!deltas) goto out_of_memory;
     placing pl;
     memset(&pl, 0, sizeof pl);
     pl.s = s;
     pl.p = p;
-    pl.position = position;
-    pl.chunk_of = chunks_of;
+    pl.position = x.position;
+    pl.chunk_of = x.chunk_of;
     pl.codes = codes;
-    pl.deltas = deltas;
+    pl.deltas = x.deltas;
     pl.entry = entry;
     spia__parallel_for(threads, n, 0, measure_rows, &pl);
     int64_t widest = 0;
@@ -456,8 +494,8 @@ spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status)
         p->code16 = (uint16_t *)malloc(sizeof(uint16_t) * entries);
     if ((!p->delta16 && !p->delta32) || (!p->code8 && !p->code16)) goto out_of_memory;
     spia__parallel_for(threads, n, 0, place_rows, &pl);
-    free(deltas);
-    deltas = NULL;
+    free(block);
+    block = NULL;
 
     const size_t words = (size_t)(p->words > 0 ? p->words : 1);
     p->weight = (double *)malloc(sizeof(double) * words);
@@ -473,22 +511,14 @@ spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status)
         p->signed_f[c] = c < d.count ? (float)w : -(float)w;
     }
     free(d.weight);
-    free(codes);
-    free(entry);
-    free(chunks_of);
-    free(position);
     s->plan = p;
     return SPIA_OK;
 
 out_of_memory:
-    free(deltas);
     free(d.keys);
     free(d.codes);
     free(d.weight);
-    free(codes);
-    free(entry);
-    free(chunks_of);
-    free(position);
+    free(block);
     spia__plan_free(p);
     return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory laying out the stencils for the solver");
 }
