@@ -58,6 +58,17 @@ enum {
 
 enum { STUCK = 1, FROZEN = 2 };
 
+/* The caller's rows, in table order, are fetched this many positions ahead
+ * when gathered into the plan's order and when the cage is written back. */
+enum { ROWS_AHEAD = 16 };
+#if defined(__GNUC__) || defined(__clang__)
+#define PREFETCH(address) __builtin_prefetch(address)
+#define PREFETCH_WRITE(address) __builtin_prefetch((address), 1)
+#else
+#define PREFETCH(address) ((void)0)
+#define PREFETCH_WRITE(address) ((void)0)
+#endif
+
 /* ------------------------------------------------------------------------ */
 /* Four-lane vectors                                                         */
 /* ------------------------------------------------------------------------ */
@@ -883,8 +894,10 @@ static void write_rows(void *context, int64_t i0, int64_t i1, int thread) {
     (void)thread;
     write_task *t = (write_task *)context;
     const fast *f = t->f;
+    const int32_t *order = f->p->order;
     for (int64_t i = i0; i < i1; ++i) {
-        const int64_t r = f->p->order ? f->p->order[i] : i;
+        const int64_t r = order ? order[i] : i;
+        if (order && i + ROWS_AHEAD < i1) PREFETCH_WRITE(t->cage + 3 * (int64_t)order[i + ROWS_AHEAD]);
         for (int a = 0; a < 3; ++a) t->cage[3 * r + a] = cage_value(f, (int32_t)i, a);
     }
 }
@@ -898,8 +911,13 @@ static void gather_rows(void *context, int64_t i0, int64_t i1, int thread) {
     (void)thread;
     gather_task *t = (gather_task *)context;
     fast *f = t->f;
+    const int32_t *order = f->p->order;
     for (int64_t i = i0; i < i1; ++i) {
-        const int64_t r = f->p->order ? f->p->order[i] : i;
+        const int64_t r = order ? order[i] : i;
+        if (order && i + ROWS_AHEAD < i1) {
+            PREFETCH(t->targets + 3 * (int64_t)order[i + ROWS_AHEAD]);
+            if (f->S != f->P) PREFETCH(t->start + 3 * (int64_t)order[i + ROWS_AHEAD]);
+        }
         for (int a = 0; a < 3; ++a) {
             f->P[3 * i + a] = t->targets[3 * r + a];
             if (f->S != f->P) f->S[3 * i + a] = t->start[3 * r + a];
