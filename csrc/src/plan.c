@@ -43,9 +43,10 @@ void spia__plan_free(spia_plan *p) {
 /* The order: breadth-first levels, coloured                                 */
 /* ------------------------------------------------------------------------ */
 
-/* The stencils as an undirected graph: row r's own columns and, through the
- * transposed pattern, the rows whose columns hold r (a boundary vertex's
- * stencil leaves out the interior vertices whose stencils hold it). */
+/* The stencils as a graph: row r's own columns and, when in_offsets is
+ * set, through the transposed pattern, the rows whose columns hold r too
+ * (a boundary vertex's stencil leaves out the interior vertices whose
+ * stencils hold it). */
 typedef struct graph {
     const spia_stencils *s;
     int64_t *in_offsets; /* rows + 1 */
@@ -82,10 +83,11 @@ static void graph_build(graph *g, const spia_stencils *s, int64_t *in_offsets, i
             const int32_t u = (g)->s->indices[k_];                                            \
             if (u != (v)) body                                                                \
         }                                                                                     \
-        for (int64_t k_ = (g)->in_offsets[v]; k_ < (g)->in_offsets[(v) + 1]; ++k_) {         \
-            const int32_t u = (g)->in_rows[k_];                                               \
-            body                                                                              \
-        }                                                                                     \
+        if ((g)->in_offsets)                                                                  \
+            for (int64_t k_ = (g)->in_offsets[v]; k_ < (g)->in_offsets[(v) + 1]; ++k_) {     \
+                const int32_t u = (g)->in_rows[k_];                                           \
+                body                                                                          \
+            }                                                                                 \
     } while (0)
 
 #if defined(__GNUC__) || defined(__clang__)
@@ -109,12 +111,12 @@ static int32_t bfs(const graph *g, int32_t root, int32_t *queue, int32_t begin, 
         if (head + 2 * LOOKAHEAD < tail) {
             const int32_t further = queue[head + 2 * LOOKAHEAD];
             PREFETCH(&g->s->offsets[further]);
-            PREFETCH(&g->in_offsets[further]);
+            if (g->in_offsets) PREFETCH(&g->in_offsets[further]);
         }
         if (head + LOOKAHEAD < tail) {
             const int32_t ahead = queue[head + LOOKAHEAD];
             PREFETCH(&g->s->indices[g->s->offsets[ahead]]);
-            PREFETCH(&g->in_rows[g->in_offsets[ahead]]);
+            if (g->in_offsets) PREFETCH(&g->in_rows[g->in_offsets[ahead]]);
         }
         const int32_t v = queue[head++];
         uint32_t used = 0;
@@ -187,25 +189,34 @@ static void *scratch_make(scratch *x, size_t n, size_t entries, int levels) {
 }
 
 /* The level order: p->order and p->chunk_start filled; x->chunk_of[r] the
- * chunk of table row r and x->position[r] its position.  Returns 0 when
- * out of memory. */
-static int level_order(const spia_stencils *s, spia_plan *p, scratch *x) {
+ * chunk of table row r and x->position[r] its position.  The search follows
+ * each row's own columns, and with `both_ways` the rows whose columns hold
+ * it too.  Returns 0 when out of memory. */
+static int level_order(const spia_stencils *s, spia_plan *p, scratch *x, int both_ways) {
     const int32_t n = s->rows;
     graph g;
+    memset(&g, 0, sizeof g);
+    g.s = s;
     int32_t *queue = x->queue, *chunk_of = x->chunk_of, *position = x->position;
     int32_t *level = chunk_of; /* the level of each row, until it becomes the chunk */
     unsigned char *colour = x->colour;
+    free(p->order);
+    free(p->chunk_start);
+    p->chunk_start = NULL;
     p->order = (int32_t *)malloc(sizeof(int32_t) * (size_t)n);
     int ok = p->order != NULL;
-    if (ok) graph_build(&g, s, x->in_offsets, x->in_rows);
+    if (ok && both_ways) graph_build(&g, s, x->in_offsets, x->in_rows);
     if (ok) {
-        /* Levels from the first row of each connected part, one part after
-         * another. */
+        /* Levels from a first row of each connected part, one part after
+         * another: rows whose stencils hold only boundary rows are no roots
+         * while others are left (the search from one, along its own
+         * columns, would stay on its boundary). */
         memset(colour, UNCOLOURED, (size_t)(n > 0 ? n : 0));
         for (int32_t r = 0; r < n; ++r) level[r] = -1;
         int32_t begin = 0, base = 0;
-        for (int32_t root = 0; root < n; ++root) {
-            if (level[root] >= 0) continue;
+        for (int32_t pick = 0; pick < 2 * n; ++pick) {
+            const int32_t root = pick < n ? pick : pick - n;
+            if (level[root] >= 0 || (pick < n && s->boundary[root])) continue;
             const int32_t end = bfs(&g, root, queue, begin, level, colour);
             int32_t top = 0;
             for (int32_t q = begin; q < end; ++q) {
@@ -313,6 +324,36 @@ typedef struct placing {
 static inline int32_t position_of(const placing *pl, int32_t r) { return pl->position ? pl->position[r] : r; }
 static inline int32_t chunk_of(const placing *pl, int32_t r) { return pl->chunk_of ? pl->chunk_of[r] : 0; }
 
+/* The lengths of positions [i0, i1). */
+static void length_rows(void *context, int64_t i0, int64_t i1, int thread) {
+    (void)thread;
+    const placing *pl = (const placing *)context;
+    const spia_stencils *s = pl->s;
+    spia_plan *p = pl->p;
+    for (int64_t i = i0; i < i1; ++i) {
+        const int32_t r = p->order ? p->order[i] : (int32_t)i;
+        if (p->order && i + 4 * LOOKAHEAD < i1) PREFETCH(&s->offsets[p->order[i + 4 * LOOKAHEAD]]);
+        p->length[i] = (uint16_t)(s->offsets[r + 1] - s->offsets[r]);
+    }
+}
+
+/* The reach over table rows [r0, r1): how many chunks apart a row and a
+ * column of its stencil are, at most. */
+static void reach_rows(void *context, int64_t r0, int64_t r1, int thread) {
+    placing *pl = (placing *)context;
+    const spia_stencils *s = pl->s;
+    int32_t reach = pl->reach[thread];
+    for (int64_t r = r0; r < r1; ++r) {
+        const int32_t c = pl->chunk_of[r];
+        for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k) {
+            const int32_t cj = pl->chunk_of[s->indices[k]];
+            const int32_t apart = cj > c ? cj - c : c - cj;
+            if (apart > reach) reach = apart;
+        }
+    }
+    pl->reach[thread] = reach;
+}
+
 /* Table rows [r0, r1), in table order: each entry's code (into the second
  * half of the dictionary for the larger off-diagonal weights) and column
  * offset, the offsets' range and the reach. */
@@ -403,11 +444,14 @@ spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status)
     d.codes = (int32_t *)malloc(sizeof(int32_t) * ((size_t)1 << DICTIONARY_BITS));
     d.weight = (double *)malloc(sizeof(double) * DICTIONARY_LIMIT);
     if (!d.keys || !d.codes || !d.weight) goto out_of_memory;
+    p->diagonal_first = 1;
     for (int32_t r = 0; r < n; ++r) {
         const int64_t b = s->offsets[r], e = s->offsets[r + 1];
         const int64_t before = r > 0 ? s->offsets[r - 1] : 0;
+        int own = 0;
         for (int64_t k = b; k < e; ++k) {
             const double w = s->weights[k];
+            if (s->indices[k] == r) own = w > 0.0 ? 1 : -1;
             const int64_t same = before + (k - b);
             int32_t code;
             if (same < b && bits_of(s->weights[same]) == bits_of(w))
@@ -426,15 +470,27 @@ spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status)
             }
             codes[k] = (uint16_t)code;
         }
+        if (own <= 0) p->diagonal_first = 0; /* no own entry, or not a positive one */
     }
     free(d.keys);
     free(d.codes);
     d.keys = NULL;
     d.codes = NULL;
 
-    /* The order. */
+    /* The order: searched along the rows' own columns, and again both ways
+     * (the transposed pattern built) where that leaves rows referring to
+     * chunks more than two away. */
     if (levels) {
-        if (!level_order(s, p, &x)) goto out_of_memory;
+        if (!level_order(s, p, &x, 0)) goto out_of_memory;
+        placing reach;
+        memset(&reach, 0, sizeof reach);
+        reach.s = s;
+        reach.chunk_of = x.chunk_of;
+        spia__parallel_for(threads, n, 0, reach_rows, &reach);
+        int32_t apart = 0;
+        for (int t = 0; t < threads; ++t)
+            if (reach.reach[t] > apart) apart = reach.reach[t];
+        if (apart > 2 && !level_order(s, p, &x, 1)) goto out_of_memory;
     } else {
         p->chunks = 1;
         p->chunk_start = (int32_t *)malloc(sizeof(int32_t) * 2);
@@ -449,21 +505,16 @@ spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status)
     p->length = (uint16_t *)malloc(sizeof(uint16_t) * (size_t)(n > 0 ? n : 1));
     p->chunk_entry = (int64_t *)malloc(sizeof(int64_t) * ((size_t)p->chunks + 1));
     if (!p->length || !p->chunk_entry) goto out_of_memory;
-    p->diagonal_first = 1;
+    {
+        placing pl;
+        memset(&pl, 0, sizeof pl);
+        pl.s = s;
+        pl.p = p;
+        spia__parallel_for(threads, n, 0, length_rows, &pl);
+    }
     entry[0] = 0;
-    for (int32_t i = 0; i < n; ++i) {
-        const int32_t r = p->order ? p->order[i] : i;
-        if (p->order && i + 4 * LOOKAHEAD < n) PREFETCH(&s->offsets[p->order[i + 4 * LOOKAHEAD]]);
-        p->length[i] = (uint16_t)(s->offsets[r + 1] - s->offsets[r]);
-        entry[i + 1] = entry[i] + p->length[i];
-    }
+    for (int32_t i = 0; i < n; ++i) entry[i + 1] = entry[i] + p->length[i];
     for (int32_t c = 0; c <= p->chunks; ++c) p->chunk_entry[c] = entry[p->chunk_start[c]];
-    for (int32_t r = 0; r < n; ++r) {
-        int own = 0;
-        for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k)
-            if (s->indices[k] == r) own = s->weights[k] > 0.0 ? 1 : -1;
-        if (own <= 0) p->diagonal_first = 0;
-    }
 
     /* Codes and offsets, at their widths: each weight has two codes, as
      * itself and where it is one of the larger off-diagonal weights of its
