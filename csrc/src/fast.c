@@ -629,7 +629,8 @@ static int run_sweeps(fast *f, const kernels *k, int first_step, int32_t sweeps,
     u.k = *k;
     u.first_step = first_step;
     u.stages = sweeps + (first_step ? 1 : 0);
-    u.threads = f->threads;
+    /* (no more threads than stages: a thread beyond them would only wait) */
+    u.threads = f->threads < u.stages ? f->threads : u.stages;
     u.iteration = iteration;
     u.scale = scale;
     u.opt = opt;
