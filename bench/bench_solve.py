@@ -22,11 +22,11 @@ Each mesh runs in its own process: the stencils are built once, then every
 variant is solved `--repeats` times at each thread count, the rounds
 interleaved so that a busy moment of the machine does not fall on one
 variant; the time is the fastest round's spia_solve wall time
-(report.solve_seconds).  "peak" is the growth of the process's peak
-resident memory (VmHWM, reset before the call) during one solve, per
-vertex, on top of the table.  The last section measures, in a process of
-its own through the C API alone (no numpy copy of the table), the 1M
-sphere's stencil build, the table's resident size and the solve's peak.
+(report.solve_seconds).  The last section measures memory on the 1M
+sphere, each variant in a process of its own through the C API alone (no
+numpy copy of the table): the stencil build's peak, the table's resident
+size with its sweep layout, and the growth of the peak resident size
+(VmHWM, reset before the call) during the solve, on two threads.
 """
 import argparse
 import ctypes
@@ -113,17 +113,14 @@ def child_mesh(spec):
         for threads in (1, 2):
             for method, flags in VARIANTS:
                 key = f"{label(method, flags)}|{threads}"
-                base = _reset_peak()
                 try:
                     cage, report = stencils.solve(P, method=method, solve_flags=flags, threads=threads,
                                                   tolerance=TOLERANCE, max_iterations=1000)
                 except native.PiaError as error:
                     results[key] = dict(refused=f"{error.code}")
                     continue
-                peak = _status("VmHWM") - base
-                r = results.setdefault(key, dict(seconds=[], peak=0))
+                r = results.setdefault(key, dict(seconds=[]))
                 r["seconds"].append(report.solve_seconds)
-                r["peak"] = max(r["peak"], peak)
                 r.update(iterations=report.iterations, method_used=report.method, status=report.status,
                          max_error=report.max_error_relative, unreachable=report.unreachable_count,
                          cage=hash(cage.tobytes()))
@@ -131,12 +128,12 @@ def child_mesh(spec):
 
 
 def child_memory(spec):
-    """The 1M sphere through the C API: build, table, solve (GS_PIA_FAST and AUTO)."""
+    """The 1M sphere through the C API: build, table, one solve of one variant."""
     native, P, mesh = load("sphere-1M")
     lib = native._library()
     n = len(P)
     out = dict(vertices=n)
-    opts, _keep = native._options(threads=2, method=spec["method"])
+    opts, _keep = native._options(threads=2, method=spec["method"], solve_flags=tuple(spec["flags"]))
     handle = ctypes.c_void_p()
     st = native._Status()
     rss0 = _reset_peak()
@@ -176,15 +173,15 @@ def fmt_s(s):
 def mesh_table(name, r):
     lines = [f"### {name}: {r['vertices']:,} vertices, {r['weights']:,} weights, stencils {r['stencil_s']:.2f} s\n",
              "| variant | iterations | solve s, 1 thread | solve s, 2 threads | max error | / GS-PIA, 1 thread | "
-             "/ GS-PIA, 2 threads | peak bytes/vertex | method used |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|---|"]
+             "/ GS-PIA, 2 threads | method used |",
+             "|---|---:|---:|---:|---:|---:|---:|---|"]
     res = r["results"]
     base = {t: min(res[f"GS_PIA|{t}"]["seconds"]) for t in (1, 2) if "seconds" in res.get(f"GS_PIA|{t}", {})}
     for method, flags in VARIANTS:
         name_ = label(method, flags)
         one, two = res.get(f"{name_}|1", {}), res.get(f"{name_}|2", {})
         if "refused" in one:
-            lines.append(f"| {name_} | refused: {one['refused']} | | | | | | | |")
+            lines.append(f"| {name_} | refused: {one['refused']} | | | | | | |")
             continue
         s1, s2 = min(one["seconds"]), min(two["seconds"])
         status = "" if one["status"] == "CONVERGED" else f" ({one['status'].lower()}"
@@ -196,8 +193,7 @@ def mesh_table(name, r):
         iters = str(one["iterations"]) if one["iterations"] == two["iterations"] else \
             f"{one['iterations']}/{two['iterations']}"
         lines.append(f"| {name_} | {iters} | {fmt_s(s1)} | {fmt_s(s2)} | {one['max_error']:.1e}{status} | "
-                     f"{s1 / base[1]:.2f} | {s2 / base[2]:.2f} | "
-                     f"{max(one['peak'], two['peak']) / r['vertices']:.0f} | {one['method_used']}{same} |")
+                     f"{s1 / base[1]:.2f} | {s2 / base[2]:.2f} | {one['method_used']}{same} |")
     return "\n".join(lines) + "\n"
 
 
@@ -218,29 +214,28 @@ def main():
     meshes += ["torus-30k smooth"] + list(SCANS)
     md = [f"# The solve, variant by variant\n",
           f"{time.strftime('%Y-%m-%d %H:%M')}; {os.cpu_count()} processors. Tolerance {TOLERANCE:g} x bounding-box "
-          f"diagonal; time = fastest of {args.repeats} rounds of spia_solve (report.solve_seconds); ratios are "
-          f"to GS_PIA at the same thread count; peak = growth of VmHWM during one solve, on top of the table.\n"]
+          f"diagonal; time = fastest of {args.repeats} rounds of spia_solve (report.solve_seconds; the scans "
+          f"below 10k vertices {4 * args.repeats} rounds); ratios are to GS_PIA at the same thread count.\n"]
     print("\n".join(md), flush=True)
     for name in meshes:
-        big = name.startswith(("sphere", "torus-1M", "torus-100k")) or name == "dragon_res2"
-        repeats = args.repeats if big else 4 * args.repeats
+        small = name in ("bunny", "elephant-with-holes")
+        repeats = 4 * args.repeats if small else args.repeats
         r = run_child(dict(mesh=name, repeats=repeats))
         text = f"### {name}: failed: {r['failed']}\n" if "failed" in r else mesh_table(name, r)
         print(text, flush=True)
         md.append(text)
     if not args.quick:
-        lines = ["### Memory of the 1M sphere, C API only (bytes per vertex)\n",
-                 "| solve | stencil build s | build peak | table (with its layout) | solve peak | table + solve | "
-                 "solve s, 2 threads | method used |",
-                 "|---|---:|---:|---:|---:|---:|---:|---|"]
-        for method in ("GS_PIA", "GS_PIA_FAST", "AUTO"):
-            m = run_child(dict(task="memory", method=method))
+        lines = ["### Memory of the 1M sphere, C API only, a process per variant (bytes per vertex)\n",
+                 "| variant | stencil build s | build peak | table (with its layout) | solve peak | table + solve | "
+                 "method used |",
+                 "|---|---:|---:|---:|---:|---:|---|"]
+        for method, flags in VARIANTS:
+            m = run_child(dict(task="memory", method=method, flags=list(flags)))
             if "failed" in m:
-                lines.append(f"| {method} | failed: {m['failed']} |")
+                lines.append(f"| {label(method, flags)} | failed: {m['failed']} |")
                 continue
-            lines.append(f"| {method} | {m['stencil_s']:.2f} | {m['build_peak']:.0f} | {m['table']:.0f} | "
-                         f"{m['solve']:.0f} | {m['table_and_solve']:.0f} | {fmt_s(m['solve_s'])} | "
-                         f"{m['method_used']} |")
+            lines.append(f"| {label(method, flags)} | {m['stencil_s']:.2f} | {m['build_peak']:.0f} | "
+                         f"{m['table']:.0f} | {m['solve']:.0f} | {m['table_and_solve']:.0f} | {m['method_used']} |")
         text = "\n".join(lines) + "\n"
         print(text, flush=True)
         md.append(text)

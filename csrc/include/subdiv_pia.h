@@ -178,7 +178,7 @@ typedef enum spia_boundary_smooth {
 } spia_boundary_smooth;
 
 typedef enum spia_method {
-    /* On tables of 50,000 rows or more, GS_PIA_FAST with
+    /* On tables of 10,000 rows or more, GS_PIA_FAST with
      * SPIA_SOLVE_FIRST_STEP where every vertex has a positive weight on
      * itself (else as below).  On smaller ones, chosen before the first
      * step by how far one PIA step would shrink the residual: on smooth

@@ -7,9 +7,9 @@
  * - in the plan's order: vertex order on small tables; breadth-first levels
  *   of the stencils, each ordered by a colouring, on large ones, where
  *   several sweeps run at once, one behind the other, on the threads (a
- *   chunk of levels is swept again once the chunks it refers to have been:
- *   the sweeps do exactly what they would one after another, whatever the
- *   number of threads);
+ *   chunk is swept once the chunks before it that it refers to have had
+ *   this sweep and those after it the sweep before: the sweeps do exactly
+ *   what they would one after another, whatever the number of threads);
  * - on the correction Y to the first iterate S: the sweeps solve L Y = B,
  *   B = P - L S, in float32 with the weights' float32 copies, four floats a
  *   row (x, y, z and a zero lane, one vector operation per weight);
@@ -28,12 +28,16 @@
  *
  * With SPIA_SOLVE_FIRST_STEP the first iterate is improved first by one
  * step of a local approximate inverse of the limit mask: Y_i = w_i sum_j
- * s_ij L_ij B_j, with s_ij = -1 where L_ij is one of the larger weights of
- * the row (the edge neighbours of a Catmull-Clark limit mask, 4 times a
- * face corner's), +1 elsewhere, and w_i = 1.28 / L_ii^2.  On a regular
- * quad grid that is 6.48 times the limit mask with alternating signs,
- * whose symbol is 1 / the limit mask's at the ends of the spectrum: it
- * brings the conditioning of L from 9 to 16/9.
+ * s_ij L_ij B_j, with s_ij = -1 where L_ij is one of the larger
+ * off-diagonal weights of the row (at least half the largest: the edge
+ * neighbours of a Catmull-Clark limit mask, 4 times a face corner's; the
+ * plan codes them apart), +1 elsewhere, and w_i = 1.28 / L_ii^2.  On a
+ * regular quad grid, whose limit mask has the symbol a(x) a(y) with
+ * a(t) = (2 + cos t) / 3, that is 6.48 times the mask with alternating
+ * signs, of symbol 6.48 a(x + pi) a(y + pi): the product of the two
+ * symbols, 0.08 (4 - cos^2 x)(4 - cos^2 y), lies in [0.72, 1.28], so the
+ * conditioning of L, 9, becomes 16/9.  It costs about a sweep and is not
+ * counted as an iteration.
  */
 #include "internal.h"
 #include "threads.h"

@@ -18,13 +18,17 @@
  * iterates, and so it converges.
  *
  * CG is conjugate gradients on the symmetrized system where the limit
- * matrix allows it (closed meshes, see step_cg).  AUTO picks CG or
- * Chebyshev-accelerated PIA (see step_chebyshev) for smooth targets and
- * GS-PIA for rough ones (see choose_auto).
+ * matrix allows it (closed meshes, see step_cg).  GS_PIA_FAST is GS-PIA on
+ * the table's sweep layout, in fast.c; spia_solve hands it the solve.
+ * AUTO takes GS_PIA_FAST on tables of AUTO_FAST_ROWS rows or more and on
+ * rough targets; on smaller smooth ones CG or Chebyshev-accelerated PIA
+ * (see step_chebyshev, choose_auto).
  *
  * Products with L are shared among threads by rows; sums over rows are
  * taken per block of BLOCK rows and the blocks added in order, so results
- * do not depend on the thread count.  GS-PIA's sweep is serial.
+ * do not depend on the thread count.  GS-PIA's sweep is serial; with
+ * SPIA_SOLVE_MULTICOLOUR it goes colour after colour, each on the
+ * threads.
  *
  * All stop when max_i |P_i - (L V)_i| <= tolerance * diagonal, at
  * max_iterations, when the error has not fallen for STAGNATION_WINDOW
@@ -58,6 +62,10 @@ enum { AUTO_PROBE_ROWS = 4096 };
 enum { MULTICOLOURS = 64 };
 /* See first_step. */
 #define FIRST_STEP_SCALE 1.28
+/* From this many rows on, AUTO takes GS_PIA_FAST whatever the probe says
+ * (below, its iterations, cheap as they are, are too many beside CG's on
+ * the smallest smooth meshes). */
+enum { AUTO_FAST_ROWS = 10000 };
 /* SPIA_SOLVE_* flags AUTO adds when it takes GS_PIA_FAST: the first step
  * saved more sweeps than it cost on the rough sphere and the scans
  * measured (bench/bench_solve.py). */
@@ -915,11 +923,12 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
         else
             opt.method = SPIA_METHOD_GS_PIA; /* no plan (or a row without its own weight, refused below) */
     } else if (opt.method == SPIA_METHOD_AUTO && fast_fits && !staged_solve) {
-        /* From SPIA_PARALLEL_ROWS rows on, GS_PIA_FAST on smooth targets
-         * too: it was faster there than CG and Chebyshev on every target
+        /* From AUTO_FAST_ROWS rows on, GS_PIA_FAST on smooth targets too:
+         * it was faster there than CG and Chebyshev on every target
          * measured (a smooth 1M torus: 4 sweeps in 0.1 s against CG's one
-         * iteration and its setup in 0.35 s); below, the probe decides. */
-        const double probe = n >= SPIA_PARALLEL_ROWS
+         * iteration and its setup in 0.35 s; 30k: 3.4 ms against 8 ms);
+         * below, the probe decides. */
+        const double probe = n >= AUTO_FAST_ROWS
                                  ? 1.0
                                  : first_contraction_probe(L, targets, opt.initial_cage ? opt.initial_cage : targets);
         if (probe < 0.0) {
