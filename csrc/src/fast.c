@@ -563,7 +563,9 @@ typedef struct pipeline {
 } pipeline;
 
 /* Stages finished so far, in order, from the calling thread: each sweep's
- * error into the history and to the progress callback, which may cancel. */
+ * error into the history and to the progress callback, which may cancel;
+ * all but the last, which the caller reports once it knows whether the
+ * residual in double follows it. */
 static void report_finished(pipeline *u) {
     const int32_t chunks = u->f->p->chunks;
     while (u->reported < u->stages && spia__counter_get(&u->finished[u->reported]) == chunks) {
@@ -573,6 +575,7 @@ static void report_finished(pipeline *u) {
         for (int t = 0; t < u->threads; ++t) w = keep_max(w, u->worst[(int64_t)t * u->stages + st]);
         const double err = sqrt(w);
         u->estimate[st] = err;
+        if (st == u->stages - 1) continue;
         const int32_t it = u->iteration + st + (u->first_step ? 0 : 1);
         spia_report *rep = u->report;
         if (rep && rep->history && it <= rep->history_capacity) {
@@ -780,19 +783,29 @@ typedef struct stage_result {
     int float_floor;           /* the double sweeps should take over */
 } stage_result;
 
+/* The contraction of a sweep's error from the last two (1 while there are
+ * fewer), between 0.05 and 1. */
+static double contraction(const double *recent, int32_t known) {
+    if (known < 2 || !(recent[0] > 0.0) || !(recent[1] > 0.0) || !isfinite(recent[1])) return 1.0;
+    const double rho = recent[1] / recent[0];
+    return rho >= 0.05 ? (rho < 1.0 ? rho : 1.0) : 0.05;
+}
+
+/* The residual after a sweep is near the sweep's error (the largest met
+ * before each row moved) times the contraction: the residual in double is
+ * taken once that expects to be within this part of the tolerance. */
+#define EXPECTED_MARGIN 0.9
+
 /* The next run's length: on a pipelined plan, as many sweeps as the last
- * two errors' ratio says are still needed (at least one, at most
- * LONGEST_RUN; FIRST_RUN before there is a ratio); one at a time on a
- * plan of one chunk. */
-static int32_t run_length(const fast *f, const double *history, int32_t known, double threshold) {
+ * two errors' ratio says are still needed for the expected residual to be
+ * within the margin (at least one, at most LONGEST_RUN; FIRST_RUN before
+ * there is a ratio); one at a time on a plan of one chunk. */
+static int32_t run_length(const fast *f, const double *recent, int32_t known, double threshold) {
     if (f->p->chunks == 1) return 1;
     if (known < 2) return FIRST_RUN;
-    const double last = history[known - 1], before = history[known - 2];
-    if (!(last > 0.0) || !(before > 0.0) || !isfinite(last)) return 1;
-    double rho = last / before;
-    if (!(rho >= 0.05)) rho = 0.05;
-    if (rho > 0.95) rho = 0.95;
-    const double need = ceil(log(threshold / last) / log(rho));
+    const double rho = contraction(recent, known);
+    if (!(rho < 0.95)) return 1;
+    const double need = ceil(log(EXPECTED_MARGIN * threshold / (recent[1] * rho)) / log(rho));
     if (!(need >= 1.0)) return 1;
     return need > LONGEST_RUN ? LONGEST_RUN : (int32_t)need;
 }
@@ -851,12 +864,23 @@ static spia_result fast_stage(fast *f, const kernels *k, const spia_options *opt
             recent[1] = err;
             if (known < 2) ++known;
         }
-        if (!(err <= threshold) && *it - it_best < FAST_WINDOW) continue;
-        /* The sweeps say the tolerance is reached, or the error has not
-         * fallen for a while: the residual in double. */
+        const int expected = err * contraction(recent, known) <= EXPECTED_MARGIN * threshold;
         const int at_tolerance = err <= threshold;
-        err_all = residual_pass(f, k, 0, &mean, &err);
-        out->current = 1;
+        if (at_tolerance || expected || *it - it_best >= FAST_WINDOW) {
+            /* The sweeps say the tolerance is reached (or soon will be), or
+             * the error has not fallen for a while: the residual in double,
+             * which the history and the progress callback then give for
+             * this iteration, as GS_PIA does. */
+            err_all = residual_pass(f, k, 0, &mean, &err);
+            out->current = 1;
+        }
+        if (report && report->history && *it <= report->history_capacity) {
+            report->history[*it - 1] = err_all / scale;
+            report->history_count = *it;
+        }
+        if (opt->progress && opt->progress(opt->progress_user_data, *it, err_all / scale))
+            return spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled after %d iterations", (int)*it);
+        if (!out->current) continue;
         if (err <= threshold) break;
         if (at_tolerance && ++failed_checks >= FLOAT_FLOOR_CHECKS) {
             out->float_floor = 1;
