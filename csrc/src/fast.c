@@ -48,6 +48,8 @@
 
 enum {
     FAST_BLOCK = 2048,      /* rows per partial sum of the residual, as solve.c's BLOCK */
+    PIECE_BLOCKS = 8,       /* blocks a thread takes at a time in the passes over all rows (taken as
+                             * threads come free: a thread slowed down by other work holds back none) */
     FAST_WINDOW = 50,       /* solve.c's STAGNATION_WINDOW */
     FIRST_RUN = 4,          /* sweeps of the first run on a pipelined plan */
     LONGEST_RUN = 16,       /* the most sweeps run at once */
@@ -523,7 +525,7 @@ static void residual_blocks(void *context, int64_t b0, int64_t b1, int thread) {
  * largest over active rows; the partial sums are added in block order. */
 static double residual_pass(fast *f, const kernels *k, int first, double *mean, double *max_active) {
     residual_task t = {f, first ? k->residual_first : k->residual_cage};
-    spia__parallel_for(f->threads, f->blocks, 0, residual_blocks, &t);
+    spia__parallel_for(f->threads, f->blocks, PIECE_BLOCKS, residual_blocks, &t);
     double maxd = 0.0, maxa = 0.0, sum = 0.0;
     for (int64_t b = 0; b < f->blocks; ++b) {
         maxd = keep_max(maxd, f->partial[4 * b]);
@@ -737,7 +739,7 @@ static int32_t mark_stuck(fast *f, const kernels *k, double threshold) {
     double *dist = (double *)malloc(sizeof(double) * 2 * (size_t)n);
     if (!dist) return -1;
     mark_task t = {f, dist};
-    spia__parallel_for(f->threads, f->blocks, 0, mark_blocks, &t);
+    spia__parallel_for(f->threads, f->blocks, PIECE_BLOCKS, mark_blocks, &t);
     double initial_max = threshold;
     for (int32_t i = 0; i < n; ++i)
         if (row_active(f, i) && dist[2 * (int64_t)i + 1] > initial_max) initial_max = dist[2 * (int64_t)i + 1];
@@ -1010,7 +1012,7 @@ spia_result spia__solve_fast(const spia_stencils *L, const float *targets, const
     }
     {
         gather_task g = {&f, targets, opt->initial_cage ? opt->initial_cage : targets};
-        spia__parallel_for(f.threads, n, 0, gather_rows, &g);
+        spia__parallel_for(f.threads, n, PIECE_BLOCKS * FAST_BLOCK, gather_rows, &g);
         f.P[3 * (size_t)n] = 0.0f;
         f.S[3 * (size_t)n] = 0.0f;
     }
@@ -1053,7 +1055,7 @@ spia_result spia__solve_fast(const spia_stencils *L, const float *targets, const
             goto done;
         }
         write_task w = {&f, *handover};
-        spia__parallel_for(f.threads, n, 0, write_rows, &w);
+        spia__parallel_for(f.threads, n, PIECE_BLOCKS * FAST_BLOCK, write_rows, &w);
         *handover_iterations = it;
         res = SPIA__HAND_OVER;
         goto done;
@@ -1061,7 +1063,7 @@ spia_result spia__solve_fast(const spia_stencils *L, const float *targets, const
     if (res >= 0) {
         if (!sr.current) sr.err_all = residual_pass(&f, &k, 0, &sr.mean, &sr.err);
         write_task w = {&f, cage};
-        spia__parallel_for(f.threads, n, 0, write_rows, &w);
+        spia__parallel_for(f.threads, n, PIECE_BLOCKS * FAST_BLOCK, write_rows, &w);
         if (stuck_count > 0 && res == SPIA_OK) res = SPIA_STAGNATED;
         if (res == SPIA_OK)
             spia__ok(status);
