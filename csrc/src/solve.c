@@ -630,17 +630,67 @@ static int32_t mark_stuck(solver_state *s, double threshold) {
     return count;
 }
 
-static double bbox_diagonal(const float *P, int32_t n) {
-    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-    for (int32_t i = 0; i < n; ++i)
+/* The targets looked over once, on the threads, in pieces of SCAN_ROWS rows:
+ * the first row with a NaN or infinite coordinate (-1 if none), and the
+ * bounding box.  (Smallest index and extremes: the same for any count.) */
+enum { SCAN_ROWS = 65536 };
+typedef struct scan_task {
+    const float *P;
+    int32_t n;
+    int64_t *bad;  /* per piece */
+    double *box;   /* per piece: 3 lows, 3 highs */
+} scan_task;
+
+static void scan_rows(void *context, int64_t p0, int64_t p1, int thread) {
+    (void)thread;
+    scan_task *t = (scan_task *)context;
+    for (int64_t piece = p0; piece < p1; ++piece) {
+        double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+        int64_t bad = -1;
+        const int64_t end = (piece + 1) * SCAN_ROWS < t->n ? (piece + 1) * SCAN_ROWS : t->n;
+        for (int64_t i = piece * SCAN_ROWS; i < end; ++i)
+            for (int a = 0; a < 3; ++a) {
+                const double x = t->P[3 * i + a];
+                if (!isfinite(x) && bad < 0) bad = i;
+                if (x < lo[a]) lo[a] = x;
+                if (x > hi[a]) hi[a] = x;
+            }
+        t->bad[piece] = bad;
         for (int a = 0; a < 3; ++a) {
-            double x = P[3 * (int64_t)i + a];
-            if (x < lo[a]) lo[a] = x;
-            if (x > hi[a]) hi[a] = x;
+            t->box[6 * piece + a] = lo[a];
+            t->box[6 * piece + 3 + a] = hi[a];
         }
+    }
+}
+
+/* Returns the first row with a non-finite coordinate, -1 if there is none
+ * (and the diagonal of the bounding box into *diagonal), -2 when out of
+ * memory. */
+static int64_t scan_targets(const float *P, int32_t n, int threads, double *diagonal) {
+    const int64_t pieces = ((int64_t)n + SCAN_ROWS - 1) / SCAN_ROWS;
+    scan_task t = {P, n, (int64_t *)malloc(sizeof(int64_t) * (size_t)pieces),
+                   (double *)malloc(sizeof(double) * 6 * (size_t)pieces)};
+    if (!t.bad || !t.box) {
+        free(t.bad);
+        free(t.box);
+        return -2;
+    }
+    spia__parallel_for(threads, pieces, 1, scan_rows, &t);
+    int64_t bad = -1;
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (int64_t piece = 0; piece < pieces; ++piece) {
+        if (bad < 0 && t.bad[piece] >= 0) bad = t.bad[piece];
+        for (int a = 0; a < 3; ++a) {
+            if (t.box[6 * piece + a] < lo[a]) lo[a] = t.box[6 * piece + a];
+            if (t.box[6 * piece + 3 + a] > hi[a]) hi[a] = t.box[6 * piece + 3 + a];
+        }
+    }
     double d2 = 0.0;
     for (int a = 0; a < 3; ++a) d2 += (hi[a] - lo[a]) * (hi[a] - lo[a]);
-    return sqrt(d2);
+    *diagonal = sqrt(d2);
+    free(t.bad);
+    free(t.box);
+    return bad;
 }
 
 static void report_reset(spia_report *rep) {
@@ -898,11 +948,18 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
         res = spia__fail(status, SPIA_ERROR_EMPTY_MESH, -1, "the stencil table has no rows");
         goto done;
     }
-    for (int64_t k = 0; k < 3 * (int64_t)n; ++k)
-        if (!isfinite(targets[k])) {
-            res = spia__fail(status, SPIA_ERROR_NONFINITE, k / 3, "target %lld is NaN or infinite", (long long)(k / 3));
+    double diagonal;
+    {
+        const int64_t bad = scan_targets(targets, n, n >= PARALLEL_ROWS ? opt.threads : 1, &diagonal);
+        if (bad == -2) {
+            res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
             goto done;
         }
+        if (bad >= 0) {
+            res = spia__fail(status, SPIA_ERROR_NONFINITE, bad, "target %lld is NaN or infinite", (long long)bad);
+            goto done;
+        }
+    }
     if (opt.initial_cage) {
         for (int64_t k = 0; k < 3 * (int64_t)n; ++k)
             if (!isfinite(opt.initial_cage[k])) {
@@ -942,8 +999,7 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
         }
     }
     if (fast) {
-        res = spia__solve_fast(L, targets, &opt, bbox_diagonal(targets, n), automatic, cage, &handover, &it0, report,
-                               status);
+        res = spia__solve_fast(L, targets, &opt, diagonal, automatic, cage, &handover, &it0, report, status);
         if (res != SPIA__HAND_OVER) goto done;
         /* Beyond float32: GS-PIA goes on from where the sweeps got to. */
         if (report) initial_relative = report->initial_max_error_relative;
@@ -1019,7 +1075,6 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
         s.weight = opt.weight > 0.0 ? opt.weight : best_weight(L, s.D);
     }
 
-    const double diagonal = bbox_diagonal(s.P, n);
     const double scale = diagonal > 0.0 ? diagonal : 1.0;
     const double threshold = opt.tolerance * scale;
     double mean, err;
