@@ -23,7 +23,7 @@ PACKAGE = dist/subdiv_pia-$(VERSION)-linux-x64.zip
 WINDOWS_PACKAGE = dist/subdiv_pia-$(VERSION)-windows-x64.zip
 
 .PHONY: all deps build package test test-c test-asan test-tsan test-fuzz fuzz test-python test-package test-blender \
-        blenders demo bench bench-scale bench-closest bench-live bench-hard clean
+        blenders demo bench bench-scale bench-solve bench-closest bench-live bench-hard clean
 
 all: build
 
@@ -112,7 +112,7 @@ demo: build
 	$(BLENDER_RUN) --python build/addon/subdiv_pia/cli.py -- tests/data/mushroom.obj out/mushroom_interpolated.blend
 	$(BLENDER_RUN) --python bench/render_comparison.py -- tests/data/mushroom.obj out/mushroom_comparison.png
 
-bench: build bench-scale bench-closest
+bench: build bench-scale bench-solve bench-closest
 	$(PYTHON) bench/bench_interpolate.py
 	$(PYTHON) bench/bench_loop_papers.py
 	$(PYTHON) bench/bench_doosabin.py
@@ -126,6 +126,11 @@ bench-scale: build
 	cmake -S . -B build/bench -DCMAKE_BUILD_TYPE=Release -DSPIA_BENCH=ON -DSPIA_TESTS=OFF
 	cmake --build build/bench --target spia_bench_osd --parallel 2
 	$(PYTHON) bench/bench_scale.py --blender $(BLENDER)
+
+# The solve alone, every Gauss-Seidel variant beside GS-PIA on 1 and 2
+# threads (bench/bench_solve.py; writes out/bench/solve.md).
+bench-solve: build
+	$(PYTHON) bench/bench_solve.py
 
 # Live cages: the update time per edit at 1k, 10k and 50k vertices.
 bench-live: build

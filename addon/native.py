@@ -28,13 +28,16 @@ import numpy as np
 __all__ = [
     "Mesh", "Report", "Stencils", "PiaError", "PiaCancelled",
     "available", "load_error", "library_path", "platform_tag", "version", "opensubdiv_version_number", "validate", "limit_stencils", "solve", "interpolate", "refine",
-    "SCHEMES", "BOUNDARY_SMOOTH", "BOUNDARY_RULES", "METHODS",
+    "SCHEMES", "BOUNDARY_SMOOTH", "BOUNDARY_RULES", "METHODS", "SOLVE_FLAGS",
 ]
 
 SCHEMES = ("CATMULL_CLARK", "LOOP", "DOO_SABIN")
 BOUNDARY_RULES = ("SMOOTH", "HOPPE")
 BOUNDARY_SMOOTH = ("ALL", "PRESERVE_CORNERS")
-METHODS = ("AUTO", "PIA", "GS_PIA", "CHEBYSHEV", "WPIA", "CG")
+METHODS = ("AUTO", "PIA", "GS_PIA", "CHEBYSHEV", "WPIA", "CG", "GS_PIA_FAST")
+# spia_options.solve_flags, by name (see the header): parts of the
+# Gauss-Seidel solvers to switch on.
+SOLVE_FLAGS = {"FIRST_STEP": 1, "MULTICOLOUR": 2, "DOUBLE_SWEEPS": 4}
 
 _RESULT_NAMES = {
     0: "OK", 1: "MAX_ITERATIONS", 2: "STAGNATED",
@@ -91,7 +94,7 @@ class _Options(ctypes.Structure):
         ("max_iterations", ctypes.c_int32), ("progress", _PROGRESS), ("progress_user_data", ctypes.c_void_p),
         ("boundary_rule", ctypes.c_int), ("weight", ctypes.c_double), ("staged", ctypes.c_int32),
         ("shape_parameter", ctypes.c_double), ("face_shape_parameters", _f32p), ("threads", ctypes.c_int32),
-        ("opensubdiv_version", ctypes.c_int32), ("initial_cage", _f32p),
+        ("opensubdiv_version", ctypes.c_int32), ("initial_cage", _f32p), ("solve_flags", ctypes.c_int32),
     ]
 
 
@@ -441,7 +444,7 @@ def opensubdiv_version_number(version):
 
 def _options(scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases=True, quality=3, method="AUTO",
              tolerance=1e-6, max_iterations=1000, progress=None, boundary_rule="SMOOTH", weight=0.0, staged=False,
-             shape_parameter=0.5, face_shape_parameters=None, threads=0, opensubdiv_version=None):
+             shape_parameter=0.5, face_shape_parameters=None, threads=0, opensubdiv_version=None, solve_flags=()):
     if not (isinstance(threads, (int, np.integer)) and threads >= 0):
         raise PiaError("INVALID_ARGUMENT", f"threads must be 0 (all processors) or a positive integer, not {threads!r}")
     if not (isinstance(quality, (int, np.integer)) and 1 <= quality <= 10):
@@ -466,6 +469,7 @@ def _options(scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases=True, qu
     opts.shape_parameter = float(shape_parameter)
     opts.threads = int(threads)
     opts.opensubdiv_version = opensubdiv_version_number(opensubdiv_version)
+    opts.solve_flags = _solve_flags(solve_flags)
     keep = None
     if face_shape_parameters is not None:
         keep = np.ascontiguousarray(face_shape_parameters, dtype=np.float32).ravel()
@@ -480,6 +484,18 @@ def _options(scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases=True, qu
         callback = _PROGRESS(callback)
         opts.progress = callback
     return opts, (callback, keep)
+
+
+def _solve_flags(flags):
+    """solve_flags as names (an iterable of SOLVE_FLAGS keys) -> the bits."""
+    if isinstance(flags, str):
+        flags = (flags,)
+    bits = 0
+    for name in flags:
+        if name not in SOLVE_FLAGS:
+            raise PiaError("INVALID_ARGUMENT", f"unknown solve flag {name!r}; expected some of {sorted(SOLVE_FLAGS)}")
+        bits |= SOLVE_FLAGS[name]
+    return bits
 
 
 def _raise(code, status):
@@ -654,7 +670,8 @@ def solve(stencils, targets, **options):
 
 def interpolate(mesh, scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases=True, quality=3, method="AUTO",
                 tolerance=1e-6, max_iterations=1000, progress=None, boundary_rule="SMOOTH", weight=0.0,
-                staged=False, shape_parameter=0.5, face_shape_parameters=None, threads=0, opensubdiv_version=None):
+                staged=False, shape_parameter=0.5, face_shape_parameters=None, threads=0, opensubdiv_version=None,
+                solve_flags=()):
     """A cage whose limit surface passes through the mesh's vertices.
 
     scheme 'LOOP' (triangles only) takes boundary_rule 'SMOOTH' (OpenSubdiv's)
@@ -663,7 +680,9 @@ def interpolate(mesh, scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases
     method 'WPIA' takes weight (0: estimated); staged=True solves the
     boundary first, then the interior.  ``threads``: 0 for one per
     processor, 1 for the calling thread only; results do not depend on it.
-    ``opensubdiv_version``: see :func:`limit_stencils`.
+    ``opensubdiv_version``: see :func:`limit_stencils`.  ``solve_flags``:
+    names from :data:`SOLVE_FLAGS` (the header's SPIA_SOLVE_*), for the
+    Gauss-Seidel solvers.
 
     Returns ``(cage, report)``: cage is an (N, 3) float32 array of new
     control positions, report a :class:`Report`.  Stopping at
@@ -675,7 +694,7 @@ def interpolate(mesh, scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases
     lib = _library()
     opts, _keep = _options(scheme, boundary_smooth, use_creases, quality, method, tolerance, max_iterations, progress,
                            boundary_rule, weight, staged, shape_parameter, face_shape_parameters, threads,
-                           opensubdiv_version)
+                           opensubdiv_version, solve_flags)
     cage = np.empty_like(mesh.positions)
     rep, history, unreachable = _report_buffers(opts.max_iterations, mesh.vertex_count)
     status = _Status()

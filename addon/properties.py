@@ -28,13 +28,16 @@ BOUNDARY_SMOOTH_ITEMS = (
 )
 METHOD_ITEMS = (
     ('AUTO', "Automatic", "The fastest solver for this mesh, chosen by a probe: conjugate gradients "
-                        "(or Chebyshev-accelerated PIA) on smooth targets, Gauss-Seidel PIA on rough "
+                        "(or Chebyshev-accelerated PIA) on smooth targets, fast Gauss-Seidel PIA on rough "
                         "ones such as scans"),
     ('PIA', "PIA", "Plain progressive iterative approximation (Jacobi-like)"),
     ('GS_PIA', "Gauss-Seidel PIA", "Progressive iterative approximation with Gauss-Seidel updates"),
     ('CHEBYSHEV', "Chebyshev PIA", "PIA accelerated with Chebyshev polynomials over the estimated spectrum"),
     ('WPIA', "Weighted PIA", "PIA with the best constant weight, estimated from the spectrum"),
     ('CG', "Conjugate Gradients", "Conjugate gradients: closed meshes only (a symmetrizable limit matrix)"),
+    ('GS_PIA_FAST', "Gauss-Seidel PIA (Fast)",
+     "Gauss-Seidel PIA in an order laid out for it, in float32 with the error measured in double, "
+     "on all threads on large meshes"),
 )
 
 FIT_ITEMS = (

@@ -178,11 +178,16 @@ typedef enum spia_boundary_smooth {
 } spia_boundary_smooth;
 
 typedef enum spia_method {
-    /* Chosen before the first step by how far one PIA step would shrink
-     * the residual (probed on a sample of rows): on smooth targets, where it
-     * shrinks to under 0.15 of itself, CG where it applies, else CHEBYSHEV;
-     * on rough ones (scans) GS-PIA where every vertex has a positive weight
-     * on itself, else CHEBYSHEV.  spia_report.method says which. */
+    /* On tables of 10,000 rows or more, GS_PIA_FAST with
+     * SPIA_SOLVE_FIRST_STEP where every vertex has a positive weight on
+     * itself (else as below).  On smaller ones, chosen before the first
+     * step by how far one PIA step would shrink the residual: on smooth
+     * targets, where it shrinks to under 0.15 of itself, CG where it
+     * applies, else CHEBYSHEV; on rough ones (scans) GS_PIA_FAST with
+     * SPIA_SOLVE_FIRST_STEP where every vertex has a positive weight on
+     * itself, else CHEBYSHEV.  Staged solves choose as smaller tables do,
+     * with GS_PIA for GS_PIA_FAST.  spia_report.method says which (PIA when
+     * the first iterate was within the tolerance already). */
     SPIA_METHOD_AUTO = 0,
     SPIA_METHOD_PIA = 1,   /* V += P - L V (Jacobi-like, the papers' PIA)            */
     /* Gauss-Seidel PIA: vertex by vertex, in place, one stencil product per
@@ -203,8 +208,43 @@ typedef enum spia_method {
      * diagonal and S symmetric (closed meshes of every scheme here; for Loop
      * and Doo-Sabin the papers prove S positive definite; a breakdown falls
      * back to CHEBYSHEV); refused where L has no such form (boundaries). */
-    SPIA_METHOD_CG = 5
+    SPIA_METHOD_CG = 5,
+    /* GS-PIA's update on a layout of the stencils made for it (built with
+     * the table): rows in vertex order on tables below 50,000 rows; from
+     * there in the levels of a breadth-first search through the stencils,
+     * each level ordered by a colouring so that rows swept one after
+     * another are not neighbours, and several sweeps at once, one behind
+     * the other, on `threads` threads.  The sweeps work in float32 (the
+     * weights' float32 copies) on the correction to the first iterate; the
+     * residual and the stopping test are in double, on the cage as it is
+     * stored, so the cage meets the same tolerance as GS-PIA's (another
+     * cage within it, the same whatever the thread count).  Where float32
+     * cannot reach the tolerance (about 4e-6 of the first iterate's error,
+     * or below the float rounding of the cage's coordinates), GS_PIA's
+     * double sweeps take over and the report says GS_PIA.  The error of an
+     * iteration is the largest met during the sweep, as for GS_PIA.
+     * Needs every L_ii > 0, as GS_PIA. */
+    SPIA_METHOD_GS_PIA_FAST = 6
 } spia_method;
+
+/* spia_options.solve_flags: parts of the Gauss-Seidel solvers that can be
+ * switched on, mostly to measure what each brings (bench/bench_solve.py). */
+enum {
+    /* GS_PIA, GS_PIA_FAST: before the first sweep, one step of a local
+     * approximate inverse of the limit mask, V += M (P - L V), where row i
+     * of M is L's row i with the signs of its larger off-diagonal weights
+     * (a Catmull-Clark vertex's edge neighbours) flipped, times
+     * 1.28 / L_ii^2: on a regular quad grid it brings the conditioning of L
+     * from 9 to 16/9.  Costs about one sweep; not counted as an
+     * iteration. */
+    SPIA_SOLVE_FIRST_STEP = 1,
+    /* GS_PIA: sweep in a multicolour order (a greedy colouring of the
+     * stencils, no two rows of a colour in each other's stencil), the rows
+     * of each colour shared among the threads. */
+    SPIA_SOLVE_MULTICOLOUR = 2,
+    /* GS_PIA_FAST: sweep in double instead of float32. */
+    SPIA_SOLVE_DOUBLE_SWEEPS = 4
+};
 
 /*
  * Progress callback: called once per iteration (and once when the stencils
@@ -264,6 +304,8 @@ typedef struct spia_options {
      * tolerance); NULL: the targets, as PIA starts.  It may alias the cage
      * buffer.  spia_fit ignores it. [NULL] */
     const float *initial_cage;
+    /* SPIA_SOLVE_* flags. [0] */
+    int32_t solve_flags;
 } spia_options;
 
 /* The defaults, as a value (the same as an all-zero struct). */

@@ -9,6 +9,51 @@
 extern "C" {
 #endif
 
+/* Tables of this many rows or more are solved on several threads (below
+ * it a parallel region costs more than it saves). */
+#define SPIA_PARALLEL_ROWS 50000
+
+/* The table again, laid out for GS_PIA_FAST's sweeps (plan.c, fast.c).
+ * Rows in the order they are swept: vertex order below SPIA_PARALLEL_ROWS
+ * rows; from there the levels of a breadth-first search through the
+ * stencils (from a far vertex of each connected part), each level's rows
+ * ordered by a colouring of the level so that a row's neighbours are not
+ * swept just before it.  Consecutive levels make up chunks of at least
+ * SPIA_PLAN_CHUNK_ROWS rows; a row refers to rows at most `reach` chunks
+ * away, which lets sweeps run one behind the other on several threads.
+ *
+ * The weights are those of the table, exactly: each row's entries are
+ * codes into a dictionary of the table's distinct weights (in double, and
+ * their float32 copies for the sweeps), with column positions as offsets
+ * from the row's own; the row's own entry first, when it has one.  The
+ * dictionary holds each weight twice: codes from words / 2 on are the
+ * larger off-diagonal weights of their rows (at least half the largest:
+ * the edge neighbours of a Catmull-Clark vertex), whose signs the first
+ * step (SPIA_SOLVE_FIRST_STEP) flips.  Codes are 8 or 16 bits and offsets
+ * 16 or 32 bits, the least that holds the table. */
+enum { SPIA_PLAN_CHUNK_ROWS = 2048 };
+typedef struct spia_plan {
+    int32_t rows;
+    int32_t *order;       /* position -> table row; NULL: vertex order */
+    int32_t chunks;
+    int32_t *chunk_start; /* chunks + 1 positions */
+    int64_t *chunk_entry; /* chunks + 1: the first entry of each chunk */
+    int32_t reach;
+    uint16_t *length;     /* entries of the row at each position */
+    uint8_t *code8;       /* one of code8, code16 */
+    uint16_t *code16;
+    int16_t *delta16;     /* one of delta16, delta32: column position - row position */
+    int32_t *delta32;
+    int32_t words;        /* codes: twice the distinct weights */
+    double *weight;
+    float *weight_f;
+    float *inverse_f;     /* 1 / weight in float (for the rows' own entries) */
+    float *signed_f;      /* weight_f, negative for the second half */
+    /* Every row starts with its own entry, of a positive weight: what
+     * Gauss-Seidel needs. */
+    int diagonal_first;
+} spia_plan;
+
 /* The stencil table behind the opaque handle: CSR rows, one per control
  * vertex.  offsets has rows + 1 entries. */
 struct spia_stencils {
@@ -21,6 +66,10 @@ struct spia_stencils {
      * vertices only (what a staged solve does first). */
     unsigned char *boundary;
     int32_t boundary_count;
+    /* The sweep layout (spia_limit_stencils_create makes it); NULL where the
+     * table does not fit one (more than 32768 distinct weights, or a row of
+     * more than 65535 entries). */
+    spia_plan *plan;
 };
 
 /* out = (row r of s) applied to points x (3 doubles each). */
@@ -109,6 +158,26 @@ int32_t spia__max_corners_per_vertex(const spia_adjacency *adj);
  * of 2 * corners of v always suffices). */
 int32_t spia__vertex_neighbours(const spia_mesh *mesh, const spia_adjacency *adj, int32_t v, int32_t *nb,
                                 int32_t *faces_on_edge, int32_t cap);
+
+/* Builds s->plan (plan.c) on `threads` threads.  SPIA_OK also when the
+ * table does not fit a plan (s->plan stays NULL); SPIA_ERROR_OUT_OF_MEMORY
+ * when memory runs out.  The plan does not depend on the thread count. */
+spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status);
+void spia__plan_free(spia_plan *p);
+
+/* GS_PIA_FAST (fast.c), called by spia_solve once the arguments are checked
+ * and L->plan found fit (every row's own weight positive): writes the cage
+ * and fills the report (method, iterations, errors, history) as spia_solve
+ * documents.  `options` is resolved; `diagonal` is the targets'
+ * bounding-box diagonal; `automatic`: chosen by AUTO (a first iterate
+ * already within the tolerance is then reported as PIA's).  Returns
+ * SPIA__HAND_OVER, with nothing written, when float32 sweeps cannot reach
+ * the tolerance: GS_PIA is to go on from *handover (a cage the caller
+ * frees; NULL: from the first iterate), after *handover_iterations. */
+#define SPIA__HAND_OVER ((spia_result)100)
+spia_result spia__solve_fast(const spia_stencils *L, const float *targets, const spia_options *options,
+                             double diagonal, int automatic, float *cage, float **handover,
+                             int32_t *handover_iterations, spia_report *report, spia_status *status);
 
 /* Fills s->boundary and s->boundary_count from the boundary vertices
  * (spia__boundary_vertices). */

@@ -47,6 +47,10 @@ spia_result spia_limit_stencils_create(const spia_mesh *mesh, const spia_options
     if (r == SPIA_OK) spia__stencils_mark_boundary(*out, on_boundary);
     free(on_boundary);
     spia__adjacency_free(&adj);
+    if (r == SPIA_OK && (r = spia__plan_build(*out, opt.threads, status)) != SPIA_OK) {
+        spia_stencils_free(*out);
+        *out = NULL;
+    }
     if (r == SPIA_OK && cancelled(&opt)) {
         spia_stencils_free(*out);
         *out = NULL;

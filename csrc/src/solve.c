@@ -18,13 +18,17 @@
  * iterates, and so it converges.
  *
  * CG is conjugate gradients on the symmetrized system where the limit
- * matrix allows it (closed meshes, see step_cg).  AUTO picks CG or
- * Chebyshev-accelerated PIA (see step_chebyshev) for smooth targets and
- * GS-PIA for rough ones (see choose_auto).
+ * matrix allows it (closed meshes, see step_cg).  GS_PIA_FAST is GS-PIA on
+ * the table's sweep layout, in fast.c; spia_solve hands it the solve.
+ * AUTO takes GS_PIA_FAST on tables of AUTO_FAST_ROWS rows or more and on
+ * rough targets; on smaller smooth ones CG or Chebyshev-accelerated PIA
+ * (see step_chebyshev, choose_auto).
  *
  * Products with L are shared among threads by rows; sums over rows are
  * taken per block of BLOCK rows and the blocks added in order, so results
- * do not depend on the thread count.  GS-PIA's sweep is serial.
+ * do not depend on the thread count.  GS-PIA's sweep is serial; with
+ * SPIA_SOLVE_MULTICOLOUR it goes colour after colour, each on the
+ * threads.
  *
  * All stop when max_i |P_i - (L V)_i| <= tolerance * diagonal, at
  * max_iterations, when the error has not fallen for STAGNATION_WINDOW
@@ -54,6 +58,18 @@ enum {
 enum { AUTO_PROBE_ROWS = 4096 };
 /* See mark_stuck. */
 #define DRIFT_FACTOR 50.0
+/* See multicolour_order: colours at most, the last for the rows left. */
+enum { MULTICOLOURS = 64 };
+/* See first_step. */
+#define FIRST_STEP_SCALE 1.28
+/* From this many rows on, AUTO takes GS_PIA_FAST whatever the probe says
+ * (below, its iterations, cheap as they are, are too many beside CG's on
+ * the smallest smooth meshes). */
+enum { AUTO_FAST_ROWS = 10000 };
+/* SPIA_SOLVE_* flags AUTO adds when it takes GS_PIA_FAST: the first step
+ * saved more sweeps than it cost on the rough sphere and the scans
+ * measured (bench/bench_solve.py). */
+#define AUTO_FAST_FLAGS SPIA_SOLVE_FIRST_STEP
 
 typedef struct solver_state {
     const spia_stencils *L;
@@ -84,9 +100,14 @@ typedef struct solver_state {
      * the result does not depend on the number of threads. */
     int64_t blocks;
     double *partial; /* blocks * PARTS */
+    /* SPIA_SOLVE_MULTICOLOUR: the rows colour after colour; colour_start
+     * has colours + 1 entries, the last colour's rows swept one by one. */
+    int32_t *colour_rows;
+    int32_t colour_start[MULTICOLOURS + 1];
+    int colours;
 } solver_state;
 
-enum { BLOCK = 2048, PARTS = 4, PARALLEL_ROWS = 50000 };
+enum { BLOCK = 2048, PARTS = 4, PARALLEL_ROWS = SPIA_PARALLEL_ROWS };
 
 /* Sums column `part` of the per-block partials in block order. */
 static double block_sum(const solver_state *s, int part) {
@@ -206,6 +227,136 @@ static double step_gs_pia(solver_state *s) {
         if (d > worst || d != d) worst = d != d ? NAN : d;
     }
     return worst;
+}
+
+/* SPIA_SOLVE_MULTICOLOUR: a greedy colouring in row order, each row taking
+ * the first colour that no row of its stencil has and that no earlier row
+ * holding it in its stencil has (the table need not be symmetric), so that
+ * the rows of one colour neither read nor write each other; rows that find
+ * all MULTICOLOURS - 1 colours taken get the last, swept one by one.
+ * Returns 0 when out of memory. */
+static int multicolour_order(solver_state *s) {
+    const spia_stencils *L = s->L;
+    const int32_t n = s->n;
+    uint64_t *taken = (uint64_t *)calloc((size_t)n, sizeof(uint64_t));
+    unsigned char *colour = (unsigned char *)malloc((size_t)n);
+    s->colour_rows = (int32_t *)malloc(sizeof(int32_t) * (size_t)n);
+    if (!taken || !colour || !s->colour_rows) {
+        free(taken);
+        free(colour);
+        return 0;
+    }
+    int32_t count[MULTICOLOURS + 1] = {0};
+    for (int32_t r = 0; r < n; ++r) {
+        uint64_t used = taken[r];
+        for (int64_t k = L->offsets[r]; k < L->offsets[r + 1]; ++k)
+            if (L->indices[k] < r) used |= (uint64_t)1 << colour[L->indices[k]];
+        int c = 0;
+        while (c < MULTICOLOURS - 1 && (used >> c & 1u)) ++c;
+        colour[r] = (unsigned char)c;
+        count[c + 1]++;
+        for (int64_t k = L->offsets[r]; k < L->offsets[r + 1]; ++k)
+            if (L->indices[k] > r) taken[L->indices[k]] |= (uint64_t)1 << c;
+    }
+    for (int c = 0; c < MULTICOLOURS; ++c) count[c + 1] += count[c];
+    s->colours = 0;
+    for (int c = 0; c <= MULTICOLOURS; ++c) s->colour_start[c] = count[c];
+    for (int c = 0; c < MULTICOLOURS; ++c)
+        if (count[c + 1] > count[c]) s->colours = c + 1;
+    for (int32_t r = 0; r < n; ++r) s->colour_rows[count[colour[r]]++] = r;
+    free(taken);
+    free(colour);
+    return 1;
+}
+
+/* One Gauss-Seidel update of row r; returns |P_r - (L V)_r| before it. */
+static inline double gs_row(solver_state *s, int32_t r) {
+    double lv[3];
+    spia__row_product(s->L, r, s->V, lv);
+    const float *t = s->P + 3 * (int64_t)r;
+    double *v = s->V + 3 * (int64_t)r;
+    const double inv = 1.0 / s->diag[r];
+    double d2 = 0.0;
+    for (int a = 0; a < 3; ++a) {
+        const double g = t[a] - lv[a];
+        d2 += g * g;
+        v[a] += g * inv;
+    }
+    return sqrt(d2);
+}
+
+typedef struct colour_task {
+    solver_state *s;
+    int32_t base;      /* the colour's first entry in colour_rows */
+    double worst[256]; /* per thread */
+} colour_task;
+
+static void colour_rows(void *context, int64_t q0, int64_t q1, int thread) {
+    colour_task *task = (colour_task *)context;
+    solver_state *s = task->s;
+    double worst = task->worst[thread];
+    for (int64_t q = q0; q < q1; ++q) {
+        const int32_t r = s->colour_rows[task->base + q];
+        if (!active(s, r)) continue;
+        const double d = gs_row(s, r);
+        if (d > worst || d != d) worst = d != d ? NAN : d;
+    }
+    task->worst[thread] = worst;
+}
+
+/* step_gs_pia in the multicolour order: the rows of a colour at once, on
+ * the threads; the same result whatever their number (the largest is
+ * exact in any order). */
+static double step_gs_pia_multicolour(solver_state *s) {
+    colour_task task;
+    memset(&task, 0, sizeof task);
+    task.s = s;
+    const int threads = s->threads < 256 ? s->threads : 256;
+    for (int c = 0; c < s->colours; ++c) {
+        task.base = s->colour_start[c];
+        const int32_t count = s->colour_start[c + 1] - s->colour_start[c];
+        if (c == MULTICOLOURS - 1)
+            colour_rows(&task, 0, count, 0);
+        else
+            spia__parallel_for(threads, count, 0, colour_rows, &task);
+    }
+    double worst = 0.0;
+    for (int t = 0; t < threads; ++t)
+        if (task.worst[t] > worst || task.worst[t] != task.worst[t])
+            worst = task.worst[t] != task.worst[t] ? NAN : task.worst[t];
+    return worst;
+}
+
+/* SPIA_SOLVE_FIRST_STEP: V += M R, R = P - L V (s->R, active rows), M the
+ * local approximate inverse of the header: row i of L with the signs of
+ * its larger off-diagonal weights flipped, times 1.28 / L_ii^2. */
+typedef struct first_task {
+    solver_state *s;
+} first_task;
+
+static void first_step_rows(void *context, int64_t r0, int64_t r1, int thread) {
+    (void)thread;
+    solver_state *s = ((first_task *)context)->s;
+    const spia_stencils *L = s->L;
+    for (int64_t r = r0; r < r1; ++r) {
+        if (!active(s, (int32_t)r) || !(s->diag[r] > 0.0)) continue;
+        double largest = 0.0, sum[3] = {0.0, 0.0, 0.0};
+        for (int64_t k = L->offsets[r]; k < L->offsets[r + 1]; ++k)
+            if (L->indices[k] != r && L->weights[k] > largest) largest = L->weights[k];
+        for (int64_t k = L->offsets[r]; k < L->offsets[r + 1]; ++k) {
+            const double w = L->weights[k];
+            const double sw = L->indices[k] != r && w >= 0.5 * largest ? -w : w;
+            const double *q = s->R + 3 * (int64_t)L->indices[k];
+            for (int a = 0; a < 3; ++a) sum[a] += sw * q[a];
+        }
+        const double scale = FIRST_STEP_SCALE / (s->diag[r] * s->diag[r]);
+        for (int a = 0; a < 3; ++a) s->V[3 * r + a] += scale * sum[a];
+    }
+}
+
+static void first_step(solver_state *s) {
+    first_task task = {s};
+    spia__parallel_for(s->threads, s->n, 0, first_step_rows, &task);
 }
 
 /* Chebyshev semi-iteration for L V = P with the spectrum of L taken as
@@ -479,17 +630,67 @@ static int32_t mark_stuck(solver_state *s, double threshold) {
     return count;
 }
 
-static double bbox_diagonal(const float *P, int32_t n) {
-    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-    for (int32_t i = 0; i < n; ++i)
+/* The targets looked over once, on the threads, in pieces of SCAN_ROWS rows:
+ * the first row with a NaN or infinite coordinate (-1 if none), and the
+ * bounding box.  (Smallest index and extremes: the same for any count.) */
+enum { SCAN_ROWS = 65536 };
+typedef struct scan_task {
+    const float *P;
+    int32_t n;
+    int64_t *bad;  /* per piece */
+    double *box;   /* per piece: 3 lows, 3 highs */
+} scan_task;
+
+static void scan_rows(void *context, int64_t p0, int64_t p1, int thread) {
+    (void)thread;
+    scan_task *t = (scan_task *)context;
+    for (int64_t piece = p0; piece < p1; ++piece) {
+        double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+        int64_t bad = -1;
+        const int64_t end = (piece + 1) * SCAN_ROWS < t->n ? (piece + 1) * SCAN_ROWS : t->n;
+        for (int64_t i = piece * SCAN_ROWS; i < end; ++i)
+            for (int a = 0; a < 3; ++a) {
+                const double x = t->P[3 * i + a];
+                if (!isfinite(x) && bad < 0) bad = i;
+                if (x < lo[a]) lo[a] = x;
+                if (x > hi[a]) hi[a] = x;
+            }
+        t->bad[piece] = bad;
         for (int a = 0; a < 3; ++a) {
-            double x = P[3 * (int64_t)i + a];
-            if (x < lo[a]) lo[a] = x;
-            if (x > hi[a]) hi[a] = x;
+            t->box[6 * piece + a] = lo[a];
+            t->box[6 * piece + 3 + a] = hi[a];
         }
+    }
+}
+
+/* Returns the first row with a non-finite coordinate, -1 if there is none
+ * (and the diagonal of the bounding box into *diagonal), -2 when out of
+ * memory. */
+static int64_t scan_targets(const float *P, int32_t n, int threads, double *diagonal) {
+    const int64_t pieces = ((int64_t)n + SCAN_ROWS - 1) / SCAN_ROWS;
+    scan_task t = {P, n, (int64_t *)malloc(sizeof(int64_t) * (size_t)pieces),
+                   (double *)malloc(sizeof(double) * 6 * (size_t)pieces)};
+    if (!t.bad || !t.box) {
+        free(t.bad);
+        free(t.box);
+        return -2;
+    }
+    spia__parallel_for(threads, pieces, 1, scan_rows, &t);
+    int64_t bad = -1;
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (int64_t piece = 0; piece < pieces; ++piece) {
+        if (bad < 0 && t.bad[piece] >= 0) bad = t.bad[piece];
+        for (int a = 0; a < 3; ++a) {
+            if (t.box[6 * piece + a] < lo[a]) lo[a] = t.box[6 * piece + a];
+            if (t.box[6 * piece + 3 + a] > hi[a]) hi[a] = t.box[6 * piece + 3 + a];
+        }
+    }
     double d2 = 0.0;
     for (int a = 0; a < 3; ++a) d2 += (hi[a] - lo[a]) * (hi[a] - lo[a]);
-    return sqrt(d2);
+    *diagonal = sqrt(d2);
+    free(t.bad);
+    free(t.box);
+    return bad;
 }
 
 static void report_reset(spia_report *rep) {
@@ -535,6 +736,68 @@ static double pia_contraction_probe(const solver_state *s) {
             const double q = s->R[3 * (int64_t)r + a];
             num += (q - lr[a]) * (q - lr[a]);
             den += q * q;
+        }
+    }
+    return den > 0.0 ? sqrt(num / den) : 0.0;
+}
+
+/* P_r - (L x)_r for x in float, summed as spia__row_product sums. */
+static void residual_row(const spia_stencils *L, const float *P, const float *x, int32_t r, double out[3]) {
+    double a = 0.0, b = 0.0, c = 0.0;
+    for (int64_t k = L->offsets[r]; k < L->offsets[r + 1]; ++k) {
+        const double w = L->weights[k];
+        const float *p = x + 3 * (int64_t)L->indices[k];
+        a += w * (double)p[0];
+        b += w * (double)p[1];
+        c += w * (double)p[2];
+    }
+    out[0] = P[3 * (int64_t)r] - a;
+    out[1] = P[3 * (int64_t)r + 1] - b;
+    out[2] = P[3 * (int64_t)r + 2] - c;
+}
+
+/* pia_contraction_probe for the first iterate `start`, from the table
+ * alone (before any solver state exists): the same rows, the same sums.
+ * Returns -1 when out of memory. */
+static double first_contraction_probe(const spia_stencils *L, const float *P, const float *start) {
+    const int32_t n = L->rows;
+    const int32_t stride = n > 4 * AUTO_PROBE_ROWS ? n / AUTO_PROBE_ROWS : 1;
+    double num = 0.0, den = 0.0;
+    if (stride == 1) {
+        /* Every row: the residual once for all. */
+        double *R = (double *)malloc(sizeof(double) * 3 * (size_t)n);
+        if (!R) return -1.0;
+        for (int32_t r = 0; r < n; ++r) residual_row(L, P, start, r, R + 3 * (int64_t)r);
+        for (int32_t r = 0; r < n; ++r) {
+            double lr[3];
+            spia__row_product(L, r, R, lr);
+            for (int a = 0; a < 3; ++a) {
+                const double q = R[3 * (int64_t)r + a];
+                num += (q - lr[a]) * (q - lr[a]);
+                den += q * q;
+            }
+        }
+        free(R);
+    } else {
+        /* Sampled rows: each one's residual and its stencil's. */
+        for (int32_t r = 0; r < n; r += stride) {
+            double lr[3] = {0.0, 0.0, 0.0}, q[3];
+            int own = 0;
+            for (int64_t k = L->offsets[r]; k < L->offsets[r + 1]; ++k) {
+                const int32_t j = L->indices[k];
+                double rj[3];
+                residual_row(L, P, start, j, rj);
+                for (int a = 0; a < 3; ++a) lr[a] += L->weights[k] * rj[a];
+                if (j == r) {
+                    own = 1;
+                    for (int a = 0; a < 3; ++a) q[a] = rj[a];
+                }
+            }
+            if (!own) residual_row(L, P, start, r, q);
+            for (int a = 0; a < 3; ++a) {
+                num += (q[a] - lr[a]) * (q[a] - lr[a]);
+                den += q[a] * q[a];
+            }
         }
     }
     return den > 0.0 ? sqrt(num / den) : 0.0;
@@ -597,7 +860,7 @@ static spia_result run_stage(solver_state *s, const spia_options *opt, double th
             step_richardson(s, 1.0);
             break;
         case SPIA_METHOD_GS_PIA:
-            sweep_error = step_gs_pia(s);
+            sweep_error = s->colour_rows ? step_gs_pia_multicolour(s) : step_gs_pia(s);
             break;
         case SPIA_METHOD_WPIA:
             step_richardson(s, s->weight);
@@ -671,6 +934,9 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
     const double t0 = spia__now();
     solver_state s;
     memset(&s, 0, sizeof s);
+    float *handover = NULL;
+    int32_t it0 = 0;
+    double initial_relative = -1.0;
     spia_result res = spia__resolve_options(options, &opt, status);
     if (res != SPIA_OK) goto done;
     if (!L || !targets || !cage) {
@@ -682,11 +948,65 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
         res = spia__fail(status, SPIA_ERROR_EMPTY_MESH, -1, "the stencil table has no rows");
         goto done;
     }
-    for (int64_t k = 0; k < 3 * (int64_t)n; ++k)
-        if (!isfinite(targets[k])) {
-            res = spia__fail(status, SPIA_ERROR_NONFINITE, k / 3, "target %lld is NaN or infinite", (long long)(k / 3));
+    double diagonal;
+    {
+        const int64_t bad = scan_targets(targets, n, n >= PARALLEL_ROWS ? opt.threads : 1, &diagonal);
+        if (bad == -2) {
+            res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
             goto done;
         }
+        if (bad >= 0) {
+            res = spia__fail(status, SPIA_ERROR_NONFINITE, bad, "target %lld is NaN or infinite", (long long)bad);
+            goto done;
+        }
+    }
+    if (opt.initial_cage) {
+        for (int64_t k = 0; k < 3 * (int64_t)n; ++k)
+            if (!isfinite(opt.initial_cage[k])) {
+                res = spia__fail(status, SPIA_ERROR_NONFINITE, k / 3, "initial cage vertex %lld is NaN or infinite",
+                                 (long long)(k / 3));
+                goto done;
+            }
+    }
+
+    /* GS_PIA_FAST, asked for or AUTO's choice on rough targets (where it
+     * would take GS_PIA), where the table has a plan for it. */
+    const int fast_fits = L->plan && L->plan->diagonal_first;
+    const int staged_solve = opt.staged && L->boundary_count > 0 && L->boundary_count < n;
+    int fast = 0, automatic = 0;
+    if (opt.method == SPIA_METHOD_GS_PIA_FAST) {
+        if (fast_fits)
+            fast = 1;
+        else
+            opt.method = SPIA_METHOD_GS_PIA; /* no plan (or a row without its own weight, refused below) */
+    } else if (opt.method == SPIA_METHOD_AUTO && fast_fits && !staged_solve) {
+        /* From AUTO_FAST_ROWS rows on, GS_PIA_FAST on smooth targets too:
+         * it was faster there than CG and Chebyshev on every target
+         * measured (a smooth 1M torus: 4 sweeps in 0.1 s against CG's one
+         * iteration and its setup in 0.35 s; 30k: 3.4 ms against 8 ms);
+         * below, the probe decides. */
+        const double probe = n >= AUTO_FAST_ROWS
+                                 ? 1.0
+                                 : first_contraction_probe(L, targets, opt.initial_cage ? opt.initial_cage : targets);
+        if (probe < 0.0) {
+            res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
+            goto done;
+        }
+        if (!(probe < AUTO_SMOOTH)) {
+            fast = 1;
+            automatic = 1;
+            opt.solve_flags |= AUTO_FAST_FLAGS;
+        }
+    }
+    if (fast) {
+        res = spia__solve_fast(L, targets, &opt, diagonal, automatic, cage, &handover, &it0, report, status);
+        if (res != SPIA__HAND_OVER) goto done;
+        /* Beyond float32: GS-PIA goes on from where the sweeps got to. */
+        if (report) initial_relative = report->initial_max_error_relative;
+        opt.method = SPIA_METHOD_GS_PIA;
+        opt.solve_flags &= ~SPIA_SOLVE_FIRST_STEP;
+        if (handover) opt.initial_cage = handover;
+    }
 
     s.method = opt.method;
     s.L = L;
@@ -713,14 +1033,6 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
          !krylov_arrays(&s))) {
         res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
         goto done;
-    }
-    if (opt.initial_cage) {
-        for (int64_t k = 0; k < 3 * (int64_t)n; ++k)
-            if (!isfinite(opt.initial_cage[k])) {
-                res = spia__fail(status, SPIA_ERROR_NONFINITE, k / 3, "initial cage vertex %lld is NaN or infinite",
-                                 (long long)(k / 3));
-                goto done;
-            }
     }
     s.start = opt.initial_cage ? opt.initial_cage : targets;
     for (int64_t k = 0; k < 3 * (int64_t)n; ++k) s.V[k] = (double)s.start[k];
@@ -750,6 +1062,10 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
             goto done;
         }
     }
+    if (s.method == SPIA_METHOD_GS_PIA && (opt.solve_flags & SPIA_SOLVE_MULTICOLOUR) && !multicolour_order(&s)) {
+        res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
+        goto done;
+    }
     if (s.method == SPIA_METHOD_WPIA) {
         if (opt.weight < 0.0 || opt.weight >= 2.0 || !isfinite(opt.weight)) {
             res = spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "the WPIA weight must be in (0, 2), got %g",
@@ -759,7 +1075,6 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
         s.weight = opt.weight > 0.0 ? opt.weight : best_weight(L, s.D);
     }
 
-    const double diagonal = bbox_diagonal(s.P, n);
     const double scale = diagonal > 0.0 ? diagonal : 1.0;
     const double threshold = opt.tolerance * scale;
     double mean, err;
@@ -769,12 +1084,14 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
         s.initial[r] = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]);
     }
     if (report) {
-        report->initial_max_error_relative = err_all / scale;
+        report->initial_max_error_relative = initial_relative >= 0.0 ? initial_relative : err_all / scale;
         report->method = s.method;
         report->weight = s.weight;
     }
+    if ((opt.solve_flags & SPIA_SOLVE_FIRST_STEP) && s.method == SPIA_METHOD_GS_PIA && !(err <= threshold))
+        first_step(&s); /* run_stage starts from the residual of the new iterate */
 
-    int32_t it = 0, stuck_count = 0;
+    int32_t it = it0, stuck_count = 0;
     const int staged = opt.staged && L->boundary_count > 0 && L->boundary_count < n;
     if (staged) {
         /* Stage 1: the boundary rows, which refer to boundary vertices only. */
@@ -833,6 +1150,8 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
         report->diagonal = diagonal;
     }
 done:
+    free(handover);
+    free(s.colour_rows);
     free(s.V);
     free(s.R);
     free(s.diag);

@@ -27,6 +27,7 @@ void spia_stencils_free(spia_stencils *s) {
     free(s->indices);
     free(s->weights);
     free(s->boundary);
+    spia__plan_free(s->plan);
     free(s);
 }
 

@@ -16,6 +16,15 @@
 #include <unistd.h>
 #endif
 
+#if defined(__x86_64__) || defined(__i386__) || defined(_M_X64) || defined(_M_IX86)
+#include <immintrin.h>
+#define cpu_pause() _mm_pause()
+#elif defined(__aarch64__) && defined(__GNUC__)
+#define cpu_pause() __asm__ __volatile__("yield")
+#else
+#define cpu_pause() ((void)0)
+#endif
+
 #if defined(_MSC_VER) && !defined(__clang__)
 typedef volatile long long piece_counter;
 static int64_t take_piece(piece_counter *next) { return (int64_t)InterlockedIncrement64(next) - 1; }
@@ -114,6 +123,32 @@ void spia__parallel_for(int threads, int64_t count, int64_t grain, spia__range_f
     }
     work(&l, 0);
     for (int t = 0; t < started; ++t) thread_join(handles[t]);
+}
+
+#if defined(_MSC_VER) && !defined(__clang__)
+void spia__counter_set(spia__counter *c, int64_t value) { InterlockedExchange64(&c->value, (long long)value); }
+int64_t spia__counter_get(spia__counter *c) { return (int64_t)InterlockedCompareExchange64(&c->value, 0, 0); }
+int64_t spia__counter_add(spia__counter *c, int64_t value) {
+    return (int64_t)InterlockedExchangeAdd64(&c->value, (long long)value);
+}
+#else
+void spia__counter_set(spia__counter *c, int64_t value) { atomic_store(&c->value, (long long)value); }
+int64_t spia__counter_get(spia__counter *c) { return (int64_t)atomic_load(&c->value); }
+int64_t spia__counter_add(spia__counter *c, int64_t value) {
+    return (int64_t)atomic_fetch_add(&c->value, (long long)value);
+}
+#endif
+
+void spia__wait(int *rounds) {
+    if (++*rounds < 64) {
+        cpu_pause();
+        return;
+    }
+#ifdef _WIN32
+    SwitchToThread();
+#else
+    sched_yield();
+#endif
 }
 
 int spia__processor_count(void) {

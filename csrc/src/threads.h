@@ -30,6 +30,29 @@ void spia__parallel_for(int threads, int64_t count, int64_t grain, spia__range_f
 /* The processors this process may run on (at least 1). */
 int spia__processor_count(void);
 
+#ifndef __cplusplus
+/* A counter that threads of one loop share (the sweep pipeline's progress
+ * marks): every operation is atomic and sequentially consistent, so what a
+ * thread wrote before raising a counter is seen by a thread that has read
+ * the raised value. */
+typedef struct spia__counter {
+#if defined(_MSC_VER) && !defined(__clang__)
+    volatile long long value;
+#else
+    _Atomic long long value;
+#endif
+} spia__counter;
+void spia__counter_set(spia__counter *c, int64_t value);
+int64_t spia__counter_get(spia__counter *c);
+/* Adds `value`; returns the value before. */
+int64_t spia__counter_add(spia__counter *c, int64_t value);
+
+/* One round of waiting for another thread: a processor pause while
+ * `*rounds` is small, then giving the processor up (the machine may have
+ * fewer free processors than threads). */
+void spia__wait(int *rounds);
+#endif
+
 #ifdef __cplusplus
 }
 #endif

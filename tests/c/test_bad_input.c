@@ -144,6 +144,14 @@ int main(void) {
     bad = o;
     bad.method = (spia_method)9;
     expect_code(&m, &bad, SPIA_ERROR_INVALID_ARGUMENT, "unknown method");
+    bad.method = (spia_method)(SPIA_METHOD_GS_PIA_FAST + 1);
+    expect_code(&m, &bad, SPIA_ERROR_INVALID_ARGUMENT, "the method after the last");
+    bad = o;
+    bad.solve_flags = 8;
+    expect_code(&m, &bad, SPIA_ERROR_INVALID_ARGUMENT, "unknown solve flag");
+    bad.solve_flags = -1;
+    expect_code(&m, &bad, SPIA_ERROR_INVALID_ARGUMENT, "negative solve flags");
+    bad = o;
     bad = o;
     bad.boundary_smooth = (spia_boundary_smooth)4;
     expect_code(&m, &bad, SPIA_ERROR_INVALID_ARGUMENT, "unknown boundary_smooth");
@@ -171,6 +179,12 @@ int main(void) {
         spia_result r = spia_interpolate(&m, &bad, cage, &rep, &st2);
         CHECK(r == SPIA_ERROR_CANCELLED, "cancel during the solve: %s", spia_result_name(r));
         CHECK(rep.iterations == 3, "cancelled after %d iterations", (int)rep.iterations);
+        CHECK(cage[0] == cage_sentinel, "cage written after cancel");
+        bad.method = SPIA_METHOD_GS_PIA_FAST;
+        memset(&rep, 0, sizeof rep);
+        r = spia_interpolate(&m, &bad, cage, &rep, &st2);
+        CHECK(r == SPIA_ERROR_CANCELLED && rep.iterations == 3, "GS_PIA_FAST cancelled: %s after %d iterations",
+              spia_result_name(r), (int)rep.iterations);
         CHECK(cage[0] == cage_sentinel, "cage written after cancel");
     }
 

@@ -231,8 +231,9 @@ static void all_calls(big *b, long long margin, int tight) {
         unlimit();
         expect_oom("tight validate", r, &st, before);
 
-        static const spia_method methods[] = {SPIA_METHOD_AUTO, SPIA_METHOD_PIA, SPIA_METHOD_GS_PIA,
-                                              SPIA_METHOD_CHEBYSHEV, SPIA_METHOD_WPIA, SPIA_METHOD_CG};
+        static const spia_method methods[] = {SPIA_METHOD_AUTO,      SPIA_METHOD_PIA,  SPIA_METHOD_GS_PIA,
+                                              SPIA_METHOD_CHEBYSHEV, SPIA_METHOD_WPIA, SPIA_METHOD_CG,
+                                              SPIA_METHOD_GS_PIA_FAST};
         for (size_t k = 0; k < sizeof methods / sizeof methods[0]; ++k) {
             spia_options o = spia_options_default();
             o.method = methods[k];

@@ -38,14 +38,18 @@ static void check(tmesh *m, const char *name, spia_scheme scheme) {
     CHECK(same_table(one, two), "%s: stencils differ between 1 and 2 threads", name);
     CHECK(same_table(one, three), "%s: stencils differ between 1 and 3 threads", name);
     /* (WPIA's steps are PIA's, with another weight) */
-    static const spia_method methods[] = {SPIA_METHOD_AUTO, SPIA_METHOD_PIA, SPIA_METHOD_GS_PIA, SPIA_METHOD_CHEBYSHEV,
-                                          SPIA_METHOD_CG};
+    static const spia_method methods[] = {SPIA_METHOD_AUTO,        SPIA_METHOD_PIA,         SPIA_METHOD_GS_PIA,
+                                          SPIA_METHOD_CHEBYSHEV,   SPIA_METHOD_CG,          SPIA_METHOD_GS_PIA,
+                                          SPIA_METHOD_GS_PIA_FAST, SPIA_METHOD_GS_PIA_FAST, SPIA_METHOD_GS_PIA_FAST};
+    static const int32_t flags[] = {0, 0, 0, 0, 0, SPIA_SOLVE_MULTICOLOUR, 0, SPIA_SOLVE_FIRST_STEP,
+                                    SPIA_SOLVE_DOUBLE_SWEEPS};
     const size_t size = sizeof(float) * 3 * (size_t)m->nv;
     float *c1 = (float *)malloc(size), *c2 = (float *)malloc(size);
     spia_method auto_method = SPIA_METHOD_AUTO;
     for (size_t k = 0; k < sizeof methods / sizeof methods[0]; ++k) {
         spia_options o = spia_options_default();
         o.method = methods[k];
+        o.solve_flags = flags[k];
         o.tolerance = 1e-5;
         o.max_iterations = 40;
         spia_report r1, r2;
@@ -65,7 +69,14 @@ static void check(tmesh *m, const char *name, spia_scheme scheme) {
               (int)r2.iterations);
         CHECK(a < 0 || memcmp(c1, c2, size) == 0, "%s method %d: cages differ between 1 and 2 threads", name,
               (int)methods[k]);
-        CHECK(r1.max_error == r2.max_error, "%s method %d: reported errors differ", name, (int)methods[k]);
+            CHECK(r1.max_error == r2.max_error, "%s method %d: reported errors differ", name, (int)methods[k]);
+        if (methods[k] == SPIA_METHOD_GS_PIA_FAST || (flags[k] & SPIA_SOLVE_MULTICOLOUR)) {
+            /* the threads really share the sweeps here: three of them too */
+            o.threads = 3;
+            spia_result c = spia_solve(one, m->pos, &o, c2, &r2, &st);
+            CHECK(c == a && r2.iterations == r1.iterations && memcmp(c1, c2, size) == 0,
+                  "%s method %d flags %d: cages differ between 1 and 3 threads", name, (int)methods[k], (int)flags[k]);
+        }
     }
     printf("%-32s %7d vertices: same stencils and cages with 1, 2 (and 3) threads (AUTO took method %d)\n", name,
            (int)m->nv, (int)auto_method);

@@ -112,7 +112,9 @@ static void decode_settings(reader *r, settings *s) {
     s->has_edge_creases = (flags >> 5) & 1;
     s->has_vertex_creases = (flags >> 6) & 1;
     s->has_face_shapes = (flags >> 7) & 1;
-    s->o.method = (spia_method)(u8(r) % 7); /* 6: unknown */
+    b = u8(r);
+    s->o.method = (spia_method)(b % 8);       /* 7: unknown */
+    s->o.solve_flags = (int32_t)(b >> 3) & 7; /* the three SPIA_SOLVE_* */
     s->o.quality = u8(r) % 12;              /* 0: default, 11: out of range */
     b = u8(r);
     s->o.max_iterations = b == 255 ? -1 : 1 + b % 48;

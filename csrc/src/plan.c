@@ -1,0 +1,575 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
+/* The sweep layout of a stencil table, for GS_PIA_FAST (see spia_plan in
+ * internal.h and fast.c).
+ *
+ * Gauss-Seidel in vertex order is a chain: each row reads the row swept
+ * just before it, so a sweep runs at the speed of one row's latency, on one
+ * thread.  The layout here breaks the chain in two ways.  The rows are
+ * grouped by the levels of a breadth-first search through the stencils, so
+ * that a row refers only to its own level and the two beside it; within a
+ * level they are ordered by a colouring of the level, so that the rows
+ * swept one after another are not neighbours.  And the levels, gathered in
+ * chunks, let a sweep start on the first chunks while the sweep before it
+ * is still on later ones: a chunk may be swept again once the chunks it
+ * refers to have been, so several sweeps run at once, each on a thread,
+ * and do exactly what they would one after another.
+ *
+ * The layout depends on the table alone, never on the thread count; it is
+ * built once, with the table. */
+#include "internal.h"
+#include "threads.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+void spia__plan_free(spia_plan *p) {
+    if (!p) return;
+    free(p->order);
+    free(p->chunk_start);
+    free(p->chunk_entry);
+    free(p->length);
+    free(p->code8);
+    free(p->code16);
+    free(p->delta16);
+    free(p->delta32);
+    free(p->weight);
+    free(p->weight_f);
+    free(p->inverse_f);
+    free(p->signed_f);
+    free(p);
+}
+
+/* ------------------------------------------------------------------------ */
+/* The order: breadth-first levels, coloured                                 */
+/* ------------------------------------------------------------------------ */
+
+/* The stencils as a graph: row r's own columns and, when in_offsets is
+ * set, through the transposed pattern, the rows whose columns hold r too
+ * (a boundary vertex's stencil leaves out the interior vertices whose
+ * stencils hold it). */
+typedef struct graph {
+    const spia_stencils *s;
+    int64_t *in_offsets; /* rows + 1 */
+    int32_t *in_rows;
+} graph;
+
+/* in_offsets (rows + 1) and in_rows (at least the table's entries) are
+ * the caller's. */
+static void graph_build(graph *g, const spia_stencils *s, int64_t *in_offsets, int32_t *in_rows) {
+    const int32_t n = s->rows;
+    g->s = s;
+    g->in_offsets = in_offsets;
+    g->in_rows = in_rows;
+    memset(in_offsets, 0, sizeof(int64_t) * ((size_t)n + 1));
+    for (int32_t r = 0; r < n; ++r)
+        for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k)
+            if (s->indices[k] != r) in_offsets[s->indices[k] + 1]++;
+    for (int32_t r = 0; r < n; ++r) in_offsets[r + 1] += in_offsets[r];
+    /* Filled through the offsets themselves (each ends up at the next
+     * row's start), then shifted back. */
+    for (int32_t r = 0; r < n; ++r)
+        for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k) {
+            const int32_t j = s->indices[k];
+            if (j != r) in_rows[in_offsets[j]++] = r;
+        }
+    for (int32_t r = n; r > 0; --r) in_offsets[r] = in_offsets[r - 1];
+    in_offsets[0] = 0;
+}
+
+/* Runs `body` for every neighbour u of v (u != v; some twice). */
+#define FOR_NEIGHBOURS(g, v, u, body)                                                         \
+    do {                                                                                      \
+        for (int64_t k_ = (g)->s->offsets[v]; k_ < (g)->s->offsets[(v) + 1]; ++k_) {          \
+            const int32_t u = (g)->s->indices[k_];                                            \
+            if (u != (v)) body                                                                \
+        }                                                                                     \
+        if ((g)->in_offsets)                                                                  \
+            for (int64_t k_ = (g)->in_offsets[v]; k_ < (g)->in_offsets[(v) + 1]; ++k_) {     \
+                const int32_t u = (g)->in_rows[k_];                                           \
+                body                                                                          \
+            }                                                                                 \
+    } while (0)
+
+#if defined(__GNUC__) || defined(__clang__)
+#define PREFETCH(address) __builtin_prefetch(address)
+#else
+#define PREFETCH(address) ((void)0)
+#endif
+/* Rows ahead in the queue whose stencils are fetched early. */
+enum { LOOKAHEAD = 8, UNCOLOURED = 0xff };
+
+/* Breadth-first search from `root` through rows whose level is -1, written
+ * to queue[begin ..]; returns the end.  Each row is coloured as it leaves
+ * the queue: the first colour (of 32; more share the last) that no
+ * neighbour of its level has taken, those having left the queue before
+ * it. */
+static int32_t bfs(const graph *g, int32_t root, int32_t *queue, int32_t begin, int32_t *level, unsigned char *colour) {
+    int32_t head = begin, tail = begin;
+    queue[tail++] = root;
+    level[root] = 0;
+    while (head < tail) {
+        if (head + 2 * LOOKAHEAD < tail) {
+            const int32_t further = queue[head + 2 * LOOKAHEAD];
+            PREFETCH(&g->s->offsets[further]);
+            if (g->in_offsets) PREFETCH(&g->in_offsets[further]);
+        }
+        if (head + LOOKAHEAD < tail) {
+            const int32_t ahead = queue[head + LOOKAHEAD];
+            PREFETCH(&g->s->indices[g->s->offsets[ahead]]);
+            if (g->in_offsets) PREFETCH(&g->in_rows[g->in_offsets[ahead]]);
+        }
+        const int32_t v = queue[head++];
+        uint32_t used = 0;
+        FOR_NEIGHBOURS(g, v, u, {
+            if (level[u] < 0) {
+                level[u] = level[v] + 1;
+                queue[tail++] = u;
+            } else if (level[u] == level[v] && colour[u] != UNCOLOURED) {
+                used |= 1u << colour[u];
+            }
+        });
+        int c = 0;
+        while (c < 31 && (used >> c & 1u)) ++c;
+        colour[v] = (unsigned char)c;
+    }
+    return tail;
+}
+
+/* Scratch room for the plan's build, one block (so that all of it goes
+ * back at once): what the search needs, then, in the same room, what
+ * filling the plan needs. */
+typedef struct scratch {
+    uint16_t *codes;     /* per table entry */
+    int32_t *position;   /* per row; NULL in vertex order */
+    int32_t *chunk_of;   /* per row; NULL in vertex order */
+    /* the search: */
+    int64_t *in_offsets; /* rows + 1 */
+    int32_t *in_rows;    /* entries */
+    int32_t *queue;      /* rows */
+    unsigned char *colour;
+    /* then the filling, in the same room: */
+    int64_t *entry;      /* rows + 1 */
+    int32_t *deltas;     /* entries */
+} scratch;
+
+static size_t rounded(size_t bytes) { return (bytes + 15) & ~(size_t)15; }
+
+/* The block for a table of n rows and `entries` entries, cut into its
+ * arrays; NULL when out of memory. */
+static void *scratch_make(scratch *x, size_t n, size_t entries, int levels) {
+    const size_t search = levels ? rounded(8 * (n + 1)) + rounded(4 * entries) + rounded(4 * n) + rounded(n) : 0;
+    const size_t filling = rounded(8 * (n + 1)) + rounded(4 * entries);
+    const size_t bytes = rounded(2 * entries) + (levels ? 2 * rounded(4 * n) : 0) + (search > filling ? search : filling);
+    char *block = (char *)malloc(bytes), *at = block;
+    if (!block) return NULL;
+    memset(x, 0, sizeof *x);
+    x->codes = (uint16_t *)at;
+    at += rounded(2 * entries);
+    if (levels) {
+        x->position = (int32_t *)at;
+        at += rounded(4 * n);
+        x->chunk_of = (int32_t *)at;
+        at += rounded(4 * n);
+    }
+    char *shared = at;
+    if (levels) {
+        x->in_offsets = (int64_t *)at;
+        at += rounded(8 * (n + 1));
+        x->in_rows = (int32_t *)at;
+        at += rounded(4 * entries);
+        x->queue = (int32_t *)at;
+        at += rounded(4 * n);
+        x->colour = (unsigned char *)at;
+    }
+    at = shared;
+    x->entry = (int64_t *)at;
+    at += rounded(8 * (n + 1));
+    x->deltas = (int32_t *)at;
+    return block;
+}
+
+/* The level order: p->order and p->chunk_start filled; x->chunk_of[r] the
+ * chunk of table row r and x->position[r] its position.  The search follows
+ * each row's own columns, and with `both_ways` the rows whose columns hold
+ * it too.  Returns 0 when out of memory. */
+static int level_order(const spia_stencils *s, spia_plan *p, scratch *x, int both_ways) {
+    const int32_t n = s->rows;
+    graph g;
+    memset(&g, 0, sizeof g);
+    g.s = s;
+    int32_t *queue = x->queue, *chunk_of = x->chunk_of, *position = x->position;
+    int32_t *level = chunk_of; /* the level of each row, until it becomes the chunk */
+    unsigned char *colour = x->colour;
+    free(p->order);
+    free(p->chunk_start);
+    p->chunk_start = NULL;
+    p->order = (int32_t *)malloc(sizeof(int32_t) * (size_t)n);
+    int ok = p->order != NULL;
+    if (ok && both_ways) graph_build(&g, s, x->in_offsets, x->in_rows);
+    if (ok) {
+        /* Levels from a first row of each connected part, one part after
+         * another: rows whose stencils hold only boundary rows are no roots
+         * while others are left (the search from one, along its own
+         * columns, would stay on its boundary). */
+        memset(colour, UNCOLOURED, (size_t)(n > 0 ? n : 0));
+        for (int32_t r = 0; r < n; ++r) level[r] = -1;
+        int32_t begin = 0, base = 0;
+        for (int32_t pick = 0; pick < 2 * n; ++pick) {
+            const int32_t root = pick < n ? pick : pick - n;
+            if (level[root] >= 0 || (pick < n && s->boundary[root])) continue;
+            const int32_t end = bfs(&g, root, queue, begin, level, colour);
+            int32_t top = 0;
+            for (int32_t q = begin; q < end; ++q) {
+                const int32_t v = queue[q];
+                if (level[v] > top) top = level[v];
+                level[v] += base;
+            }
+            base += top + 1;
+            begin = end;
+        }
+        /* Each level sorted by colour (stably), and the chunks. */
+        int32_t chunks = 0, chunk_rows = 0;
+        for (int32_t a = 0; a < n;) {
+            int32_t b = a;
+            while (b < n && level[queue[b]] == level[queue[a]]) ++b;
+            int32_t count[33] = {0};
+            for (int32_t q = a; q < b; ++q) count[colour[queue[q]] + 1]++;
+            for (int c = 0; c < 32; ++c) count[c + 1] += count[c];
+            for (int32_t q = a; q < b; ++q) p->order[a + count[colour[queue[q]]]++] = queue[q];
+            if (chunk_rows == 0) ++chunks;
+            chunk_rows += b - a;
+            if (chunk_rows >= SPIA_PLAN_CHUNK_ROWS) chunk_rows = 0;
+            a = b;
+        }
+        p->chunks = chunks;
+        p->chunk_start = (int32_t *)malloc(sizeof(int32_t) * ((size_t)chunks + 1));
+        ok = p->chunk_start != NULL;
+        if (ok) {
+            /* The same walk again, now over the sorted order, writing the
+             * chunks, each row's chunk and position. */
+            int32_t c = -1;
+            chunk_rows = 0;
+            for (int32_t a = 0; a < n;) {
+                int32_t b = a;
+                const int32_t lv = level[p->order[a]];
+                while (b < n && level[p->order[b]] == lv) ++b;
+                if (chunk_rows == 0) p->chunk_start[++c] = a;
+                chunk_rows += b - a;
+                if (chunk_rows >= SPIA_PLAN_CHUNK_ROWS) chunk_rows = 0;
+                for (int32_t q = a; q < b; ++q) queue[q] = c; /* chunk by position, for now */
+                a = b;
+            }
+            p->chunk_start[chunks] = n;
+            for (int32_t q = 0; q < n; ++q) {
+                chunk_of[p->order[q]] = queue[q];
+                position[p->order[q]] = q;
+            }
+        }
+    }
+    return ok;
+}
+
+/* ------------------------------------------------------------------------ */
+/* The dictionary of weights                                                 */
+/* ------------------------------------------------------------------------ */
+
+enum { DICTIONARY_BITS = 17, DICTIONARY_LIMIT = 32768 }; /* each weight takes two codes */
+
+typedef struct dictionary {
+    uint64_t *keys; /* the bits of the weight; 0 (the weight +0.0, never in a table) when empty */
+    int32_t *codes;
+    double *weight; /* DICTIONARY_LIMIT */
+    int32_t count;
+} dictionary;
+
+static uint64_t bits_of(double w) {
+    uint64_t b;
+    memcpy(&b, &w, sizeof b);
+    return b;
+}
+
+/* The code of w, added if new; -1 past DICTIONARY_LIMIT weights. */
+static int32_t dictionary_code(dictionary *d, double w) {
+    const uint64_t key = bits_of(w);
+    const uint64_t mask = ((uint64_t)1 << DICTIONARY_BITS) - 1;
+    uint64_t slot = (key * 0x9E3779B97F4A7C15ull) >> (64 - DICTIONARY_BITS);
+    for (;;) {
+        if (d->keys[slot] == key) return d->codes[slot];
+        if (d->keys[slot] == 0) break;
+        slot = (slot + 1) & mask;
+    }
+    if (d->count >= DICTIONARY_LIMIT) return -1;
+    d->keys[slot] = key;
+    d->codes[slot] = d->count;
+    d->weight[d->count] = w;
+    return d->count++;
+}
+
+/* ------------------------------------------------------------------------ */
+/* The plan                                                                  */
+/* ------------------------------------------------------------------------ */
+
+/* The position of table row r, and its chunk. */
+typedef struct placing {
+    const spia_stencils *s;
+    spia_plan *p;
+    const int32_t *position, *chunk_of; /* NULL: vertex order, one chunk */
+    uint16_t *codes;                    /* per table entry: the dictionary's, then the plan's */
+    int32_t *deltas;                    /* per table entry: column position - row position */
+    const int64_t *entry;               /* per position: its first entry in the plan */
+    int64_t widest[256];                /* per thread: the largest |column position - row position| */
+    int32_t reach[256];                 /* per thread */
+} placing;
+
+static inline int32_t position_of(const placing *pl, int32_t r) { return pl->position ? pl->position[r] : r; }
+static inline int32_t chunk_of(const placing *pl, int32_t r) { return pl->chunk_of ? pl->chunk_of[r] : 0; }
+
+/* The lengths of positions [i0, i1). */
+static void length_rows(void *context, int64_t i0, int64_t i1, int thread) {
+    (void)thread;
+    const placing *pl = (const placing *)context;
+    const spia_stencils *s = pl->s;
+    spia_plan *p = pl->p;
+    for (int64_t i = i0; i < i1; ++i) {
+        const int32_t r = p->order ? p->order[i] : (int32_t)i;
+        if (p->order && i + 4 * LOOKAHEAD < i1) PREFETCH(&s->offsets[p->order[i + 4 * LOOKAHEAD]]);
+        p->length[i] = (uint16_t)(s->offsets[r + 1] - s->offsets[r]);
+    }
+}
+
+/* The reach over table rows [r0, r1): how many chunks apart a row and a
+ * column of its stencil are, at most. */
+static void reach_rows(void *context, int64_t r0, int64_t r1, int thread) {
+    placing *pl = (placing *)context;
+    const spia_stencils *s = pl->s;
+    int32_t reach = pl->reach[thread];
+    for (int64_t r = r0; r < r1; ++r) {
+        const int32_t c = pl->chunk_of[r];
+        for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k) {
+            const int32_t cj = pl->chunk_of[s->indices[k]];
+            const int32_t apart = cj > c ? cj - c : c - cj;
+            if (apart > reach) reach = apart;
+        }
+    }
+    pl->reach[thread] = reach;
+}
+
+/* Table rows [r0, r1), in table order: each entry's code (into the second
+ * half of the dictionary for the larger off-diagonal weights) and column
+ * offset, the offsets' range and the reach. */
+static void measure_rows(void *context, int64_t r0, int64_t r1, int thread) {
+    placing *pl = (placing *)context;
+    const spia_stencils *s = pl->s;
+    const int32_t edges = pl->p->words / 2;
+    int64_t widest = pl->widest[thread];
+    int32_t reach = pl->reach[thread];
+    for (int64_t r = r0; r < r1; ++r) {
+        const int32_t i = position_of(pl, (int32_t)r), c = chunk_of(pl, (int32_t)r);
+        double largest = 0.0;
+        for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k)
+            if (s->indices[k] != r && s->weights[k] > largest) largest = s->weights[k];
+        for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k) {
+            const int32_t j = s->indices[k];
+            if (j != r && s->weights[k] >= 0.5 * largest) pl->codes[k] = (uint16_t)(pl->codes[k] + edges);
+            const int64_t delta = (int64_t)position_of(pl, j) - i;
+            pl->deltas[k] = (int32_t)delta;
+            const int64_t wide = delta > 0 ? delta : -delta;
+            if (wide > widest) widest = wide;
+            const int32_t apart = chunk_of(pl, j) > c ? chunk_of(pl, j) - c : c - chunk_of(pl, j);
+            if (apart > reach) reach = apart;
+        }
+    }
+    pl->widest[thread] = widest;
+    pl->reach[thread] = reach;
+}
+
+/* Positions [i0, i1) of the plan from their table rows' codes and
+ * offsets: the row's own entry first, then the others as the table has
+ * them.  (By position, so that threads write apart; the rows a few
+ * positions ahead are fetched early.) */
+static void place_rows(void *context, int64_t i0, int64_t i1, int thread) {
+    (void)thread;
+    placing *pl = (placing *)context;
+    const spia_stencils *s = pl->s;
+    spia_plan *p = pl->p;
+    for (int64_t i = i0; i < i1; ++i) {
+        const int32_t r = p->order ? p->order[i] : (int32_t)i;
+        if (p->order) {
+            if (i + 2 * LOOKAHEAD < i1) PREFETCH(&s->offsets[p->order[i + 2 * LOOKAHEAD]]);
+            if (i + LOOKAHEAD < i1) {
+                const int64_t ahead = s->offsets[p->order[i + LOOKAHEAD]];
+                PREFETCH(&pl->codes[ahead]);
+                PREFETCH(&pl->deltas[ahead]);
+            }
+        }
+        int64_t e = pl->entry[i];
+        for (int pass = 0; pass < 2; ++pass)
+            for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k) {
+                if ((pl->deltas[k] == 0) != (pass == 0)) continue; /* the row's own entry first */
+                if (p->code8)
+                    p->code8[e] = (uint8_t)pl->codes[k];
+                else
+                    p->code16[e] = pl->codes[k];
+                if (p->delta16)
+                    p->delta16[e] = (int16_t)pl->deltas[k];
+                else
+                    p->delta32[e] = pl->deltas[k];
+                ++e;
+            }
+    }
+}
+
+spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status) {
+    const int32_t n = s->rows;
+    s->plan = NULL;
+    if (threads < 1) threads = 1;
+    if (threads > 256) threads = 256;
+    if (n < SPIA_PARALLEL_ROWS) threads = 1;
+    for (int32_t r = 0; r < n; ++r)
+        if (s->offsets[r + 1] - s->offsets[r] > 65535) return SPIA_OK; /* no plan: GS_PIA_FAST falls back */
+    const size_t entries = (size_t)(s->nnz > 0 ? s->nnz : 1);
+    const int levels = n >= SPIA_PARALLEL_ROWS;
+    spia_plan *p = (spia_plan *)calloc(1, sizeof *p);
+    scratch x;
+    void *block = p ? scratch_make(&x, (size_t)n, entries, levels) : NULL;
+    dictionary d;
+    memset(&d, 0, sizeof d);
+    if (!block) goto out_of_memory;
+    p->rows = n;
+    uint16_t *codes = x.codes;
+
+    /* The distinct weights, in table order (most rows repeat the weights of
+     * the row before in the same places: those are looked up there first). */
+    d.keys = (uint64_t *)calloc((size_t)1 << DICTIONARY_BITS, sizeof(uint64_t));
+    d.codes = (int32_t *)malloc(sizeof(int32_t) * ((size_t)1 << DICTIONARY_BITS));
+    d.weight = (double *)malloc(sizeof(double) * DICTIONARY_LIMIT);
+    if (!d.keys || !d.codes || !d.weight) goto out_of_memory;
+    p->diagonal_first = 1;
+    for (int32_t r = 0; r < n; ++r) {
+        const int64_t b = s->offsets[r], e = s->offsets[r + 1];
+        const int64_t before = r > 0 ? s->offsets[r - 1] : 0;
+        int own = 0;
+        for (int64_t k = b; k < e; ++k) {
+            const double w = s->weights[k];
+            if (s->indices[k] == r) own = w > 0.0 ? 1 : -1;
+            const int64_t same = before + (k - b);
+            int32_t code;
+            if (same < b && bits_of(s->weights[same]) == bits_of(w))
+                code = codes[same];
+            else
+                code = dictionary_code(&d, w);
+            if (code < 0) {
+                /* Too many distinct weights (shape parameters per face, say):
+                 * no plan. */
+                free(d.keys);
+                free(d.codes);
+                free(d.weight);
+                free(block);
+                spia__plan_free(p);
+                return SPIA_OK;
+            }
+            codes[k] = (uint16_t)code;
+        }
+        if (own <= 0) p->diagonal_first = 0; /* no own entry, or not a positive one */
+    }
+    free(d.keys);
+    free(d.codes);
+    d.keys = NULL;
+    d.codes = NULL;
+
+    /* The order: searched along the rows' own columns, and again both ways
+     * (the transposed pattern built) where that leaves rows referring to
+     * chunks more than two away. */
+    if (levels) {
+        if (!level_order(s, p, &x, 0)) goto out_of_memory;
+        placing reach;
+        memset(&reach, 0, sizeof reach);
+        reach.s = s;
+        reach.chunk_of = x.chunk_of;
+        spia__parallel_for(threads, n, 0, reach_rows, &reach);
+        int32_t apart = 0;
+        for (int t = 0; t < threads; ++t)
+            if (reach.reach[t] > apart) apart = reach.reach[t];
+        if (apart > 2 && !level_order(s, p, &x, 1)) goto out_of_memory;
+    } else {
+        p->chunks = 1;
+        p->chunk_start = (int32_t *)malloc(sizeof(int32_t) * 2);
+        if (!p->chunk_start) goto out_of_memory;
+        p->chunk_start[0] = 0;
+        p->chunk_start[1] = n;
+    }
+
+    /* Lengths and where each position's entries start (the search's room
+     * is the filling's now). */
+    int64_t *entry = x.entry;
+    p->length = (uint16_t *)malloc(sizeof(uint16_t) * (size_t)(n > 0 ? n : 1));
+    p->chunk_entry = (int64_t *)malloc(sizeof(int64_t) * ((size_t)p->chunks + 1));
+    if (!p->length || !p->chunk_entry) goto out_of_memory;
+    {
+        placing pl;
+        memset(&pl, 0, sizeof pl);
+        pl.s = s;
+        pl.p = p;
+        spia__parallel_for(threads, n, 0, length_rows, &pl);
+    }
+    entry[0] = 0;
+    for (int32_t i = 0; i < n; ++i) entry[i + 1] = entry[i] + p->length[i];
+    for (int32_t c = 0; c <= p->chunks; ++c) p->chunk_entry[c] = entry[p->chunk_start[c]];
+
+    /* Codes and offsets, at their widths: each weight has two codes, as
+     * itself and where it is one of the larger off-diagonal weights of its
+     * row (the first step's edges). */
+    p->words = 2 * d.count;
+    placing pl;
+    memset(&pl, 0, sizeof pl);
+    pl.s = s;
+    pl.p = p;
+    pl.position = x.position;
+    pl.chunk_of = x.chunk_of;
+    pl.codes = codes;
+    pl.deltas = x.deltas;
+    pl.entry = entry;
+    spia__parallel_for(threads, n, 0, measure_rows, &pl);
+    int64_t widest = 0;
+    for (int t = 0; t < threads; ++t) {
+        if (pl.widest[t] > widest) widest = pl.widest[t];
+        if (pl.reach[t] > p->reach) p->reach = pl.reach[t];
+    }
+    if (widest <= 32767)
+        p->delta16 = (int16_t *)malloc(sizeof(int16_t) * entries);
+    else
+        p->delta32 = (int32_t *)malloc(sizeof(int32_t) * entries);
+    if (p->words <= 256)
+        p->code8 = (uint8_t *)malloc(entries);
+    else
+        p->code16 = (uint16_t *)malloc(sizeof(uint16_t) * entries);
+    if ((!p->delta16 && !p->delta32) || (!p->code8 && !p->code16)) goto out_of_memory;
+    spia__parallel_for(threads, n, 0, place_rows, &pl);
+    free(block);
+    block = NULL;
+
+    const size_t words = (size_t)(p->words > 0 ? p->words : 1);
+    p->weight = (double *)malloc(sizeof(double) * words);
+    p->weight_f = (float *)malloc(sizeof(float) * words);
+    p->inverse_f = (float *)malloc(sizeof(float) * words);
+    p->signed_f = (float *)malloc(sizeof(float) * words);
+    if (!p->weight || !p->weight_f || !p->inverse_f || !p->signed_f) goto out_of_memory;
+    for (int32_t c = 0; c < p->words; ++c) {
+        const double w = d.weight[c % d.count];
+        p->weight[c] = w;
+        p->weight_f[c] = (float)w;
+        p->inverse_f[c] = (float)(1.0 / w);
+        p->signed_f[c] = c < d.count ? (float)w : -(float)w;
+    }
+    free(d.weight);
+    s->plan = p;
+    return SPIA_OK;
+
+out_of_memory:
+    free(d.keys);
+    free(d.codes);
+    free(d.weight);
+    free(block);
+    spia__plan_free(p);
+    return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory laying out the stencils for the solver");
+}
