@@ -358,6 +358,7 @@ def main():
     ap.add_argument("--budget-seconds", type=float, default=float(os.environ.get("BENCH_BUDGET_S", 120)))
     ap.add_argument("--budget-gb", type=float, default=float(os.environ.get("BENCH_BUDGET_GB", 8)))
     ap.add_argument("--blender", default=os.environ.get("BLENDER", "blender"))
+    ap.add_argument("--largest", default=None, help="the largest sphere to run (a label such as 1M)")
     ap.add_argument("--skip", default="", help="comma-separated parts to leave out: scaling,direct,osd,blender,hard")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -374,6 +375,11 @@ def main():
     budget_s = min(args.budget_seconds, 30.0) if args.quick else args.budget_seconds
     budget_b = args.budget_gb * 2**30
     spheres = QUICK_SPHERES if args.quick else SPHERES
+    if args.largest:
+        labels = [label for label, _k in spheres]
+        if args.largest not in labels:
+            sys.exit(f"--largest must be one of {', '.join(labels)}")
+        spheres = spheres[:labels.index(args.largest) + 1]
     big = "100k" if args.quick else "1M"
     big_k = dict(SPHERES)[big]
     started = time.monotonic()
