@@ -394,8 +394,9 @@ spia_result prepare(const spia_mesh *m, const spia_adjacency *adj, const spia_op
 struct SparseStencil {
     std::vector<std::pair<int32_t, double>> w;
     void Clear(void * = nullptr) { w.clear(); }
-    void AddWithWeight(const SparseStencil &src, float weight) {
-        for (const auto &e : src.w) w.emplace_back(e.first, (double)weight * e.second);
+    // Weights from PrimvarRefinerReal<float> (Loop) or <double>.
+    void AddWithWeight(const SparseStencil &src, double weight) {
+        for (const auto &e : src.w) w.emplace_back(e.first, weight * e.second);
     }
     void Compact() {
         std::sort(w.begin(), w.end());
@@ -789,25 +790,6 @@ void spatial_order(const spia_mesh *m, const Prepared &p, std::vector<int32_t> &
     for (size_t i = 0; i < list.size(); ++i) list[i] = keyed[i].second;
 }
 
-// A sparse stencil for Far::PrimvarRefiner in double precision.
-struct SparseStencilD {
-    std::vector<std::pair<int32_t, double>> w;
-    void Clear(void * = nullptr) { w.clear(); }
-    void AddWithWeight(const SparseStencilD &src, double weight) {
-        for (const auto &e : src.w) w.emplace_back(e.first, weight * e.second);
-    }
-    void Compact() {
-        std::sort(w.begin(), w.end());
-        size_t out = 0;
-        for (size_t i = 0; i < w.size();) {
-            int32_t j = w[i].first;
-            double sum = 0.0;
-            while (i < w.size() && w[i].first == j) sum += w[i++].second;
-            w[out++] = std::make_pair(j, sum);
-        }
-        w.resize(out);
-    }
-};
 
 // The limit point of vertex c of a refined level (all faces quads) as
 // OpenSubdiv's limit masks give it, for a vertex with no semi-sharp
@@ -815,7 +797,7 @@ struct SparseStencilD {
 // boundary edges), (a + 4 c + b) / 6 on a crease or boundary, else
 // (n^2 c + 4 sum e + sum d) / (n (n + 5)) over its edge neighbours e and
 // the opposite corners d of its faces.  Rows of the points' stencils.
-bool limit_mask(const Far::TopologyLevel &level, Far::Index c, const std::vector<SparseStencilD> &points,
+bool limit_mask(const Far::TopologyLevel &level, Far::Index c, const std::vector<SparseStencil> &points,
                 std::vector<std::pair<int32_t, double>> &row) {
     std::vector<std::pair<Far::Index, double>> mask;
     Far::ConstIndexArray ve = level.GetVertexEdges(c);
@@ -915,8 +897,8 @@ spia_result decayed_rows(const spia_mesh *m, const spia_adjacency *adj, const sp
         // Each level's kept points as stencils over the previous level's
         // points (a few weights each); a finished vertex's row is carried
         // back through them to the control vertices.
-        std::vector<std::vector<SparseStencilD>> steps;
-        std::vector<SparseStencilD> identity;
+        std::vector<std::vector<SparseStencil>> steps;
+        std::vector<SparseStencil> identity;
         auto back = [&](std::vector<std::pair<int32_t, double>> &row) {
             for (size_t l = steps.size(); l-- > 0;) {
                 std::vector<std::pair<int32_t, double>> wider;
@@ -947,15 +929,15 @@ spia_result decayed_rows(const spia_mesh *m, const spia_adjacency *adj, const sp
             uniform.fullTopologyInLastLevel = true;
             r->RefineUniform(uniform);
             const Far::TopologyLevel &l0 = r->GetLevel(0), &l1 = r->GetLevel(1);
-            std::vector<SparseStencilD> next((size_t)l1.GetNumVertices());
+            std::vector<SparseStencil> next((size_t)l1.GetNumVertices());
             Far::PrimvarRefinerReal<double> primvar(*r);
             identity.resize((size_t)nv);
             for (int32_t i = 0; i < nv; ++i) {
                 identity[(size_t)i].w.assign(1, std::make_pair(i, 1.0));
             }
-            SparseStencilD *src = identity.data(), *dst = next.data();
+            SparseStencil *src = identity.data(), *dst = next.data();
             primvar.Interpolate(1, src, dst);
-            for (SparseStencilD &st : next) st.Compact();
+            for (SparseStencil &st : next) st.Compact();
             std::vector<int32_t> child((size_t)n_batch, -1);
             for (int32_t i = 0; i < n_batch; ++i) {
                 if (done[(size_t)i]) continue;
@@ -991,7 +973,7 @@ spia_result decayed_rows(const spia_mesh *m, const spia_adjacency *adj, const sp
                 for (int k = 0; k < uf.size(); ++k) keep[(size_t)uf[k]] = 1;
             }
             std::vector<int32_t> local((size_t)l1.GetNumVertices(), -1);
-            std::vector<SparseStencilD> kept;
+            std::vector<SparseStencil> kept;
             sizes.clear();
             fv.clear();
             for (int32_t f = 0; f < l1.GetNumFaces(); ++f) {
@@ -1197,18 +1179,18 @@ spia_result adaptive_rows(const spia_mesh *m, const spia_adjacency *adj, const s
         std::vector<int64_t> level_start((size_t)max_level + 2, 0);
         for (int l = 0; l <= max_level; ++l)
             level_start[(size_t)l + 1] = level_start[(size_t)l] + sr.GetLevel(l).GetNumVertices();
-        std::vector<std::vector<SparseStencilD>> steps((size_t)max_level + 1);
+        std::vector<std::vector<SparseStencil>> steps((size_t)max_level + 1);
         {
             Far::PrimvarRefinerReal<double> primvar(sr);
-            std::vector<SparseStencilD> identity;
+            std::vector<SparseStencil> identity;
             for (int l = 1; l <= max_level; ++l) {
                 const int32_t prev = sr.GetLevel(l - 1).GetNumVertices();
                 identity.resize((size_t)prev);
                 for (int32_t i = 0; i < prev; ++i) identity[(size_t)i].w.assign(1, std::make_pair(i, 1.0));
                 steps[(size_t)l].resize((size_t)sr.GetLevel(l).GetNumVertices());
-                SparseStencilD *src = identity.data(), *dst = steps[(size_t)l].data();
+                SparseStencil *src = identity.data(), *dst = steps[(size_t)l].data();
                 primvar.Interpolate(l, src, dst);
-                for (SparseStencilD &st : steps[(size_t)l]) st.Compact();
+                for (SparseStencil &st : steps[(size_t)l]) st.Compact();
             }
         }
         Far::PatchTableFactory::Options patch_options;
