@@ -807,9 +807,17 @@ static int32_t run_length(const fast *f, const double *recent, int32_t known, do
     if (known < 2) return FIRST_RUN;
     const double rho = contraction(recent, known);
     if (!(rho < 0.95)) return 1;
-    const double need = ceil(log(EXPECTED_MARGIN * threshold / (recent[1] * rho)) / log(rho));
-    if (!(need >= 1.0)) return 1;
-    return need > LONGEST_RUN ? LONGEST_RUN : (int32_t)need;
+    /* The least n with rho^n <= target, by multiplying: libm's log is
+     * GLIBC_2.29, newer than the glibc official Blender runs on (2.28). */
+    const double target = EXPECTED_MARGIN * threshold / (recent[1] * rho);
+    if (!(target < 1.0)) return 1;
+    double power = rho;
+    int32_t n = 1;
+    while (power > target && n < LONGEST_RUN) {
+        power *= rho;
+        ++n;
+    }
+    return n;
 }
 
 /* One stage (all of the solve unless staged): sweeps until the tolerance,
