@@ -390,6 +390,22 @@ spia_result prepare(const spia_mesh *m, const spia_adjacency *adj, const spia_op
     return SPIA_OK;
 }
 
+// (index, weight) pairs sorted and repeated indices added up (in sorted
+// order, so the sums do not depend on how the pairs came); zero sums are
+// dropped when asked.
+template <class I>
+void merge_entries(std::vector<std::pair<I, double>> &v, bool drop_zeros) {
+    std::sort(v.begin(), v.end());
+    size_t out = 0;
+    for (size_t i = 0; i < v.size();) {
+        const I j = v[i].first;
+        double sum = 0.0;
+        while (i < v.size() && v[i].first == j) sum += v[i++].second;
+        if (!drop_zeros || sum != 0.0) v[out++] = std::make_pair(j, sum);
+    }
+    v.resize(out);
+}
+
 // A sparse stencil for Far::PrimvarRefiner: weights over control vertices.
 struct SparseStencil {
     std::vector<std::pair<int32_t, double>> w;
@@ -398,18 +414,47 @@ struct SparseStencil {
     void AddWithWeight(const SparseStencil &src, double weight) {
         for (const auto &e : src.w) w.emplace_back(e.first, weight * e.second);
     }
-    void Compact() {
-        std::sort(w.begin(), w.end());
-        size_t out = 0;
-        for (size_t i = 0; i < w.size();) {
-            int32_t j = w[i].first;
-            double sum = 0.0;
-            while (i < w.size() && w[i].first == j) sum += w[i++].second;
-            w[out++] = std::make_pair(j, sum);
-        }
-        w.resize(out);
-    }
+    void Compact() { merge_entries(w, false); }
 };
+
+// One level down: the entries of row with indices in [begin, end) replaced
+// by those points' stencils in `step` (over the level below, whose points
+// start at `below`), the others kept; then merged, zero sums dropped.
+template <class I>
+void carry_down(std::vector<std::pair<I, double>> &row, const std::vector<SparseStencil> &step, I begin, I end,
+                I below, std::vector<std::pair<I, double>> &scratch) {
+    scratch.clear();
+    for (const auto &e : row) {
+        if (e.first >= begin && e.first < end) {
+            for (const auto &x : step[(size_t)(e.first - begin)].w)
+                scratch.emplace_back(below + (I)x.first, e.second * x.second);
+        } else {
+            scratch.push_back(e);
+        }
+    }
+    merge_entries(scratch, true);
+    row.swap(scratch);
+}
+
+// Runs run(b) for batches 0 .. count - 1 on the threads (at most one per
+// batch).  Out of memory anywhere is thrown again here; another exception
+// is passed to failed(b).
+template <class Run, class Failed>
+void run_batches(int threads, int32_t count, Run &&run, Failed &&failed) {
+    std::atomic<bool> out_of_memory(false);
+    parallel_for(std::max(1, std::min(threads, (int)count)), count, 1, [&](int64_t b0, int64_t b1, int) {
+        for (int64_t b = b0; b < b1; ++b) {
+            try {
+                run((int32_t)b);
+            } catch (const std::bad_alloc &) {
+                out_of_memory = true;
+            } catch (...) {
+                failed((int32_t)b);
+            }
+        }
+    });
+    if (out_of_memory) throw std::bad_alloc();
+}
 
 // Rows of the exact limit (uniform refinement `levels` deep, then limit
 // masks) for the flagged vertices of a sub-mesh refiner.
@@ -579,6 +624,20 @@ struct HeldRows {
     std::vector<int32_t> size;
     std::vector<int32_t> indices;
     std::vector<double> weights;
+    // Vertex o's row from (osd column, weight) entries.
+    template <class Entries>
+    void hold(const Prepared &p, int32_t o, const Entries &entries) {
+        if (start.empty()) {
+            start.assign((size_t)p.osd_n, -1);
+            size.assign((size_t)p.osd_n, 0);
+        }
+        start[(size_t)o] = (int64_t)indices.size();
+        for (const auto &e : entries) {
+            indices.push_back(p.vertex_of[(size_t)e.first]);
+            weights.push_back(e.second);
+        }
+        size[(size_t)o] = (int32_t)((int64_t)indices.size() - start[(size_t)o]);
+    }
 };
 
 // How each vertex that needs OpenSubdiv is evaluated (step 5).
@@ -843,15 +902,7 @@ bool limit_mask(const Far::TopologyLevel &level, Far::Index c, const std::vector
     row.clear();
     for (const auto &m : mask)
         for (const auto &e : points[(size_t)m.first].w) row.emplace_back(e.first, m.second * e.second);
-    std::sort(row.begin(), row.end());
-    size_t out = 0;
-    for (size_t i = 0; i < row.size();) {
-        const int32_t j = row[i].first;
-        double sum = 0.0;
-        while (i < row.size() && row[i].first == j) sum += row[i++].second;
-        if (sum != 0.0) row[out++] = std::make_pair(j, sum);
-    }
-    row.resize(out);
+    merge_entries(row, true);
     return true;
 }
 
@@ -899,20 +950,10 @@ spia_result decayed_rows(const spia_mesh *m, const spia_adjacency *adj, const sp
         // back through them to the control vertices.
         std::vector<std::vector<SparseStencil>> steps;
         std::vector<SparseStencil> identity;
+        std::vector<std::pair<int32_t, double>> scratch;
         auto back = [&](std::vector<std::pair<int32_t, double>> &row) {
-            for (size_t l = steps.size(); l-- > 0;) {
-                std::vector<std::pair<int32_t, double>> wider;
-                for (const auto &e : row)
-                    for (const auto &x : steps[l][(size_t)e.first].w) wider.emplace_back(x.first, e.second * x.second);
-                std::sort(wider.begin(), wider.end());
-                row.clear();
-                for (size_t i = 0; i < wider.size();) {
-                    const int32_t j = wider[i].first;
-                    double sum = 0.0;
-                    while (i < wider.size() && wider[i].first == j) sum += wider[i++].second;
-                    if (sum != 0.0) row.emplace_back(j, sum);
-                }
-            }
+            for (size_t l = steps.size(); l-- > 0;)
+                carry_down<int32_t>(row, steps[l], 0, INT32_MAX, 0, scratch);
         };
         std::vector<int32_t> at((size_t)n_batch);  // each vertex's point in the current mesh
         for (int32_t i = 0; i < n_batch; ++i) at[(size_t)i] = sub.local_of[(size_t)marked[(size_t)i]];
@@ -1020,37 +1061,13 @@ spia_result decayed_rows(const spia_mesh *m, const spia_adjacency *adj, const sp
             steps.push_back(std::move(kept));
         }
     };
-    std::atomic<bool> out_of_memory(false);
-    const int batch_threads = std::max(1, std::min(opt->threads, batches));
-    parallel_for(batch_threads, batches, 1, [&](int64_t b0, int64_t b1, int) {
-        for (int64_t b = b0; b < b1; ++b) {
-            try {
-                run_batch((int32_t)b, results[(size_t)b]);
-            } catch (const std::bad_alloc &) {
-                out_of_memory = true;
-            } catch (...) {
-                results[(size_t)b].failed = true;
-            }
-        }
-    });
-    if (out_of_memory) throw std::bad_alloc();
+    run_batches(opt->threads, batches, [&](int32_t b) { run_batch(b, results[(size_t)b]); },
+                [&](int32_t b) { results[(size_t)b].failed = true; });
     for (BatchRows &out : results)
         if (out.failed)
             return spia__fail(status, SPIA_ERROR_TOPOLOGY, -1, "OpenSubdiv rejected the topology around semi-sharp creases");
-    if (held.start.empty()) {
-        held.start.assign((size_t)p.osd_n, -1);
-        held.size.assign((size_t)p.osd_n, 0);
-    }
     for (BatchRows &out : results)
-        for (size_t r = 0; r < out.vertex.size(); ++r) {
-            const int32_t o = out.vertex[r];
-            held.start[(size_t)o] = (int64_t)held.indices.size();
-            held.size[(size_t)o] = (int32_t)out.rows[r].size();
-            for (const auto &e : out.rows[r]) {
-                held.indices.push_back(p.vertex_of[(size_t)e.first]);
-                held.weights.push_back(e.second);
-            }
-        }
+        for (size_t r = 0; r < out.vertex.size(); ++r) held.hold(p, out.vertex[r], out.rows[r]);
     return SPIA_OK;
 }
 
@@ -1235,71 +1252,37 @@ spia_result adaptive_rows(const spia_mesh *m, const spia_adjacency *adj, const s
                 }
             }
             // Down the levels: points of level l in terms of level l - 1's.
-            for (int l = max_level; l >= 1; --l) {
-                wider.clear();
-                for (const auto &e : row) {
-                    if (e.first >= level_start[(size_t)l] && e.first < level_start[(size_t)l + 1]) {
-                        for (const auto &x : steps[(size_t)l][(size_t)(e.first - level_start[(size_t)l])].w)
-                            wider.emplace_back(level_start[(size_t)l - 1] + x.first, e.second * x.second);
-                    } else {
-                        wider.push_back(e);
-                    }
-                }
-                std::sort(wider.begin(), wider.end());
-                row.clear();
-                for (size_t k = 0; k < wider.size();) {
-                    const int64_t j = wider[k].first;
-                    double sum = 0.0;
-                    while (k < wider.size() && wider[k].first == j) sum += wider[k++].second;
-                    row.emplace_back(j, sum);
-                }
-            }
+            for (int l = max_level; l >= 1; --l)
+                carry_down<int64_t>(row, steps[(size_t)l], level_start[(size_t)l], level_start[(size_t)l + 1],
+                                    level_start[(size_t)l - 1], wider);
+            merge_entries(row, true);  // (already merged, unless no level was refined)
             out.vertex.push_back(o);
             out.start.push_back((int64_t)out.indices.size());
-            std::sort(row.begin(), row.end());
             for (const auto &e : row) {
                 if (e.first < 0 || e.first >= sub_n) {
                     failed(SPIA_ERROR_INTERNAL, p.vertex_of[o],
                            "OpenSubdiv stencil refers to point %d, not a control vertex", (int)e.first, 0);
                     return;
                 }
-                if (e.second == 0.0) continue;
                 out.indices.push_back(sub.osd_of_local[(size_t)e.first]);
                 out.weights.push_back(e.second);
             }
         }
         out.start.push_back((int64_t)out.indices.size());
     };
-    std::atomic<bool> out_of_memory(false);
-    const int batch_threads = std::max(1, std::min(opt->threads, batches));
-    parallel_for(batch_threads, batches, 1, [&](int64_t b0, int64_t b1, int) {
-        for (int64_t b = b0; b < b1; ++b) {
-            try {
-                run_batch((int32_t)b, results[(size_t)b]);
-            } catch (const std::bad_alloc &) {
-                out_of_memory = true;
-            } catch (...) {
-                results[(size_t)b].code = SPIA_ERROR_INTERNAL;
-                snprintf(results[(size_t)b].message, SPIA_MESSAGE_SIZE, "unexpected failure around sharp features");
-            }
-        }
+    run_batches(opt->threads, batches, [&](int32_t b) { run_batch(b, results[(size_t)b]); }, [&](int32_t b) {
+        results[(size_t)b].code = SPIA_ERROR_INTERNAL;
+        snprintf(results[(size_t)b].message, SPIA_MESSAGE_SIZE, "unexpected failure around sharp features");
     });
-    if (out_of_memory) throw std::bad_alloc();
     for (BatchRows &out : results)
         if (out.code != SPIA_OK) return spia__fail(status, out.code, out.index, "%s", out.message);
-    if (held.start.empty()) {
-        held.start.assign((size_t)osd_n, -1);
-        held.size.assign((size_t)osd_n, 0);
-    }
     for (BatchRows &out : results) {
+        std::vector<std::pair<int32_t, double>> row;
         for (size_t r = 0; r < out.vertex.size(); ++r) {
-            const int32_t o = out.vertex[r];
-            held.start[(size_t)o] = (int64_t)held.indices.size();
-            held.size[(size_t)o] = (int32_t)(out.start[r + 1] - out.start[r]);
-            for (int64_t k = out.start[r]; k < out.start[r + 1]; ++k) {
-                held.indices.push_back(p.vertex_of[(size_t)out.indices[(size_t)k]]);
-                held.weights.push_back(out.weights[(size_t)k]);
-            }
+            row.clear();
+            for (int64_t k = out.start[r]; k < out.start[r + 1]; ++k)
+                row.emplace_back(out.indices[(size_t)k], out.weights[(size_t)k]);
+            held.hold(p, out.vertex[r], row);
         }
         std::vector<int32_t>().swap(out.indices);
         std::vector<double>().swap(out.weights);
