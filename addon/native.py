@@ -117,6 +117,7 @@ class _FitOptions(ctypes.Structure):
         ("mode", ctypes.c_int), ("samples_per_edge", ctypes.c_int32), ("cutoff", ctypes.c_double),
         ("smoothing", ctypes.c_double), ("point_weight", ctypes.c_double), ("max_rounds", ctypes.c_int32),
         ("round_tolerance", ctypes.c_double), ("solver_iterations", ctypes.c_int32),
+        ("robust_scale", ctypes.c_double), ("slide_weight", ctypes.c_double), ("flags", ctypes.c_uint32),
     ]
 
 
@@ -135,7 +136,14 @@ class _FitReport(ctypes.Structure):
         ("solve_seconds", ctypes.c_double),
         ("vertex_distances", _f32p), ("history", _f64p), ("history_capacity", ctypes.c_int32),
         ("history_count", ctypes.c_int32),
+        ("folded_before", ctypes.c_int64), ("folded_after", ctypes.c_int64),
+        ("scan_point_count", ctypes.c_int64), ("scan_before", _FitDistances), ("scan_after", _FitDistances),
+        ("scan_distances", _f32p),
     ]
+
+
+# spia_fit_flags
+FIT_ALLOW_FOLDS, FIT_HARD_CUTOFF, FIT_NO_SCAN_DISTANCES = 1, 2, 4
 
 
 _lib = None
@@ -778,6 +786,7 @@ class Scan:
         if code != 0:
             _raise(code, status)
         self._handle = handle
+        self.vertex_count = mesh.vertex_count
 
     def __del__(self):
         handle, self._handle = getattr(self, "_handle", None), None
@@ -814,11 +823,13 @@ class Scan:
 
 @dataclass
 class FitDistances:
-    """Distances of the limit surface's samples to the scan, relative to the scan's diagonal."""
+    """Distances relative to the scan's diagonal, over the points within the cut-off: of the
+    limit surface's samples to the scan, or (scan_before, scan_after) of the scan's vertices
+    to the limit surface."""
     mean: float
     p95: float
     max: float
-    ignored: int                # samples beyond the cut-off (over holes)
+    ignored: int                # points beyond the cut-off (over holes; scan parts not reached)
 
 
 @dataclass
@@ -838,6 +849,12 @@ class FitReport:
     solve_seconds: float
     vertex_distances: np.ndarray = field(repr=False)   # per cage vertex, relative
     history: np.ndarray = field(repr=False)            # mean relative distance per round
+    folded_before: int = -1     # samples facing away from the scan (-1: not measured)
+    folded_after: int = -1
+    scan_point_count: int = 0   # scan vertices measured the other way (0: not measured)
+    scan_before: FitDistances = None
+    scan_after: FitDistances = None
+    scan_distances: np.ndarray = field(default=None, repr=False)  # per scan vertex, relative, -1 unused
 
     def summary(self):
         b, a = self.before, self.after
@@ -846,12 +863,18 @@ class FitReport:
 
 
 def fit(cage, scan, mode="SURFACE", samples_per_edge=4, cutoff=0.02, smoothing=1e-5, point_weight=1e-3,
-        max_rounds=16, round_tolerance=0.01, solver_iterations=20, **options):
+        max_rounds=16, round_tolerance=0.01, solver_iterations=20, robust_scale=6.0, slide_weight=0.0, allow_folds=False,
+        hard_cutoff=False, measure_scan=True, **options):
     """Moves the vertices of ``cage`` (a :class:`Mesh`) so that its limit
     surface lies on ``scan`` (a :class:`Scan`).  mode 'SURFACE' fits the
     whole surface (Catmull-Clark); 'VERTICES' interpolates the closest scan
     points of the cage's limit points (any scheme).  ``options`` are those of
     :func:`interpolate` (scheme, quality, creases, solver, progress, ...).
+    ``robust_scale``: the robust kernel's scale as a multiple of the median
+    distance; ``slide_weight``: how much samples are held back from sliding
+    along the scan within a round; ``allow_folds``: no fold guard; ``hard_cutoff``: the cut-off's
+    0/1 weights without the kernel; ``measure_scan``: also measure the
+    scan's vertices against the surface (``report.scan_before/after``).
     Returns ``(cage positions (N, 3) float32, FitReport)``."""
     lib = _library()
     opts, _keep = _options(**options)
@@ -871,13 +894,23 @@ def fit(cage, scan, mode="SURFACE", samples_per_edge=4, cutoff=0.02, smoothing=1
     fo.max_rounds = int(max_rounds)
     fo.round_tolerance = float(round_tolerance)
     fo.solver_iterations = int(solver_iterations)
+    if not (robust_scale > 0 and np.isfinite(robust_scale)):
+        raise PiaError("INVALID_ARGUMENT", f"robust_scale must be a positive number, not {robust_scale!r}")
+    fo.robust_scale = float(robust_scale)
+    if not (0 <= slide_weight < 1):
+        raise PiaError("INVALID_ARGUMENT", f"slide_weight must be at least 0 and below 1, not {slide_weight!r}")
+    fo.slide_weight = float(slide_weight)
+    fo.flags = ((FIT_ALLOW_FOLDS if allow_folds else 0) | (FIT_HARD_CUTOFF if hard_cutoff else 0)
+                | (0 if measure_scan else FIT_NO_SCAN_DISTANCES))
     if fo.max_rounds < 1 or fo.solver_iterations < 1:
         raise PiaError("INVALID_ARGUMENT", "max_rounds and solver_iterations must be at least 1")
     out = np.empty_like(cage.positions)
     vertex_distances = np.zeros(cage.vertex_count, np.float32)
     history = np.zeros(fo.max_rounds + 1, np.float64)
+    per_scan = np.full(max(scan.vertex_count, 1), -1.0, np.float32)
     rep = _FitReport(vertex_distances=_ptr(vertex_distances, ctypes.c_float),
-                     history=_ptr(history, ctypes.c_double), history_capacity=len(history))
+                     history=_ptr(history, ctypes.c_double), history_capacity=len(history),
+                     scan_distances=_ptr(per_scan, ctypes.c_float))
     status = _Status()
     cm = cage._c()
     code = lib.spia_fit(ctypes.byref(cm), scan._handle, ctypes.byref(opts), ctypes.byref(fo),
@@ -893,4 +926,7 @@ def fit(cage, scan, mode="SURFACE", samples_per_edge=4, cutoff=0.02, smoothing=1
         before=dist(rep.before), after=dist(rep.after), iterations=rep.iterations,
         max_error_relative=rep.max_error_relative, stencil_seconds=rep.stencil_seconds,
         query_seconds=rep.query_seconds, solve_seconds=rep.solve_seconds,
-        vertex_distances=vertex_distances, history=history[: rep.history_count].copy())
+        vertex_distances=vertex_distances, history=history[: rep.history_count].copy(),
+        folded_before=rep.folded_before, folded_after=rep.folded_after, scan_point_count=rep.scan_point_count,
+        scan_before=dist(rep.scan_before), scan_after=dist(rep.scan_after),
+        scan_distances=per_scan[: scan.vertex_count] if rep.scan_point_count else None)

@@ -558,7 +558,40 @@ typedef struct spia_fit_options {
      * less than this fraction (the cage written is the best one seen). [0.01] */
     double round_tolerance;
     int32_t solver_iterations; /* conjugate gradient steps per round [20]                            */
+    /* SURFACE: how far a sample may be before it pulls less, as a multiple
+     * of the median distance of the samples within the cut-off (the
+     * robust kernel's scale): a sample at distance d pulls with weight
+     * 1 / (1 + (d / (robust_scale * median))^2), so stray scan parts,
+     * noise blobs and a base plate that the surface does not belong to
+     * lose their pull as the fit closes in.  [6] */
+    double robust_scale;
+    /* SURFACE: weight, next to the point-to-plane one, of each sample's
+     * sideways move (along the scan's tangent plane) within a round.
+     * Point-to-plane lets samples slide, which is what makes the fit
+     * converge in few rounds, but lets neighbouring samples slide over
+     * one another into a pleat whose middle layer faces away from the
+     * scan; this holds them back a little each round, at a price in
+     * accuracy (on the bunny, 0.01 halves the folds left by the fold guard
+     * and raises the mean distance by a sixth).  Below 1.  [0: none] */
+    double slide_weight;
+    uint32_t flags;            /* spia_fit_flags, or-ed [0]                                          */
 } spia_fit_options;
+
+typedef enum spia_fit_flags {
+    /* SURFACE: no fold guard.  By default a sample whose limit normal faces
+     * away from the scan's normal at its closest point (a fold, or a
+     * sample caught by the wrong side of a thin part) does not pull, and
+     * the cage around it is held 4 times more firmly to its initial shape
+     * for every round in which it stays folded. */
+    SPIA_FIT_ALLOW_FOLDS = 1,
+    /* SURFACE: the cut-off alone decides which samples pull (weight 1
+     * within it, 0 beyond), with no robust kernel. */
+    SPIA_FIT_HARD_CUTOFF = 2,
+    /* Leave out the scan-to-surface distances (scan_before, scan_after),
+     * which cost a hierarchy over the refined limit surface and a query
+     * per scan vertex. */
+    SPIA_FIT_NO_SCAN_DISTANCES = 4
+} spia_fit_flags;
 
 typedef struct spia_fit_distances {
     double mean, p95, max;     /* over the samples within the cutoff, relative to the scan diagonal  */
@@ -590,6 +623,25 @@ typedef struct spia_fit_report {
     double *history;
     int32_t history_capacity;
     int32_t history_count;
+    /* Catmull-Clark: samples within the cut-off, not over a hole, whose limit normal (from
+     * their neighbours on the sample grid) faces away from the scan's
+     * normal at the closest point, the orientation being the one most of
+     * the cage given agrees on; -1 when samples_per_edge is 1. */
+    int64_t folded_before, folded_after;
+    /* Distances the other way: from each scan vertex that a face uses to
+     * the limit surface (refined one level finer than the samples,
+     * ceil(log2 samples_per_edge) + 1 levels, and coarser while that would
+     * make more than 8M quads), relative to the scan's
+     * diagonal, for the cage given and the cage written.  `ignored` counts
+     * the scan vertices farther than the cut-off: scan parts the surface
+     * does not reach.  Catmull-Clark only; all zero with
+     * SPIA_FIT_NO_SCAN_DISTANCES. */
+    int64_t scan_point_count;
+    spia_fit_distances scan_before, scan_after;
+    /* Optional caller-owned buffer of the scan's vertex_count floats: each
+     * scan vertex's relative distance to the limit surface of the cage
+     * written (-1 for vertices no scan face uses).  For a heat map. */
+    float *scan_distances;
 } spia_fit_report;
 
 /*

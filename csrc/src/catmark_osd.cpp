@@ -1702,6 +1702,59 @@ spia_result refine(const spia_mesh *m, const spia_adjacency *adj, const spia_opt
     return SPIA_OK;
 }
 
+// The limit surface as a quad mesh: the cage refined uniformly `levels`
+// times, every vertex moved to its limit position (the limit surface at the
+// vertex's own parameter location), for measuring distances to the surface.
+// The refiner is kept, so that each new cage costs one pass of primvar
+// refinement and nothing else.
+struct LimitGrid {
+    Prepared p;
+    int32_t levels = 0;
+    int32_t vertex_count = 0, face_count = 0;
+    std::vector<int32_t> quads;  // face_count * 4, into the last level's vertices
+};
+
+spia_result limit_grid(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, int32_t levels,
+                       LimitGrid &g, spia_status *status) {
+    spia_result r = prepare(m, adj, opt, g.p, status);
+    if (r != SPIA_OK) return r;
+    Far::TopologyRefiner &refiner = *g.p.refiner;
+    Far::TopologyRefiner::UniformOptions uniform(levels);
+    uniform.fullTopologyInLastLevel = true;  // PrimvarRefiner::Limit needs it
+    refiner.RefineUniform(uniform);
+    const Far::TopologyLevel &last = refiner.GetLevel(levels);
+    g.levels = levels;
+    g.vertex_count = last.GetNumVertices();
+    g.face_count = last.GetNumFaces();
+    g.quads.resize((size_t)g.face_count * 4);
+    for (int32_t f = 0; f < g.face_count; ++f) {
+        Far::ConstIndexArray fv = last.GetFaceVertices(f);
+        if (fv.size() != 4)
+            return spia__fail(status, SPIA_ERROR_INTERNAL, f, "refined face %d has %d vertices", (int)f, fv.size());
+        for (int c = 0; c < 4; ++c) g.quads[(size_t)f * 4 + c] = fv[c];
+    }
+    spia__ok(status);
+    return SPIA_OK;
+}
+
+void limit_grid_evaluate(const LimitGrid &g, const double *cage, float *out) {
+    const Far::TopologyRefiner &refiner = *g.p.refiner;
+    std::vector<Point> src((size_t)refiner.GetNumVerticesTotal()), limit((size_t)g.vertex_count);
+    for (int32_t o = 0; o < g.p.osd_n; ++o)
+        for (int a = 0; a < 3; ++a) src[(size_t)o].p[a] = cage[3 * (int64_t)g.p.vertex_of[(size_t)o] + a];
+    Far::PrimvarRefinerReal<float> primvar(refiner);
+    Point *level_src = src.data();
+    for (int level = 1; level <= g.levels; ++level) {
+        Point *level_dst = level_src + refiner.GetLevel(level - 1).GetNumVertices();
+        primvar.Interpolate(level, level_src, level_dst);
+        level_src = level_dst;
+    }
+    Point *limit_dst = limit.data();
+    primvar.Limit(level_src, limit_dst);
+    for (int32_t i = 0; i < g.vertex_count; ++i)
+        for (int a = 0; a < 3; ++a) out[3 * (int64_t)i + a] = (float)limit[(size_t)i].p[a];
+}
+
 // Limit stencils at samples inside the faces: per ptex face (a quad, or each
 // corner's sub-quad of another polygon), samples_per_edge^2 points at the
 // centres of a regular grid over (s, t), rows in ptex order, then t, then s.
@@ -1816,3 +1869,41 @@ extern "C" spia_result spia__osd_surface_stencils(const spia_mesh *mesh, const s
         return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "unexpected failure computing sample stencils");
     }
 }
+
+struct spia__limit_grid {
+    LimitGrid g;
+};
+
+extern "C" spia_result spia__osd_limit_grid_create(const spia_mesh *mesh, const spia_adjacency *adj,
+                                                   const spia_options *options, int32_t levels,
+                                                   spia__limit_grid **out, spia_status *status) {
+    *out = nullptr;
+    try {
+        std::unique_ptr<spia__limit_grid> grid(new spia__limit_grid);
+        spia_result r = limit_grid(mesh, adj, options, levels, grid->g, status);
+        if (r == SPIA_OK) *out = grid.release();
+        return r;
+    } catch (const std::bad_alloc &) {
+        return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory refining the limit surface");
+    } catch (...) {
+        return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "unexpected failure refining the limit surface");
+    }
+}
+
+extern "C" int32_t spia__limit_grid_vertex_count(const spia__limit_grid *grid) { return grid->g.vertex_count; }
+extern "C" int32_t spia__limit_grid_face_count(const spia__limit_grid *grid) { return grid->g.face_count; }
+extern "C" const int32_t *spia__limit_grid_quads(const spia__limit_grid *grid) { return grid->g.quads.data(); }
+
+extern "C" spia_result spia__limit_grid_evaluate(const spia__limit_grid *grid, const double *cage, float *out,
+                                                 spia_status *status) {
+    try {
+        limit_grid_evaluate(grid->g, cage, out);
+        return SPIA_OK;
+    } catch (const std::bad_alloc &) {
+        return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory evaluating the limit surface");
+    } catch (...) {
+        return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "unexpected failure evaluating the limit surface");
+    }
+}
+
+extern "C" void spia__limit_grid_free(spia__limit_grid *grid) { delete grid; }

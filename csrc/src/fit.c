@@ -18,6 +18,14 @@
  * creeps; the Laplacian term keeps the cage fair and holds it in place over
  * holes.
  *
+ * Each sample's weight w_s is a robust (Cauchy) kernel of its distance,
+ * 1 / (1 + (d / c)^2) with c a multiple of the median distance, within the
+ * cut-off and 0 beyond it or over a hole.  The fold guard: a sample whose
+ * limit normal (differences along the sample grid) faces away from the
+ * scan's normal weighs 0, and the fairness weight of the vertices of its
+ * face grows fourfold each round it stays so, a per-vertex c_i on the
+ * Laplacian term: sum_i c_i |(Lap (V - V0))_i|^2.
+ *
  * VERTICES: the cage's limit points go to their closest scan points and the
  * cage is solved to interpolate them. */
 #include "internal.h"
@@ -44,6 +52,15 @@ static spia_result resolve_fit(const spia_fit_options *in, spia_fit_options *out
     if (o.max_rounds == 0) o.max_rounds = 16;
     if (o.round_tolerance == 0.0) o.round_tolerance = 0.01;
     if (o.solver_iterations == 0) o.solver_iterations = 20;
+    if (o.robust_scale == 0.0) o.robust_scale = 6.0;
+    if (!isfinite(o.slide_weight) || o.slide_weight >= 1.0)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "slide_weight must be below 1");
+    if (o.slide_weight < 0.0) o.slide_weight = 0.0;
+    if (!(o.robust_scale > 0.0) || !isfinite(o.robust_scale))
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "robust_scale must be a positive number");
+    const uint32_t known = SPIA_FIT_ALLOW_FOLDS | SPIA_FIT_HARD_CUTOFF | SPIA_FIT_NO_SCAN_DISTANCES;
+    if (o.flags & ~known)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "unknown fit flags 0x%x", (unsigned)(o.flags & ~known));
     if (!(o.cutoff > 0.0) || !isfinite(o.cutoff))
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "cutoff must be a positive number");
     if (!isfinite(o.smoothing) || !isfinite(o.point_weight) || !isfinite(o.round_tolerance) ||
@@ -161,12 +178,13 @@ static spia_fit_distances distance_stats(const float *d, int64_t count, double c
     return s;
 }
 
-/* The mean with every sample beyond the cut-off counted at the cut-off: what
- * picks the best cage, so that a round that pushes samples off the scan
- * never looks like a gain. */
-static double mean_clamped(const float *d, int64_t count, double cutoff_abs) {
+/* The mean with every sample beyond the cut-off (and, given `folded`, every
+ * folded one) counted at the cut-off: what picks the best cage, so that a
+ * round that pushes samples off the scan or folds the surface never looks
+ * like a gain. */
+static double mean_clamped(const float *d, const uint8_t *folded, int64_t count, double cutoff_abs) {
     double sum = 0.0;
-    for (int64_t i = 0; i < count; ++i) sum += d[i] <= cutoff_abs ? d[i] : cutoff_abs;
+    for (int64_t i = 0; i < count; ++i) sum += d[i] <= cutoff_abs && !(folded && folded[i]) ? d[i] : cutoff_abs;
     return count ? sum / (double)count : 0.0;
 }
 
@@ -188,6 +206,51 @@ static void cutoff_weights(const float *d, const uint8_t *on_boundary, int64_t c
     for (int64_t i = 0; i < count; ++i) w[i] = d[i] <= cutoff_abs && !on_boundary[i] ? 1.0f : 0.0f;
 }
 
+/* The k-th smallest of n floats (k < n), reordering a. */
+static float select_kth(float *a, int64_t n, int64_t k) {
+    int64_t lo = 0, hi = n - 1;
+    while (lo < hi) {
+        const float pivot = a[lo + (hi - lo) / 2];
+        int64_t i = lo, j = hi;
+        while (i <= j) {
+            while (a[i] < pivot) ++i;
+            while (a[j] > pivot) --j;
+            if (i <= j) {
+                const float t = a[i];
+                a[i] = a[j], a[j] = t;
+                ++i, --j;
+            }
+        }
+        if (k <= j)
+            hi = j;
+        else if (k >= i)
+            lo = i;
+        else
+            break;
+    }
+    return a[k];
+}
+
+/* The median distance of the samples that pull (weight > 0); `scratch`
+ * holds count floats.  0 when none does. */
+static double median_pulling(const float *d, const float *w, int64_t count, float *scratch) {
+    int64_t n = 0;
+    for (int64_t i = 0; i < count; ++i)
+        if (w[i] > 0.0f) scratch[n++] = d[i];
+    return n ? (double)select_kth(scratch, n, n / 2) : 0.0;
+}
+
+/* Scales the weights by the robust kernel 1 / (1 + (d / c)^2). */
+static void robust_weights(const float *d, int64_t count, double c, float *w) {
+    if (!(c > 0.0)) return;
+    const double inv = 1.0 / c;
+    for (int64_t i = 0; i < count; ++i)
+        if (w[i] > 0.0f) {
+            const double r = d[i] * inv;
+            w[i] = (float)(w[i] / (1.0 + r * r));
+        }
+}
+
 /* Conjugate gradients stop early only when the residual has fallen this far:
  * in practice every round takes solver_iterations steps, which measured
  * better (for the same time) than looser tolerances with more rounds. */
@@ -203,11 +266,15 @@ typedef struct fit_system {
     const float *dist;      /* S */
     const float *weight;    /* S: per-sample weights (0 beyond the cut-off) */
     const uint8_t *on_boundary; /* S */
-    double cutoff_abs, alpha, lambda, damping;
+    /* beta: the weight of each sample's tangential displacement within a
+     * round (from X, the samples of the round's starting cage). */
+    double cutoff_abs, alpha, beta, lambda, damping;
+    const double *X;
     /* Umbrella Laplacian: neighbours of v are nb[nb_start[v] .. nb_start[v+1]-1]. */
     const int64_t *nb_start;
     const int32_t *nb;
     const unsigned char *free_vertex;
+    const double *stiffness; /* n: per-vertex factor on the Laplacian term (the fold guard) */
     double *tmp_s;          /* S * 3 */
     double *tmp_n;          /* n * 3 */
 } fit_system;
@@ -221,7 +288,22 @@ static inline void apply_b(const fit_system *f, int64_t s, const double u[3], do
     }
     const float *nn = f->normals + 3 * s;
     const double dot = nn[0] * u[0] + nn[1] * u[1] + nn[2] * u[2];
-    for (int c = 0; c < 3; ++c) g[c] = w * (nn[c] * dot + f->alpha * u[c]);
+    const double a = f->alpha + f->beta, keep = 1.0 - f->beta;
+    for (int c = 0; c < 3; ++c) g[c] = w * (keep * nn[c] * dot + a * u[c]);
+}
+
+/* The right-hand side's share of sample s: B_s-weighted targets, the
+ * tangential anchor at the sample's current place X_s. */
+static inline void target_b(const fit_system *f, int64_t s, const float T[3], const double X[3], double g[3]) {
+    const double w = f->weight[s];
+    if (w == 0.0) {
+        g[0] = g[1] = g[2] = 0.0;
+        return;
+    }
+    const float *nn = f->normals + 3 * s;
+    const double dt = nn[0] * T[0] + nn[1] * T[1] + nn[2] * T[2], dx = nn[0] * X[0] + nn[1] * X[1] + nn[2] * X[2];
+    for (int c = 0; c < 3; ++c)
+        g[c] = w * (nn[c] * dt + f->alpha * T[c] + f->beta * (X[c] - nn[c] * dx));
 }
 
 static void laplacian(const fit_system *f, const double *x, double *y) {
@@ -254,6 +336,14 @@ static void laplacian_transpose_add(const fit_system *f, const double *y, double
     }
 }
 
+/* z += lambda Lap^T C Lap x, C the per-vertex stiffness. */
+static void fairness_add(const fit_system *f, const double *x, double *z) {
+    laplacian(f, x, f->tmp_n);
+    for (int32_t v = 0; v < f->n; ++v)
+        for (int c = 0; c < 3; ++c) f->tmp_n[3 * (int64_t)v + c] *= f->stiffness[v];
+    laplacian_transpose_add(f, f->tmp_n, f->lambda, z);
+}
+
 /* out = M^T g for per-sample vectors g. */
 static void gather(const fit_system *f, const double *g, double *out) {
     const spia_stencils *T = f->Mt;
@@ -270,8 +360,7 @@ static void system_apply(const fit_system *f, const double *x, double *y) {
     }
     gather(f, t, y);
     if (f->lambda > 0.0) {
-        laplacian(f, x, f->tmp_n);
-        laplacian_transpose_add(f, f->tmp_n, f->lambda, y);
+        fairness_add(f, x, y);
     }
     for (int32_t v = 0; v < f->n; ++v)
         for (int c = 0; c < 3; ++c) {
@@ -320,14 +409,10 @@ static int least_squares_round(fit_system *f, const float *T, const double *V0, 
     /* b = M^T B T + lambda Lap^T Lap V0 + damping V (the damping anchors the
      * current iterate, so it does not bias the fit). */
     double *t = f->tmp_s;
-    for (int64_t s = 0; s < f->S; ++s) {
-        const double u[3] = {T[3 * s], T[3 * s + 1], T[3 * s + 2]};
-        apply_b(f, s, u, t + 3 * s);
-    }
+    for (int64_t s = 0; s < f->S; ++s) target_b(f, s, T + 3 * s, f->X + 3 * s, t + 3 * s);
     gather(f, t, b);
     if (f->lambda > 0.0) {
-        laplacian(f, V0, f->tmp_n);
-        laplacian_transpose_add(f, f->tmp_n, f->lambda, b);
+        fairness_add(f, V0, b);
     }
     for (int64_t i = 0; i < N3; ++i) b[i] += f->damping * V[i];
 
@@ -340,18 +425,18 @@ static int least_squares_round(fit_system *f, const float *T, const double *V0, 
             if (f->weight[s] == 0.0) continue;
             const double w2 = Mt->weights[k] * Mt->weights[k] * f->weight[s];
             const float *nn = f->normals + 3 * s;
-            const double al = f->alpha;
-            a[0] += w2 * (nn[0] * nn[0] + al), a[1] += w2 * nn[0] * nn[1], a[2] += w2 * nn[0] * nn[2];
-            a[3] += w2 * (nn[1] * nn[1] + al), a[4] += w2 * nn[1] * nn[2], a[5] += w2 * (nn[2] * nn[2] + al);
+            const double al = f->alpha + f->beta, kp = w2 * (1.0 - f->beta);
+            a[0] += kp * nn[0] * nn[0] + w2 * al, a[1] += kp * nn[0] * nn[1], a[2] += kp * nn[0] * nn[2];
+            a[3] += kp * nn[1] * nn[1] + w2 * al, a[4] += kp * nn[1] * nn[2], a[5] += kp * nn[2] * nn[2] + w2 * al;
         }
         const int64_t na = f->nb_start[v], nb = f->nb_start[v + 1];
-        double lap = 0.0;
+        double lap = 0.0; /* (Lap^T C Lap)_vv */
         if (nb > na) {
-            lap = 1.0;
+            lap = f->stiffness[v];
             for (int64_t k = na; k < nb; ++k) {
                 const int32_t j = f->nb[k];
                 const double deg = (double)(f->nb_start[j + 1] - f->nb_start[j]);
-                lap += 1.0 / (deg * deg);
+                lap += f->stiffness[j] / (deg * deg);
             }
         }
         const double d = f->lambda * lap + f->damping;
@@ -399,6 +484,18 @@ typedef struct fit_buffers {
     int32_t *nb;
     unsigned char *free_vertex;
     int32_t *sample_face;
+    /* The fold guard: per sample the normal agreement and whether it is
+     * folded; per vertex the stiffness and a mark. */
+    float *dots;
+    uint8_t *folded, *mark;
+    double *stiffness;
+    /* The scan side: the limit surface as a quad grid, its positions, its
+     * face sizes (all 4), and the scan vertices measured, in double. */
+    spia__limit_grid *grid;
+    float *grid_pos, *scan_d, *scan_scratch;
+    int32_t *grid_sizes, *scan_vertex;
+    double *scan_pts;
+    int64_t scan_count;
 } fit_buffers;
 
 static void buffers_free(fit_buffers *b) {
@@ -409,6 +506,150 @@ static void buffers_free(fit_buffers *b) {
     free(b->tmp_n), free(b->T), free(b->N), free(b->d), free(b->scratch), free(b->targets), free(b->solved);
     free(b->wts), free(b->on_boundary);
     free(b->nb_start), free(b->nb), free(b->free_vertex), free(b->sample_face);
+    free(b->dots), free(b->folded), free(b->mark), free(b->stiffness);
+    if (b->grid) spia__limit_grid_free(b->grid);
+    free(b->grid_pos), free(b->scan_d), free(b->scan_scratch), free(b->grid_sizes), free(b->scan_vertex);
+    free(b->scan_pts);
+}
+
+/* ---- folds ---------------------------------------------------------------- */
+
+/* Per sample, the cosine between its limit normal and the scan's normal at
+ * its closest point.  The normal is the cross product of the differences
+ * to the neighbours along the ptex face's sample grid (central inside,
+ * one-sided at the grid's edge); 0 where it or the scan's normal vanishes,
+ * and everywhere when the grid is a single sample. */
+static void normal_agreement(const double *X, const float *N, int64_t S, int32_t k, float *dots) {
+    if (k < 2) {
+        memset(dots, 0, sizeof(float) * (size_t)S);
+        return;
+    }
+    const int64_t per_face = (int64_t)k * k;
+    for (int64_t s = 0; s < S; ++s) {
+        const int64_t base = s - s % per_face, local = s % per_face;
+        const int32_t i = (int32_t)(local % k), j = (int32_t)(local / k);
+        const int32_t i0 = i > 0 ? i - 1 : i, i1 = i < k - 1 ? i + 1 : i;
+        const int32_t j0 = j > 0 ? j - 1 : j, j1 = j < k - 1 ? j + 1 : j;
+        const double *a = X + 3 * (base + (int64_t)j * k + i1), *b = X + 3 * (base + (int64_t)j * k + i0);
+        const double *c = X + 3 * (base + (int64_t)j1 * k + i), *e = X + 3 * (base + (int64_t)j0 * k + i);
+        const double du[3] = {a[0] - b[0], a[1] - b[1], a[2] - b[2]};
+        const double dv[3] = {c[0] - e[0], c[1] - e[1], c[2] - e[2]};
+        const double n[3] = {du[1] * dv[2] - du[2] * dv[1], du[2] * dv[0] - du[0] * dv[2], du[0] * dv[1] - du[1] * dv[0]};
+        const float *m = N + 3 * s;
+        const double len = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+        const double mlen = sqrt((double)m[0] * m[0] + (double)m[1] * m[1] + (double)m[2] * m[2]);
+        dots[s] = len > 0.0 && mlen > 0.0 ? (float)((n[0] * m[0] + n[1] * m[1] + n[2] * m[2]) / (len * mlen)) : 0.0f;
+    }
+}
+
+/* Whether samples that pull are counted facing along the scan's normals
+ * (+1) or against them (-1): the cage's and the scan's orientation need
+ * not agree, so the sign most of them agree on is the right one. */
+static int orientation(const float *dots, const float *d, const uint8_t *on_boundary, int64_t S, double cutoff_abs) {
+    double sum = 0.0;
+    for (int64_t s = 0; s < S; ++s)
+        if (d[s] <= cutoff_abs && !on_boundary[s]) sum += dots[s];
+    return sum < 0.0 ? -1 : 1;
+}
+
+/* Marks the folded samples (within the cut-off, not over a hole, facing
+ * away); returns how many. */
+static int64_t find_folds(const float *dots, const float *d, const uint8_t *on_boundary, int64_t S, double cutoff_abs,
+                          int sign, uint8_t *folded) {
+    int64_t count = 0;
+    for (int64_t s = 0; s < S; ++s) {
+        folded[s] = d[s] <= cutoff_abs && !on_boundary[s] && (double)sign * dots[s] < 0.0;
+        count += folded[s];
+    }
+    return count;
+}
+
+/* The stiffness of each vertex of a face holding a folded sample grows
+ * fourfold, once per round, up to STIFFNESS_MAX. */
+#define STIFFNESS_MAX 65536.0
+static void stiffen(const spia_mesh *cage, const spia_adjacency *adj, const uint8_t *folded, const int32_t *sample_face,
+                    int64_t S, uint8_t *mark, double *stiffness) {
+    memset(mark, 0, (size_t)cage->vertex_count);
+    for (int64_t s = 0; s < S; ++s)
+        if (folded[s]) {
+            const int32_t f = sample_face[s];
+            for (int64_t c = adj->corner_start[f]; c < adj->corner_start[f + 1]; ++c) mark[cage->face_vertices[c]] = 1;
+        }
+    for (int32_t v = 0; v < cage->vertex_count; ++v)
+        if (mark[v] && stiffness[v] < STIFFNESS_MAX) stiffness[v] *= 4.0;
+}
+
+/* ---- the scan side ------------------------------------------------------ */
+
+/* The limit surface's grid and the scan vertices to measure.  The grid is
+ * one level finer than the samples (ceil(log2 per_edge) + 1 levels), so
+ * that its flat quads stay within a sixteenth of a sample spacing's
+ * curvature sag of the surface, and one level coarser at a time while it
+ * would have more than SCAN_GRID_FACES quads (at least one level). */
+#define SCAN_GRID_FACES (8 << 20)
+static spia_result scan_side_prepare(const spia_mesh *cage, const spia_adjacency *adj, const spia_options *opt,
+                                     int32_t per_edge, const spia_scan *scan, fit_buffers *b, spia_status *status) {
+    int32_t levels = 1;
+    while ((1 << levels) < per_edge) ++levels;
+    ++levels;
+    int64_t quads = 0;
+    for (int32_t f = 0; f < cage->face_count; ++f) quads += cage->face_sizes[f]; /* quads after one level */
+    while (levels > 1 && (quads << (2 * (levels - 1))) > SCAN_GRID_FACES) --levels;
+    spia_result r = spia__osd_limit_grid_create(cage, adj, opt, levels, &b->grid, status);
+    if (r != SPIA_OK) return r;
+    const int32_t gv = spia__limit_grid_vertex_count(b->grid), gf = spia__limit_grid_face_count(b->grid);
+    int32_t scan_n = 0;
+    const float *P = spia__scan_positions(scan, &scan_n);
+    b->grid_pos = malloc(sizeof(float) * 3 * (size_t)(gv > 0 ? gv : 1));
+    b->grid_sizes = malloc(sizeof(int32_t) * (size_t)(gf > 0 ? gf : 1));
+    uint8_t *used = malloc((size_t)scan_n + 1);
+    if (!b->grid_pos || !b->grid_sizes || !used) {
+        free(used);
+        return SPIA_ERROR_OUT_OF_MEMORY;
+    }
+    for (int32_t f = 0; f < gf; ++f) b->grid_sizes[f] = 4;
+    spia__scan_used_vertices(scan, used);
+    int64_t count = 0;
+    for (int32_t v = 0; v < scan_n; ++v) count += used[v];
+    b->scan_count = count;
+    b->scan_vertex = malloc(sizeof(int32_t) * (size_t)(count + 1));
+    b->scan_pts = malloc(sizeof(double) * 3 * (size_t)(count + 1));
+    b->scan_d = malloc(sizeof(float) * (size_t)(count + 1));
+    b->scan_scratch = malloc(sizeof(float) * (size_t)(count + 1));
+    if (!b->scan_vertex || !b->scan_pts || !b->scan_d || !b->scan_scratch) {
+        free(used);
+        return SPIA_ERROR_OUT_OF_MEMORY;
+    }
+    int64_t k = 0;
+    for (int32_t v = 0; v < scan_n; ++v)
+        if (used[v]) {
+            b->scan_vertex[k] = v;
+            for (int c = 0; c < 3; ++c) b->scan_pts[3 * k + c] = P[3 * (int64_t)v + c];
+            ++k;
+        }
+    free(used);
+    return SPIA_OK;
+}
+
+/* The distances of the scan vertices to the limit surface of cage V. */
+static spia_result scan_side_measure(fit_buffers *b, const double *V, double cutoff_abs, double diagonal, int threads,
+                                     spia_fit_distances *out, spia_status *status) {
+    spia_result r = spia__limit_grid_evaluate(b->grid, V, b->grid_pos, status);
+    if (r != SPIA_OK) return r;
+    spia_mesh view;
+    memset(&view, 0, sizeof view);
+    view.vertex_count = spia__limit_grid_vertex_count(b->grid);
+    view.positions = b->grid_pos;
+    view.face_count = spia__limit_grid_face_count(b->grid);
+    view.face_sizes = b->grid_sizes;
+    view.face_vertices = spia__limit_grid_quads(b->grid);
+    spia_scan *surface = NULL;
+    if ((r = spia_scan_create(&view, &surface, status)) != SPIA_OK) return r;
+    spia__scan_closest_points_double(surface, b->scan_count, b->scan_pts, NULL, NULL, NULL, b->scan_d, NULL, NULL,
+                                     threads);
+    spia_scan_free(surface);
+    *out = distance_stats(b->scan_d, b->scan_count, cutoff_abs, diagonal, b->scan_scratch);
+    return SPIA_OK;
 }
 
 /* The umbrella neighbours of every vertex, from the faces. */
@@ -488,6 +729,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         fresh.vertex_distances = report->vertex_distances;
         fresh.history = report->history;
         fresh.history_capacity = report->history_capacity;
+        fresh.scan_distances = report->scan_distances;
         *report = fresh;
     }
     report->result = SPIA_ERROR_INVALID_ARGUMENT;
@@ -519,6 +761,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
     if ((r = spia__adjacency_build(cage, &adj, status)) != SPIA_OK) return report->result = r;
 
     double t0 = spia__now();
+    int sign = 1;
     spia_options surface_opt = opt;
     surface_opt.scheme = SPIA_SCHEME_CATMULL_CLARK;
     int64_t S = 0;
@@ -561,6 +804,25 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         if (report->before.ignored >= S) {
             r = nothing_to_fit(status, "sample of the cage's limit surface", fo.cutoff);
             goto done;
+        }
+        b.dots = malloc(sizeof(float) * (size_t)S);
+        b.folded = malloc((size_t)S);
+        if (!b.dots || !b.folded) goto oom;
+        normal_agreement(b.X, b.N, S, fo.samples_per_edge, b.dots);
+        sign = orientation(b.dots, b.d, b.on_boundary, S, cutoff_abs);
+        report->folded_before = find_folds(b.dots, b.d, b.on_boundary, S, cutoff_abs, sign, b.folded);
+        if (fo.samples_per_edge < 2) report->folded_before = -1;
+        if (!(fo.flags & SPIA_FIT_NO_SCAN_DISTANCES)) {
+            t0 = spia__now();
+            if ((r = scan_side_prepare(cage, &adj, &surface_opt, fo.samples_per_edge, scan, &b, status)) != SPIA_OK) {
+                if (r == SPIA_ERROR_OUT_OF_MEMORY) goto oom;
+                goto done;
+            }
+            if ((r = scan_side_measure(&b, b.V0, cutoff_abs, diagonal, opt.threads, &report->scan_before, status)) !=
+                SPIA_OK)
+                goto done;
+            report->scan_point_count = b.scan_count;
+            report->query_seconds += spia__now() - t0;
         }
     }
 
@@ -628,7 +890,11 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         b.precond = malloc(sizeof(double) * 9 * (size_t)n);
         b.tmp_n = malloc(sizeof(double) * (size_t)N3);
         b.wts = malloc(sizeof(float) * (size_t)S);
-        if (!b.Mt || !b.work || !b.precond || !b.tmp_n || !b.wts) goto oom;
+        b.stiffness = malloc(sizeof(double) * (size_t)(n > 0 ? n : 1));
+        b.mark = malloc((size_t)n + 1);
+        if (!b.Mt || !b.work || !b.precond || !b.tmp_n || !b.wts || !b.stiffness || !b.mark) goto oom;
+        for (int32_t v = 0; v < n; ++v) b.stiffness[v] = 1.0;
+        const int guard = !(fo.flags & SPIA_FIT_ALLOW_FOLDS) && fo.samples_per_edge >= 2;
         if (build_neighbours(cage, &adj, &b) != SPIA_OK) goto oom;
         int64_t counted = S - report->before.ignored;
         int32_t free_count = 0;
@@ -636,13 +902,15 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         fit_system f;
         f.M = b.M, f.Mt = b.Mt, f.n = n, f.S = S, f.normals = b.N, f.dist = b.d, f.weight = b.wts, f.on_boundary = b.on_boundary, f.cutoff_abs = cutoff_abs;
         f.alpha = fo.point_weight;
+        f.beta = fo.slide_weight;
+        f.X = b.X;
         f.lambda = fo.smoothing * (double)(counted > 0 ? counted : S) / (double)(free_count > 0 ? free_count : 1);
         /* A whisper of damping towards the current iterate keeps vertices no
          * sample reaches (and global drift) determined. */
         f.damping = 1e-6 * (1.0 + f.lambda) * (double)S / (double)(free_count > 0 ? free_count : 1);
-        f.nb_start = b.nb_start, f.nb = b.nb, f.free_vertex = b.free_vertex;
+        f.nb_start = b.nb_start, f.nb = b.nb, f.free_vertex = b.free_vertex, f.stiffness = b.stiffness;
         f.tmp_s = b.tmp_s, f.tmp_n = b.tmp_n;
-        double best_score = mean_clamped(b.d, S, cutoff_abs);
+        double best_score = mean_clamped(b.d, guard ? b.folded : NULL, S, cutoff_abs);
         if (report->history && report->history_capacity > 0) {
             report->history[0] = mean_within(b.d, S, cutoff_abs) / (diagonal > 0.0 ? diagonal : 1.0);
             report->history_count = 1;
@@ -651,9 +919,18 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         for (int round = 1; round <= fo.max_rounds; ++round) {
             t0 = spia__now();
             cutoff_weights(b.d, b.on_boundary, S, cutoff_abs, b.wts);
+            if (!(fo.flags & SPIA_FIT_HARD_CUTOFF))
+                robust_weights(b.d, S, fo.robust_scale * median_pulling(b.d, b.wts, S, b.scratch), b.wts);
+            if (guard) {
+                for (int64_t q = 0; q < S; ++q)
+                    if (b.folded[q]) b.wts[q] = 0.0f;
+                stiffen(cage, &adj, b.folded, b.sample_face, S, b.mark, b.stiffness);
+            }
             report->iterations += least_squares_round(&f, b.T, b.V0, b.V, fo.solver_iterations, b.work, b.precond);
             report->solve_seconds += spia__now() - t0;
             evaluate(scan, &b, b.V, S, diagonal, opt.threads, &report->query_seconds);
+            normal_agreement(b.X, b.N, S, fo.samples_per_edge, b.dots);
+            find_folds(b.dots, b.d, b.on_boundary, S, cutoff_abs, sign, b.folded);
             const double mean = mean_within(b.d, S, cutoff_abs);
             report->rounds = round;
             if (report->history && round < report->history_capacity) {
@@ -667,7 +944,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
             /* The distances do not fall monotonically (new closest points,
              * new planes): keep the best cage, and stop after two rounds in
              * a row that improved it by less than round_tolerance. */
-            const double score = mean_clamped(b.d, S, cutoff_abs);
+            const double score = mean_clamped(b.d, guard ? b.folded : NULL, S, cutoff_abs);
             const double gain = best_score > 0.0 ? (best_score - score) / best_score : 0.0;
             if (score < best_score) {
                 best_score = score;
@@ -692,6 +969,24 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
     if (S > 0) {
         evaluate(scan, &b, b.best, S, diagonal, opt.threads, &report->query_seconds);
         report->after = distance_stats(b.d, S, cutoff_abs, diagonal, b.scratch);
+        normal_agreement(b.X, b.N, S, fo.samples_per_edge, b.dots);
+        report->folded_after =
+            fo.samples_per_edge < 2 ? -1 : find_folds(b.dots, b.d, b.on_boundary, S, cutoff_abs, sign, b.folded);
+        if (b.grid) {
+            t0 = spia__now();
+            if ((r = scan_side_measure(&b, b.best, cutoff_abs, diagonal, opt.threads, &report->scan_after, status)) !=
+                SPIA_OK)
+                goto done;
+            report->query_seconds += spia__now() - t0;
+            if (report->scan_distances) {
+                int32_t scan_n = 0;
+                spia__scan_positions(scan, &scan_n);
+                const double unit = diagonal > 0.0 ? diagonal : 1.0;
+                for (int32_t v = 0; v < scan_n; ++v) report->scan_distances[v] = -1.0f;
+                for (int64_t k = 0; k < b.scan_count; ++k)
+                    report->scan_distances[b.scan_vertex[k]] = (float)(b.scan_d[k] / unit);
+            }
+        }
         if (report->vertex_distances) {
             float *vd = report->vertex_distances;
             memset(vd, 0, sizeof(float) * (size_t)n);

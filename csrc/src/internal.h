@@ -262,6 +262,25 @@ spia_result spia__require_triangles(const spia_mesh *mesh, spia_status *status);
 spia_result spia__osd_surface_stencils(const spia_mesh *mesh, const spia_adjacency *adj, const spia_options *options,
                                        int32_t samples_per_edge, spia_stencils **out, spia_status *status);
 
+/* The Catmull-Clark limit surface as a quad mesh (catmark_osd.cpp): the
+ * cage refined uniformly `levels` times with every vertex at its limit
+ * position.  Create once per topology, evaluate for each cage (vertex_count
+ * * 3 doubles of the original mesh; out: the grid's vertex count * 3). */
+typedef struct spia__limit_grid spia__limit_grid;
+spia_result spia__osd_limit_grid_create(const spia_mesh *mesh, const spia_adjacency *adj, const spia_options *options,
+                                        int32_t levels, spia__limit_grid **out, spia_status *status);
+int32_t spia__limit_grid_vertex_count(const spia__limit_grid *grid);
+int32_t spia__limit_grid_face_count(const spia__limit_grid *grid);
+const int32_t *spia__limit_grid_quads(const spia__limit_grid *grid);
+spia_result spia__limit_grid_evaluate(const spia__limit_grid *grid, const double *cage, float *out,
+                                      spia_status *status);
+void spia__limit_grid_free(spia__limit_grid *grid);
+
+/* The scan's own copy of its positions (scan.c), and which vertices its
+ * triangles use (used: vertex_count bytes, 1 or 0). */
+const float *spia__scan_positions(const spia_scan *scan, int32_t *vertex_count);
+void spia__scan_used_vertices(const spia_scan *scan, uint8_t *used);
+
 /* Closest points for points in double (scan.c); no argument checks.  radius,
  * when not NULL, bounds each point's distance from above (a search hint;
  * a bound that proves too small falls back to a full search).  threads as

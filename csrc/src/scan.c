@@ -317,3 +317,13 @@ spia_result spia_scan_closest_points(const spia_scan *scan, int64_t count, const
     spia__ok(status);
     return SPIA_OK;
 }
+
+const float *spia__scan_positions(const spia_scan *scan, int32_t *vertex_count) {
+    *vertex_count = scan->vertex_count;
+    return scan->positions;
+}
+
+void spia__scan_used_vertices(const spia_scan *scan, uint8_t *used) {
+    memset(used, 0, (size_t)scan->vertex_count);
+    for (int64_t k = 0; k < 3 * scan->triangle_count; ++k) used[scan->triangles[k]] = 1;
+}

@@ -1,0 +1,178 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""What a fit is worth to an artist: no folds, distances both ways, no pull
+from stray scan parts.  Checked against numpy geometry: the unit sphere,
+normals from differences on a grid of surface samples and the scan's own
+triangle normals, and distances to a clean copy of a scan."""
+import os
+
+import numpy as np
+import pytest
+
+from meshio import read_obj
+from test_fit import quad_sphere, uv_sphere
+
+DATA = os.path.join(os.path.dirname(__file__), "..", "data")
+
+
+def _obj_mesh(native, name):
+    pos, faces, _ = read_obj(os.path.join(DATA, name))
+    sizes = np.array([len(f) for f in faces], np.int32)
+    return native.Mesh(pos, sizes, np.concatenate(faces).astype(np.int32))
+
+
+@pytest.fixture(scope="module")
+def bunny(native):
+    scan = _obj_mesh(native, "bun_zipper.obj")
+    cage = _obj_mesh(native, "bun_zipper_quadriflow_cage.obj")
+    return scan, cage
+
+
+def test_scan_distances_on_the_sphere(native):
+    """Scan vertices on the unit sphere, a disk 0.25 above it that the
+    surface does not reach, and a vertex no face uses: after the fit the
+    sphere's vertices are on the surface, the disk's are as far as numpy
+    says and counted as not reached, the loose vertex is not measured."""
+    pos, tris = uv_sphere(400, 200)
+    k = 48
+    ang = np.linspace(0, 2 * np.pi, k, endpoint=False)
+    disk = np.vstack([[0, 0, 1.25], np.c_[0.3 * np.cos(ang), 0.3 * np.sin(ang), np.full(k, 1.25)]])
+    disk_tris = np.array([[0, 1 + i, 1 + (i + 1) % k] for i in range(k)]) + len(pos)
+    loose = np.array([[5.0, 5.0, 5.0]])
+    allpos = np.vstack([pos, disk, loose]).astype(np.float32)
+    scan = native.Scan(native.Mesh.from_faces(allpos, np.vstack([tris, disk_tris])))
+    diag = scan.diagonal
+    cp, cf = quad_sphere(6)
+    cage = native.Mesh.from_faces(cp, cf)
+    out, rep = native.fit(cage, scan)
+    n_sphere, n_disk = len(pos), len(disk)
+    assert rep.scan_point_count == n_sphere + n_disk
+    assert rep.scan_after.ignored == n_disk
+    d = rep.scan_distances
+    assert d.shape == (len(allpos),) and d[-1] == -1.0
+    assert d[:n_sphere].max() * diag < 1e-3   # the level-3 grid's flat quads sag ~4e-4 below the sphere
+    expected = np.linalg.norm(disk, axis=1) - 1.0          # the surface is the unit sphere
+    assert np.abs(d[n_sphere:n_sphere + n_disk] * diag - expected).max() < 1e-3
+    assert rep.scan_after.max == pytest.approx(d[:n_sphere].max(), rel=1e-5)
+
+    # the cage given: its surface lies inside the sphere; each scan vertex's
+    # distance is 1 minus the surface's radius in its direction, read off
+    # dense samples of the surface
+    X = native.surface_stencils(cage, 16).apply(cp).astype(np.float64)
+    radius, direction = np.linalg.norm(X, axis=1), X / np.linalg.norm(X, axis=1)[:, None]
+    u = pos / np.linalg.norm(pos, axis=1)[:, None]
+    best = np.concatenate([np.argmax(c @ direction.T, axis=1) for c in np.array_split(u, 100)])
+    radial = 1.0 - radius[best]
+    assert rep.scan_before.ignored == n_disk
+    assert rep.scan_before.mean * diag == pytest.approx(radial.mean(), rel=0.03)
+    assert rep.scan_before.max * diag == pytest.approx(radial.max(), rel=0.05)
+
+
+def _folded_share(native, cage, V, scan_mesh, scan, k=8, cutoff=0.02):
+    """Share of the samples within the cut-off (a k x k grid per ptex face)
+    whose normal, from differences on the grid, faces away from the normal
+    of the scan triangle holding the closest point; the orientation is the
+    one most samples agree on."""
+    X = native.surface_stencils(native.Mesh(V, cage.face_sizes, cage.face_vertices), k).apply(V)
+    G = X.reshape(-1, k, k, 3).astype(np.float64)
+    n = np.cross(np.gradient(G, axis=2), np.gradient(G, axis=1)).reshape(-1, 3)
+    _, _, dist, faces = scan.closest_points(X)
+    # the scan polygon's normal (the scan is triangles)
+    fv = scan_mesh.face_vertices.reshape(-1, 3)
+    P = scan_mesh.positions.astype(np.float64)
+    fn = np.cross(P[fv[:, 1]] - P[fv[:, 0]], P[fv[:, 2]] - P[fv[:, 0]])[faces]
+    kept = dist <= cutoff * scan.diagonal
+    dots = np.einsum("ij,ij->i", n, fn)[kept]
+    return float((np.sign(dots.sum()) * dots < 0).mean())
+
+
+def test_fold_guard_on_the_bunny(native, bunny):
+    scan_mesh, cage = bunny
+    scan = native.Scan(scan_mesh)
+    guarded, rep = native.fit(cage, scan)
+    free, rep_free = native.fit(cage, scan, allow_folds=True, hard_cutoff=True)
+    share, share_free = (_folded_share(native, cage, V, scan_mesh, scan) for V in (guarded, free))
+    print("folded: guarded %.3f%%, without the guard %.3f%%; mean %.3g against %.3g" % (
+        100 * share, 100 * share_free, rep.after.mean, rep_free.after.mean))
+    assert share_free > 0.01                      # the plain fit folds ...
+    assert share < 0.0015                         # ... the guarded one hardly
+    assert rep.after.mean < 1.15 * rep_free.after.mean
+    assert rep.after.mean < rep.before.mean / 8
+    # the report's own count (4 x 4 samples, smooth scan normals) tells the same
+    assert rep.folded_after / rep.sample_count < 0.0015 < rep_free.folded_after / rep_free.sample_count
+
+
+def test_stray_triangles_do_not_pull(native, bunny):
+    """1% of the scan's triangles copied 0.1% to 0.4% of the diagonal off
+    the scan along their normals (noise blobs, stray points): within the
+    cut-off, so only the robust kernel keeps them from pulling.  Measured
+    against the clean scan, the fit stays within 10% of the clean fit."""
+    scan_mesh, cage = bunny
+    clean = native.Scan(scan_mesh)
+    P = scan_mesh.positions.astype(np.float64)
+    tris = scan_mesh.face_vertices.reshape(-1, 3)
+    rng = np.random.default_rng(7)
+    pick = rng.choice(len(tris), len(tris) // 100, replace=False)
+    t = P[tris[pick]]
+    normal = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+    normal /= np.linalg.norm(normal, axis=1)[:, None]
+    offset = rng.uniform(0.001, 0.004, len(pick)) * clean.diagonal * rng.choice([-1, 1], len(pick))
+    stray = (t + (normal * offset[:, None])[:, None, :]).reshape(-1, 3)
+    dirty = native.Scan(native.Mesh.from_faces(np.vstack([P, stray]).astype(np.float32),
+                                               np.vstack([tris, len(P) + np.arange(len(stray)).reshape(-1, 3)])))
+    M = native.surface_stencils(cage, 4)
+
+    def against_clean(V):
+        d = clean.closest_points(M.apply(V))[2] / clean.diagonal
+        return d[d <= 0.02].mean()
+    reference = against_clean(native.fit(cage, clean)[0])
+    robust = against_clean(native.fit(cage, dirty)[0])
+    print("mean distance to the clean scan: clean fit %.3g, on the dirty scan %.3g" % (reference, robust))
+    assert robust < 1.1 * reference
+
+
+def test_a_base_plate_does_not_pull(native, bunny):
+    """The bunny on a turntable: a plate 0.5% of the diagonal below its
+    lowest point, under its open bottom.  Samples over the bottom's holes
+    find the plate within the cut-off; the hard cut-off lets it drag the
+    bottom down, the robust kernel much less (measured against the scan
+    without the plate, over the samples within the cut-off of it)."""
+    scan_mesh, cage = bunny
+    clean = native.Scan(scan_mesh)
+    P = scan_mesh.positions.astype(np.float64)
+    lo, hi = P.min(axis=0), P.max(axis=0)
+    y = lo[1] - 0.005 * clean.diagonal                    # the bunny stands along +y
+    g = np.linspace(0, 1, 41)
+    gx, gz = np.meshgrid(lo[0] - 0.2 * (hi[0] - lo[0]) + 1.4 * (hi[0] - lo[0]) * g,
+                         lo[2] - 0.2 * (hi[2] - lo[2]) + 1.4 * (hi[2] - lo[2]) * g, indexing="ij")
+    plate = np.c_[gx.ravel(), np.full(gx.size, y), gz.ravel()]
+    ij = np.arange(41 * 41).reshape(41, 41)
+    a, b, c, d = ij[:-1, :-1].ravel(), ij[1:, :-1].ravel(), ij[1:, 1:].ravel(), ij[:-1, 1:].ravel()
+    plate_tris = np.vstack([np.c_[a, b, c], np.c_[a, c, d]]) + len(P)
+    on_plate = native.Scan(native.Mesh.from_faces(np.vstack([P, plate]).astype(np.float32),
+                                                  np.vstack([scan_mesh.face_vertices.reshape(-1, 3), plate_tris])))
+    assert on_plate.diagonal == pytest.approx(clean.diagonal, rel=0.3)
+    M = native.surface_stencils(cage, 4)
+
+    def lowest_and_mean(V):
+        X = M.apply(V)
+        d = clean.closest_points(X)[2] / clean.diagonal
+        return X[:, 1].min(), d[d <= 0.02].mean()
+    low_ref, reference = lowest_and_mean(native.fit(cage, clean)[0])
+    low_robust, robust = lowest_and_mean(native.fit(cage, on_plate)[0])
+    low_hard, hard = lowest_and_mean(native.fit(cage, on_plate, hard_cutoff=True)[0])
+    print("lowest sample: %.4f clean, %.4f robust, %.4f hard (plate %.4f); mean %.3g, %.3g, %.3g"
+          % (low_ref, low_robust, low_hard, y, reference, robust, hard))
+    # the plate costs the robust fit about a tenth (the samples right over
+    # it are near it too); the hard cut-off loses far more
+    assert robust < 1.15 * reference
+    assert hard > 1.5 * reference and hard > 1.4 * robust
+
+
+def test_fit_quality_options_are_checked(native, bunny):
+    scan_mesh, cage = bunny
+    scan = native.Scan(scan_mesh)
+    for kw in ({"robust_scale": 0}, {"robust_scale": float("nan")}, {"slide_weight": 1.0}, {"slide_weight": -0.1}):
+        with pytest.raises(native.PiaError):
+            native.fit(cage, scan, max_rounds=1, **kw)
+    _, rep = native.fit(cage, scan, max_rounds=1, measure_scan=False)
+    assert rep.scan_point_count == 0 and rep.scan_distances is None
