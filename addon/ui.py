@@ -88,6 +88,19 @@ class DATA_PT_subdiv_pia(bpy.types.Panel):
                 col.label(text="%s distance: %.2g (was %.2g)"
                           % (label, float(obj.get("pia_fit_%s_after" % key, 0.0)),
                              float(obj.get("pia_fit_%s_before" % key, 0.0))))
+            if obj.get("pia_fit_scan_points"):
+                col.label(text="Scan to surface: mean %.2g, max %.2g (was %.2g, %.2g)"
+                          % (float(obj.get("pia_fit_scan_mean_after", 0.0)),
+                             float(obj.get("pia_fit_scan_max_after", 0.0)),
+                             float(obj.get("pia_fit_scan_mean_before", 0.0)),
+                             float(obj.get("pia_fit_scan_max_before", 0.0))))
+                col.label(text="Scan not reached: %.2g%% (was %.2g%%)"
+                          % (100.0 * float(obj.get("pia_fit_scan_unreached_after", 0.0)),
+                             100.0 * float(obj.get("pia_fit_scan_unreached_before", 0.0))))
+            if "pia_fit_folded_after" in obj:
+                col.label(text="Facing away from the scan: %.2g%% (was %.2g%%)"
+                          % (100.0 * float(obj["pia_fit_folded_after"]),
+                             100.0 * float(obj.get("pia_fit_folded_before", 0.0))))
             col.label(text="Of the scan's diagonal; heat map red at %.2g"
                       % float(obj.get("pia_distance_scale", api.HEAT_SCALE)))
             col.label(text="(Viewport Shading > Color > Attribute)")
