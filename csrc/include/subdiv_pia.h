@@ -649,7 +649,9 @@ typedef struct spia_fit_report {
  * `options` gives the subdivision settings (scheme, quality, creases,
  * boundary) and, for VERTICES, the solver settings; its progress callback
  * is called after every round with the round and the mean relative
- * distance, and cancels as elsewhere.
+ * distance, and also at least every 0.2 s within the long steps (with the
+ * round under way and the last mean; 0 before the first round), and
+ * cancels as elsewhere.
  *
  * Returns SPIA_OK; or SPIA_MAX_ITERATIONS when SURFACE used max_rounds with
  * the distances still falling, or the VERTICES solve stopped short of its

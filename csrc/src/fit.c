@@ -178,13 +178,18 @@ static spia_fit_distances distance_stats(const float *d, int64_t count, double c
     return s;
 }
 
-/* The mean with every sample beyond the cut-off (and, given `folded`, every
- * folded one) counted at the cut-off: what picks the best cage, so that a
- * round that pushes samples off the scan or folds the surface never looks
- * like a gain. */
+/* The mean with every sample beyond the cut-off counted at the cut-off and,
+ * given `folded`, every folded one FOLD_PENALTY of the cut-off farther than
+ * it is: what picks the best cage, so that a round that pushes samples off
+ * the scan or folds the surface does not look like a gain.  (Counted at the
+ * whole cut-off, a folded sample outweighs a hundred good ones and the fit
+ * stops rounds early: measured on the bunny, mean 1.35e-4 against 1.30e-4
+ * at this penalty, with as many folds.) */
+#define FOLD_PENALTY 0.03
 static double mean_clamped(const float *d, const uint8_t *folded, int64_t count, double cutoff_abs) {
     double sum = 0.0;
-    for (int64_t i = 0; i < count; ++i) sum += d[i] <= cutoff_abs && !(folded && folded[i]) ? d[i] : cutoff_abs;
+    for (int64_t i = 0; i < count; ++i)
+        sum += d[i] > cutoff_abs ? cutoff_abs : folded && folded[i] ? d[i] + FOLD_PENALTY * cutoff_abs : d[i];
     return count ? sum / (double)count : 0.0;
 }
 
@@ -249,6 +254,47 @@ static void robust_weights(const float *d, int64_t count, double c, float *w) {
             const double r = d[i] * inv;
             w[i] = (float)(w[i] / (1.0 + r * r));
         }
+}
+
+/* ---- progress ------------------------------------------------------------- */
+
+/* Within a round the progress callback is called at least every
+ * PROGRESS_INTERVAL seconds from the long steps (closest points in chunks
+ * of QUERY_CHUNK, each conjugate-gradient step), with the round under way
+ * and the last mean distance, so that a cancel is answered promptly at
+ * every scale. */
+#define PROGRESS_INTERVAL 0.2
+#define QUERY_CHUNK 65536
+typedef struct fit_clock {
+    spia_progress_fn fn;
+    void *user;
+    double last, mean;
+    int32_t round;
+    int cancelled;
+} fit_clock;
+
+static int clock_tick(fit_clock *c) {
+    if (!c->fn || c->cancelled) return c->cancelled;
+    const double now = spia__now();
+    if (now - c->last < PROGRESS_INTERVAL) return 0;
+    c->last = now;
+    if (c->fn(c->user, c->round, c->mean)) c->cancelled = 1;
+    return c->cancelled;
+}
+
+/* Closest points in chunks, the clock ticking between them; returns 1 when
+ * cancelled (the rest left undone). */
+static int closest_in_chunks(const spia_scan *scan, int64_t count, const double *points, const float *radius,
+                             float *closest, float *normals, float *distances, uint8_t *on_boundary, int threads,
+                             fit_clock *clock) {
+    for (int64_t at = 0; at < count; at += QUERY_CHUNK) {
+        const int64_t n = count - at < QUERY_CHUNK ? count - at : QUERY_CHUNK;
+        spia__scan_closest_points_double(scan, n, points + 3 * at, radius ? radius + at : NULL,
+                                         closest ? closest + 3 * at : NULL, normals ? normals + 3 * at : NULL,
+                                         distances + at, NULL, on_boundary ? on_boundary + at : NULL, threads);
+        if (clock_tick(clock)) return 1;
+    }
+    return 0;
 }
 
 /* Conjugate gradients stop early only when the residual has fallen this far:
@@ -403,7 +449,7 @@ static double precondition(int32_t n, const double *precond, const double *r, do
 /* One round: conjugate gradients on A V = b from the current V, with targets
  * T (S * 3 floats).  `work` holds 5 * 3n doubles, `precond` 9n. */
 static int least_squares_round(fit_system *f, const float *T, const double *V0, double *V, int iterations,
-                               double *work, double *precond) {
+                               double *work, double *precond, fit_clock *clock) {
     const int64_t N3 = 3 * (int64_t)f->n;
     double *b = work, *r = work + N3, *z = work + 2 * N3, *p = work + 3 * N3, *Ap = work + 4 * N3;
     /* b = M^T B T + lambda Lap^T Lap V0 + damping V (the damping anchors the
@@ -453,7 +499,7 @@ static int least_squares_round(fit_system *f, const float *T, const double *V0, 
     memcpy(p, z, sizeof(double) * (size_t)N3);
     const double rz0 = rz;
     int it = 0;
-    for (; it < iterations && rz > CG_TOLERANCE * CG_TOLERANCE * rz0 && rz > 0.0; ++it) {
+    for (; it < iterations && rz > CG_TOLERANCE * CG_TOLERANCE * rz0 && rz > 0.0 && !clock_tick(clock); ++it) {
         system_apply(f, p, Ap);
         double pAp = 0.0;
         for (int64_t i = 0; i < N3; ++i) pAp += p[i] * Ap[i];
@@ -633,7 +679,7 @@ static spia_result scan_side_prepare(const spia_mesh *cage, const spia_adjacency
 
 /* The distances of the scan vertices to the limit surface of cage V. */
 static spia_result scan_side_measure(fit_buffers *b, const double *V, double cutoff_abs, double diagonal, int threads,
-                                     spia_fit_distances *out, spia_status *status) {
+                                     fit_clock *clock, spia_fit_distances *out, spia_status *status) {
     spia_result r = spia__limit_grid_evaluate(b->grid, V, b->grid_pos, status);
     if (r != SPIA_OK) return r;
     spia_mesh view;
@@ -645,9 +691,12 @@ static spia_result scan_side_measure(fit_buffers *b, const double *V, double cut
     view.face_vertices = spia__limit_grid_quads(b->grid);
     spia_scan *surface = NULL;
     if ((r = spia_scan_create(&view, &surface, status)) != SPIA_OK) return r;
-    spia__scan_closest_points_double(surface, b->scan_count, b->scan_pts, NULL, NULL, NULL, b->scan_d, NULL, NULL,
-                                     threads);
+    const int cancelled = clock_tick(clock) ||
+                          closest_in_chunks(surface, b->scan_count, b->scan_pts, NULL, NULL, NULL, b->scan_d, NULL,
+                                            threads, clock);
     spia_scan_free(surface);
+    if (cancelled)
+        return spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled measuring the scan's distances to the surface");
     *out = distance_stats(b->scan_d, b->scan_count, cutoff_abs, diagonal, b->scan_scratch);
     return SPIA_OK;
 }
@@ -697,8 +746,8 @@ static spia_result nothing_to_fit(spia_status *status, const char *what, double 
                       what, cutoff);
 }
 
-static void evaluate(const spia_scan *scan, fit_buffers *b, const double *V, int64_t S, double diagonal,
-                     int threads, double *query_seconds) {
+static int evaluate(const spia_scan *scan, fit_buffers *b, const double *V, int64_t S, double diagonal,
+                    int threads, double *query_seconds, fit_clock *clock) {
     const double t0 = spia__now();
     if (b->evaluated) memcpy(b->X_prev, b->X, sizeof(double) * 3 * (size_t)S);
     rows_apply(b->M, V, b->X);
@@ -709,10 +758,11 @@ static void evaluate(const spia_scan *scan, fit_buffers *b, const double *V, int
                                       (x[2] - y[2]) * (x[2] - y[2]));
             b->radius[s] = (float)((b->d[s] + moved) * (1.0 + 1e-5) + 1e-7 * diagonal);
         }
-    spia__scan_closest_points_double(scan, S, b->X, b->evaluated ? b->radius : NULL, b->T, b->N, b->d, NULL,
-                                     b->on_boundary, threads);
+    const int cancelled = closest_in_chunks(scan, S, b->X, b->evaluated ? b->radius : NULL, b->T, b->N, b->d,
+                                            b->on_boundary, threads, clock);
     b->evaluated = 1;
     *query_seconds += spia__now() - t0;
+    return cancelled;
 }
 
 spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_options *options,
@@ -762,6 +812,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
 
     double t0 = spia__now();
     int sign = 1;
+    fit_clock clock = {opt.progress, opt.progress_user_data, spia__now(), 0.0, 0, 0};
     spia_options surface_opt = opt;
     surface_opt.scheme = SPIA_SCHEME_CATMULL_CLARK;
     int64_t S = 0;
@@ -799,7 +850,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
             r = spia__fail(status, SPIA_ERROR_INTERNAL, -1, "the samples do not match the cage's faces");
             goto done;
         }
-        evaluate(scan, &b, b.V, S, diagonal, opt.threads, &report->query_seconds);
+        if (evaluate(scan, &b, b.V, S, diagonal, opt.threads, &report->query_seconds, &clock)) goto cancelled;
         report->before = distance_stats(b.d, S, cutoff_abs, diagonal, b.scratch);
         if (report->before.ignored >= S) {
             r = nothing_to_fit(status, "sample of the cage's limit surface", fo.cutoff);
@@ -818,7 +869,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
                 if (r == SPIA_ERROR_OUT_OF_MEMORY) goto oom;
                 goto done;
             }
-            if ((r = scan_side_measure(&b, b.V0, cutoff_abs, diagonal, opt.threads, &report->scan_before, status)) !=
+            if ((r = scan_side_measure(&b, b.V0, cutoff_abs, diagonal, opt.threads, &clock, &report->scan_before, status)) !=
                 SPIA_OK)
                 goto done;
             report->scan_point_count = b.scan_count;
@@ -926,9 +977,12 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
                     if (b.folded[q]) b.wts[q] = 0.0f;
                 stiffen(cage, &adj, b.folded, b.sample_face, S, b.mark, b.stiffness);
             }
-            report->iterations += least_squares_round(&f, b.T, b.V0, b.V, fo.solver_iterations, b.work, b.precond);
+            clock.round = round;
+            report->iterations +=
+                least_squares_round(&f, b.T, b.V0, b.V, fo.solver_iterations, b.work, b.precond, &clock);
+            if (clock.cancelled) goto cancelled;
             report->solve_seconds += spia__now() - t0;
-            evaluate(scan, &b, b.V, S, diagonal, opt.threads, &report->query_seconds);
+            if (evaluate(scan, &b, b.V, S, diagonal, opt.threads, &report->query_seconds, &clock)) goto cancelled;
             normal_agreement(b.X, b.N, S, fo.samples_per_edge, b.dots);
             find_folds(b.dots, b.d, b.on_boundary, S, cutoff_abs, sign, b.folded);
             const double mean = mean_within(b.d, S, cutoff_abs);
@@ -937,7 +991,9 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
                 report->history[round] = mean / (diagonal > 0.0 ? diagonal : 1.0);
                 report->history_count = round + 1;
             }
-            if (opt.progress && opt.progress(opt.progress_user_data, round, mean / (diagonal > 0.0 ? diagonal : 1.0))) {
+            clock.mean = mean / (diagonal > 0.0 ? diagonal : 1.0);
+            clock.last = spia__now();
+            if (opt.progress && opt.progress(opt.progress_user_data, round, clock.mean)) {
                 r = spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled after fitting round %d", round);
                 goto done;
             }
@@ -967,14 +1023,14 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
 
     /* Distances of the cage written. */
     if (S > 0) {
-        evaluate(scan, &b, b.best, S, diagonal, opt.threads, &report->query_seconds);
+        if (evaluate(scan, &b, b.best, S, diagonal, opt.threads, &report->query_seconds, &clock)) goto cancelled;
         report->after = distance_stats(b.d, S, cutoff_abs, diagonal, b.scratch);
         normal_agreement(b.X, b.N, S, fo.samples_per_edge, b.dots);
         report->folded_after =
             fo.samples_per_edge < 2 ? -1 : find_folds(b.dots, b.d, b.on_boundary, S, cutoff_abs, sign, b.folded);
         if (b.grid) {
             t0 = spia__now();
-            if ((r = scan_side_measure(&b, b.best, cutoff_abs, diagonal, opt.threads, &report->scan_after, status)) !=
+            if ((r = scan_side_measure(&b, b.best, cutoff_abs, diagonal, opt.threads, &clock, &report->scan_after, status)) !=
                 SPIA_OK)
                 goto done;
             report->query_seconds += spia__now() - t0;
@@ -1021,6 +1077,9 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
     }
     for (int64_t i = 0; i < N3; ++i) cage_out[i] = (float)b.best[i];
     if (r == SPIA_OK) spia__ok(status);
+    goto done;
+cancelled:
+    r = spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled while fitting (round %d)", clock.round);
     goto done;
 oom:
     r = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory fitting the cage");

@@ -94,11 +94,11 @@ def test_fold_guard_on_the_bunny(native, bunny):
     print("folded: guarded %.3f%%, without the guard %.3f%%; mean %.3g against %.3g" % (
         100 * share, 100 * share_free, rep.after.mean, rep_free.after.mean))
     assert share_free > 0.01                      # the plain fit folds ...
-    assert share < 0.0015                         # ... the guarded one hardly
-    assert rep.after.mean < 1.15 * rep_free.after.mean
+    assert share < min(0.002, share_free / 8)     # ... the guarded one hardly
+    assert rep.after.mean < 1.1 * rep_free.after.mean
     assert rep.after.mean < rep.before.mean / 8
     # the report's own count (4 x 4 samples, smooth scan normals) tells the same
-    assert rep.folded_after / rep.sample_count < 0.0015 < rep_free.folded_after / rep_free.sample_count
+    assert rep.folded_after / rep.sample_count < 0.002 < rep_free.folded_after / rep_free.sample_count
 
 
 def test_stray_triangles_do_not_pull(native, bunny):
@@ -162,9 +162,9 @@ def test_a_base_plate_does_not_pull(native, bunny):
     low_hard, hard = lowest_and_mean(native.fit(cage, on_plate, hard_cutoff=True)[0])
     print("lowest sample: %.4f clean, %.4f robust, %.4f hard (plate %.4f); mean %.3g, %.3g, %.3g"
           % (low_ref, low_robust, low_hard, y, reference, robust, hard))
-    # the plate costs the robust fit about a tenth (the samples right over
+    # the plate costs the robust fit about a sixth (the samples right over
     # it are near it too); the hard cut-off loses far more
-    assert robust < 1.15 * reference
+    assert robust < 1.25 * reference
     assert hard > 1.5 * reference and hard > 1.4 * robust
 
 
@@ -176,3 +176,21 @@ def test_fit_quality_options_are_checked(native, bunny):
             native.fit(cage, scan, max_rounds=1, **kw)
     _, rep = native.fit(cage, scan, max_rounds=1, measure_scan=False)
     assert rep.scan_point_count == 0 and rep.scan_distances is None
+
+
+def test_progress_within_rounds_and_cancel(native):
+    """The dragon's cage (9.5k vertices, 150k samples, a 100k-vertex scan):
+    before the first round ends the callback has been called already
+    (round 0: closest points are queried in chunks between which it is
+    called every 0.2 s), and a cancel there stops the fit."""
+    scan = native.Scan(_obj_mesh(native, "dragon_res2.obj"))
+    cage = _obj_mesh(native, "dragon_res2_quadriflow_cage.obj")
+    calls = []
+
+    def progress(round_, mean):
+        calls.append(round_)
+        return True
+    with pytest.raises(native.PiaCancelled) as e:
+        native.fit(cage, scan, progress=progress)
+    assert calls == [0]
+    assert "cancelled while fitting (round 0)" in str(e.value)
