@@ -649,9 +649,9 @@ typedef struct spia_fit_report {
  * `options` gives the subdivision settings (scheme, quality, creases,
  * boundary) and, for VERTICES, the solver settings; its progress callback
  * is called after every round with the round and the mean relative
- * distance, and also at least every 0.2 s within the long steps (with the
- * round under way and the last mean; 0 before the first round), and
- * cancels as elsewhere.
+ * distance (VERTICES: the solve's iterations), and also at least every
+ * 0.2 s within the long steps, repeating the last call's figures (0 and
+ * the cage given's mean before any), and cancels as elsewhere.
  *
  * Returns SPIA_OK; or SPIA_MAX_ITERATIONS when SURFACE used max_rounds with
  * the distances still falling, or the VERTICES solve stopped short of its

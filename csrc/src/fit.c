@@ -261,8 +261,10 @@ static void robust_weights(const float *d, int64_t count, double c, float *w) {
 /* Within a round the progress callback is called at least every
  * PROGRESS_INTERVAL seconds from the long steps (closest points in chunks
  * of QUERY_CHUNK, each conjugate-gradient step), with the round under way
- * and the last mean distance, so that a cancel is answered promptly at
- * every scale. */
+ * so that a cancel is answered promptly at
+ * every scale.  These calls repeat the last call's figures (the rounds
+ * done and their mean distance, or the VERTICES solve's last iteration and
+ * error; 0 and the cage given's mean before any). */
 #define PROGRESS_INTERVAL 0.2
 #define QUERY_CHUNK 65536
 typedef struct fit_clock {
@@ -279,6 +281,14 @@ static int clock_tick(fit_clock *c) {
     if (now - c->last < PROGRESS_INTERVAL) return 0;
     c->last = now;
     if (c->fn(c->user, c->round, c->mean)) c->cancelled = 1;
+    return c->cancelled;
+}
+
+/* The solver's progress, passed on and remembered (for the ticks to repeat). */
+static int clock_forward(void *user, int32_t iteration, double value) {
+    fit_clock *c = (fit_clock *)user;
+    c->round = iteration, c->mean = value, c->last = spia__now();
+    if (c->fn(c->user, iteration, value)) c->cancelled = 1;
     return c->cancelled;
 }
 
@@ -852,6 +862,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         }
         if (evaluate(scan, &b, b.V, S, diagonal, opt.threads, &report->query_seconds, &clock)) goto cancelled;
         report->before = distance_stats(b.d, S, cutoff_abs, diagonal, b.scratch);
+        clock.mean = report->before.mean;
         if (report->before.ignored >= S) {
             r = nothing_to_fit(status, "sample of the cage's limit surface", fo.cutoff);
             goto done;
@@ -922,7 +933,9 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         spia_report rep;
         memset(&rep, 0, sizeof rep);
         t0 = spia__now();
-        r = spia_solve(b.L, b.targets, &opt, b.solved, &rep, status);
+        spia_options solve_opt = opt;
+        if (opt.progress) solve_opt.progress = clock_forward, solve_opt.progress_user_data = &clock;
+        r = spia_solve(b.L, b.targets, &solve_opt, b.solved, &rep, status);
         report->solve_seconds += spia__now() - t0;
         report->iterations = rep.iterations;
         report->max_error_relative = rep.max_error_relative;
@@ -977,7 +990,6 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
                     if (b.folded[q]) b.wts[q] = 0.0f;
                 stiffen(cage, &adj, b.folded, b.sample_face, S, b.mark, b.stiffness);
             }
-            clock.round = round;
             report->iterations +=
                 least_squares_round(&f, b.T, b.V0, b.V, fo.solver_iterations, b.work, b.precond, &clock);
             if (clock.cancelled) goto cancelled;
@@ -992,6 +1004,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
                 report->history_count = round + 1;
             }
             clock.mean = mean / (diagonal > 0.0 ? diagonal : 1.0);
+            clock.round = round;
             clock.last = spia__now();
             if (opt.progress && opt.progress(opt.progress_user_data, round, clock.mean)) {
                 r = spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled after fitting round %d", round);
@@ -1079,7 +1092,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
     if (r == SPIA_OK) spia__ok(status);
     goto done;
 cancelled:
-    r = spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled while fitting (round %d)", clock.round);
+    r = spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled during fitting round %d", clock.round + 1);
     goto done;
 oom:
     r = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory fitting the cage");

@@ -40,12 +40,20 @@ typedef struct shared {
 typedef struct counter {
     int32_t calls;
     double sum;
+    int32_t last_iteration;
+    double last_error;
 } counter;
 
+/* Counts the calls that report something new: the fit's calls within a
+ * round repeat the last round's figures, as often as time says. */
 static int count_progress(void *user, int32_t iteration, double relative_error) {
     counter *c = (counter *)user;
+    if (c->calls > 0 && iteration == c->last_iteration && relative_error == c->last_error) return 0;
+    if (c->calls == 0 && iteration == 0) return 0; /* a fit's calls before its first round */
     ++c->calls;
     c->sum += iteration + relative_error;
+    c->last_iteration = iteration;
+    c->last_error = relative_error;
     return 0;
 }
 
@@ -53,7 +61,7 @@ static int count_progress(void *user, int32_t iteration, double relative_error) 
  * *calls the progress calls it saw; returns the result code. */
 static int run_job(const shared *s, const job *j, float *out, int32_t *iterations, int32_t *calls, double *sum) {
     spia_status st;
-    counter c = {0, 0.0};
+    counter c = {0, 0.0, 0, 0.0};
     spia_options o = j->options;
     o.progress = count_progress;
     o.progress_user_data = &c;

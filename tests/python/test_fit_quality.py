@@ -181,8 +181,8 @@ def test_fit_quality_options_are_checked(native, bunny):
 def test_progress_within_rounds_and_cancel(native):
     """The dragon's cage (9.5k vertices, 150k samples, a 100k-vertex scan):
     before the first round ends the callback has been called already
-    (round 0: closest points are queried in chunks between which it is
-    called every 0.2 s), and a cancel there stops the fit."""
+    (with round 0: closest points are queried in chunks between which it
+    is called every 0.2 s), and a cancel there stops the fit."""
     scan = native.Scan(_obj_mesh(native, "dragon_res2.obj"))
     cage = _obj_mesh(native, "dragon_res2_quadriflow_cage.obj")
     calls = []
@@ -193,4 +193,4 @@ def test_progress_within_rounds_and_cancel(native):
     with pytest.raises(native.PiaCancelled) as e:
         native.fit(cage, scan, progress=progress)
     assert calls == [0]
-    assert "cancelled while fitting (round 0)" in str(e.value)
+    assert "cancelled during fitting round 1" in str(e.value)
