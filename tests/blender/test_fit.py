@@ -260,7 +260,7 @@ def test_bunny_scan_surface_fit():
     # Folds, judged by Blender's level-3 surface: its vertex normals against
     # the normal of the scan triangle holding each vertex's closest point
     # (the orientation most of them agree on).
-    points, normals = _level3_points_and_normals(new_obj)
+    points, normals, _ = _level3_surface(new_obj)
     cosines, d = [], []
     for p, n in zip(points, normals):
         location, normal, _, distance = bvh.find_nearest(Vector(p))
@@ -275,7 +275,8 @@ def test_bunny_scan_surface_fit():
     assert abs(new_obj["pia_fit_folded_after"] - folded) < 0.001
 
 
-def _level3_points_and_normals(obj):
+def _level3_surface(obj):
+    """Blender's level-3 limit surface of obj: (vertices, vertex normals, polygons)."""
     mod = obj.modifiers[0]
     mod.levels, mod.quality, mod.use_limit_surface = 3, 3, True
     depsgraph = bpy.context.evaluated_depsgraph_get()
@@ -286,7 +287,7 @@ def _level3_points_and_normals(obj):
         pts = positions(mesh).astype(np.float64)
         nrm = np.empty(3 * len(mesh.vertices), np.float32)
         mesh.vertices.foreach_get("normal", nrm)
-        return pts, nrm.reshape(-1, 3).astype(np.float64)
+        return pts, nrm.reshape(-1, 3).astype(np.float64), [tuple(p.vertices) for p in mesh.polygons]
     finally:
         evaluated.to_mesh_clear()
 
@@ -298,17 +299,8 @@ def test_scan_to_surface_distances_are_blenders():
     scan = import_obj(os.path.join(DATA, "bun_zipper.obj"))
     cage = import_obj(os.path.join(DATA, "bun_zipper_quadriflow_cage.obj"))
     new_obj = fit(cage, scan, fit='SURFACE', levels=3, quality=3)
-    mod = new_obj.modifiers[0]
-    mod.levels, mod.quality, mod.use_limit_surface = 3, 3, True
-    depsgraph = bpy.context.evaluated_depsgraph_get()
-    depsgraph.update()
-    evaluated = new_obj.evaluated_get(depsgraph)
-    mesh = evaluated.to_mesh()
-    try:
-        surface = BVHTree.FromPolygons([Vector(v) for v in positions(mesh).astype(np.float64)],
-                                       [tuple(p.vertices) for p in mesh.polygons], all_triangles=False, epsilon=0.0)
-    finally:
-        evaluated.to_mesh_clear()
+    points, _, faces = _level3_surface(new_obj)
+    surface = bvh_of(points, faces)
     vertices, polygons = scan_in_cage_space(scan, cage)
     diag = used_diagonal(vertices, polygons)
     used = np.unique(np.fromiter((v for p in polygons for v in p), np.int64))
