@@ -26,7 +26,16 @@ struct spia_scan {
     unsigned char *boundary_bits;
     double diagonal;
     int64_t skipped_faces; /* faces that repeat a vertex: left out              */
+    /* Seconds of spia_scan_create's phases: checks, copy and fans with the
+     * normals, hierarchy, boundary (for benchmarks: spia__scan_timings). */
+    double seconds[4];
 };
+
+/* The library does not export it; benchmarks that compile scan.c in do. */
+void spia__scan_timings(const spia_scan *scan, double seconds[4]);
+void spia__scan_timings(const spia_scan *scan, double seconds[4]) {
+    for (int i = 0; i < 4; ++i) seconds[i] = scan ? scan->seconds[i] : 0.0;
+}
 
 static void scan_release(spia_scan *s) {
     if (!s) return;
@@ -108,6 +117,8 @@ spia_result spia_scan_create(const spia_mesh *mesh, spia_scan **out, spia_status
     if (!mesh->positions || !mesh->face_sizes || !mesh->face_vertices)
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "the scan's positions and faces must not be NULL");
     const int32_t n = mesh->vertex_count;
+    double t0 = spia__now();
+    const double start = t0;
     for (int64_t i = 0; i < 3 * (int64_t)n; ++i)
         if (!isfinite(mesh->positions[i]))
             return spia__fail(status, SPIA_ERROR_NONFINITE, i / 3, "scan vertex %lld has a non-finite coordinate",
@@ -142,6 +153,8 @@ spia_result spia_scan_create(const spia_mesh *mesh, spia_scan **out, spia_status
     s->vertex_count = n;
     s->triangle_count = tris;
     s->skipped_faces = skipped;
+    s->seconds[0] = spia__now() - start;
+    t0 = spia__now();
     s->positions = malloc(sizeof(float) * 3 * (size_t)n);
     s->normals = calloc(3 * (size_t)n, sizeof(float));
     s->triangles = malloc(sizeof(int32_t) * 3 * (size_t)tris);
@@ -195,6 +208,8 @@ spia_result spia_scan_create(const spia_mesh *mesh, spia_scan **out, spia_status
             for (int q = 0; q < 3; ++q) s->normals[3 * (int64_t)v + q] = (float)(a[q] / len);
     }
     free(acc);
+    s->seconds[1] = spia__now() - t0;
+    t0 = spia__now();
 
     /* The hierarchy sorts the triangles into its leaf order; the polygons
      * they came from follow. */
@@ -214,10 +229,13 @@ spia_result spia_scan_create(const spia_mesh *mesh, spia_scan **out, spia_status
         free(s->polygon_of);
         s->polygon_of = polygon_of;
     }
+    s->seconds[2] = spia__now() - t0;
+    t0 = spia__now();
     if (mark_boundary(s) != SPIA_OK) {
         scan_release(s);
         return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the scan's boundary");
     }
+    s->seconds[3] = spia__now() - t0;
     *out = s;
     spia__ok(status);
     return SPIA_OK;
