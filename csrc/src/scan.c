@@ -52,49 +52,102 @@ void spia_scan_free(spia_scan *scan) { scan_release(scan); }
 
 double spia_scan_diagonal(const spia_scan *scan) { return scan ? scan->diagonal : 0.0; }
 
-/* Boundary edges: sort the triangles' edges by (low, high) vertex and find
- * those that occur once. */
-typedef struct edge_ref {
-    int32_t lo, hi;
-    int64_t slot; /* 3 * triangle + k */
-} edge_ref;
+/* Boundary edges: the triangles' edges bucketed by their lower vertex (a
+ * counting sort, linear in the edges), and in each bucket those whose upper
+ * vertex occurs once.  Buckets are searched side by side; what is marked
+ * does not depend on the order within a bucket, so neither on the threads. */
+typedef struct edge_entry {
+    int32_t hi;
+    uint32_t slot; /* 3 * triangle + k: edge k runs from corner k to corner k + 1 */
+} edge_entry;
 
-static int compare_edge(const void *a, const void *b) {
-    const edge_ref *x = (const edge_ref *)a, *y = (const edge_ref *)b;
-    if (x->lo != y->lo) return x->lo < y->lo ? -1 : 1;
-    if (x->hi != y->hi) return x->hi < y->hi ? -1 : 1;
-    return (x->slot > y->slot) - (x->slot < y->slot);
+/* Buckets larger than this (a fan's hub, a huge n-gon's first corner) are
+ * sorted instead of searched pairwise. */
+#define BUCKET_PAIRWISE 48
+
+static int compare_entry(const void *a, const void *b) {
+    const edge_entry *x = (const edge_entry *)a, *y = (const edge_entry *)b;
+    return (x->hi > y->hi) - (x->hi < y->hi);
 }
 
-static spia_result mark_boundary(spia_scan *s) {
-    const int64_t m = 3 * s->triangle_count;
-    edge_ref *e = malloc(sizeof(edge_ref) * (size_t)m);
-    unsigned char *vertex_boundary = calloc((size_t)s->vertex_count, 1);
-    s->boundary_bits = calloc((size_t)s->triangle_count, 1);
-    if (!e || !vertex_boundary || !s->boundary_bits) {
-        free(e), free(vertex_boundary);
+typedef struct boundary_job {
+    const int64_t *begin; /* vertex_count + 1: bucket v is entries[begin[v], begin[v + 1]) */
+    edge_entry *entries;
+    uint8_t *once;        /* per slot: its edge is used by one triangle only */
+    const int32_t *triangles;
+    const uint8_t *vertex_boundary;
+    unsigned char *bits;
+} boundary_job;
+
+static void bucket_range(void *context, int64_t first, int64_t last, int thread) {
+    (void)thread;
+    const boundary_job *j = (const boundary_job *)context;
+    for (int64_t v = first; v < last; ++v) {
+        edge_entry *e = j->entries + j->begin[v];
+        const int64_t k = j->begin[v + 1] - j->begin[v];
+        if (k <= BUCKET_PAIRWISE) {
+            for (int64_t a = 0; a < k; ++a) {
+                int twin = 0;
+                for (int64_t b = 0; b < k && !twin; ++b) twin = b != a && e[b].hi == e[a].hi;
+                if (!twin) j->once[e[a].slot] = 1;
+            }
+        } else {
+            qsort(e, (size_t)k, sizeof *e, compare_entry);
+            for (int64_t a = 0; a < k;) {
+                int64_t b = a + 1;
+                while (b < k && e[b].hi == e[a].hi) ++b;
+                if (b - a == 1) j->once[e[a].slot] = 1;
+                a = b;
+            }
+        }
+    }
+}
+
+static void boundary_bits_range(void *context, int64_t first, int64_t last, int thread) {
+    (void)thread;
+    const boundary_job *j = (const boundary_job *)context;
+    for (int64_t t = first; t < last; ++t) {
+        unsigned char bits = 0;
+        for (int k = 0; k < 3; ++k) {
+            bits |= (unsigned char)(j->once[3 * t + k] << k);
+            bits |= (unsigned char)(j->vertex_boundary[j->triangles[3 * t + k]] << (3 + k));
+        }
+        j->bits[t] = bits;
+    }
+}
+
+static spia_result mark_boundary(spia_scan *s, int threads) {
+    const int64_t m = 3 * s->triangle_count, n = s->vertex_count;
+    int64_t *begin = calloc((size_t)n + 1, sizeof(int64_t));
+    edge_entry *e = malloc(sizeof(edge_entry) * (size_t)m);
+    uint8_t *once = calloc((size_t)m, 1);
+    uint8_t *vertex_boundary = calloc((size_t)n, 1);
+    s->boundary_bits = malloc((size_t)s->triangle_count);
+    if (!begin || !e || !once || !vertex_boundary || !s->boundary_bits) {
+        free(begin), free(e), free(once), free(vertex_boundary);
         return SPIA_ERROR_OUT_OF_MEMORY;
     }
+    const int32_t *tri = s->triangles;
+    /* begin[v] counts the edges whose lower vertex is v, then (summed) is
+     * the end of v's bucket; filled backwards it becomes the bucket's start. */
     for (int64_t i = 0; i < m; ++i) {
-        const int32_t a = s->triangles[i], b = s->triangles[i % 3 == 2 ? i - 2 : i + 1];
-        e[i].lo = a < b ? a : b;
-        e[i].hi = a < b ? b : a;
-        e[i].slot = i;
+        const int32_t a = tri[i], b = tri[i % 3 == 2 ? i - 2 : i + 1];
+        ++begin[a < b ? a : b];
     }
-    qsort(e, (size_t)m, sizeof(edge_ref), compare_edge);
-    for (int64_t i = 0; i < m;) {
-        int64_t j = i + 1;
-        while (j < m && e[j].lo == e[i].lo && e[j].hi == e[i].hi) ++j;
-        if (j - i == 1) {
-            s->boundary_bits[e[i].slot / 3] |= (unsigned char)(1u << (e[i].slot % 3));
-            vertex_boundary[e[i].lo] = vertex_boundary[e[i].hi] = 1;
-        }
-        i = j;
+    for (int64_t v = 1; v <= n; ++v) begin[v] += begin[v - 1];
+    for (int64_t i = m - 1; i >= 0; --i) {
+        const int32_t a = tri[i], b = tri[i % 3 == 2 ? i - 2 : i + 1];
+        edge_entry *x = e + --begin[a < b ? a : b];
+        x->hi = a < b ? b : a;
+        x->slot = (uint32_t)i;
     }
-    for (int64_t t = 0; t < s->triangle_count; ++t)
-        for (int k = 0; k < 3; ++k)
-            if (vertex_boundary[s->triangles[3 * t + k]]) s->boundary_bits[t] |= (unsigned char)(1u << (3 + k));
-    free(e), free(vertex_boundary);
+    boundary_job job = {begin, e, once, tri, vertex_boundary, s->boundary_bits};
+    spia__parallel_for(threads, n, 16384, bucket_range, &job);
+    free(e), free(begin);
+    for (int64_t i = 0; i < m; ++i)
+        if (once[i]) vertex_boundary[tri[i]] = vertex_boundary[tri[i % 3 == 2 ? i - 2 : i + 1]] = 1;
+    spia__parallel_for(threads, s->triangle_count, 65536, boundary_bits_range, &job);
+    free(once), free(vertex_boundary);
     return SPIA_OK;
 }
 
@@ -231,7 +284,7 @@ spia_result spia_scan_create(const spia_mesh *mesh, spia_scan **out, spia_status
     }
     s->seconds[2] = spia__now() - t0;
     t0 = spia__now();
-    if (mark_boundary(s) != SPIA_OK) {
+    if (mark_boundary(s, spia__processor_count()) != SPIA_OK) {
         scan_release(s);
         return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the scan's boundary");
     }
