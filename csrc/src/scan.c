@@ -151,6 +151,39 @@ static spia_result mark_boundary(spia_scan *s, int threads) {
     return SPIA_OK;
 }
 
+/* The vertices renumbered in the order the triangles (in leaf order) first
+ * use them, those no triangle uses last: a leaf's corners then lie together
+ * in memory, and a query that reads a leaf's triangles reads a line or two
+ * of positions instead of one a corner.  The positions are the same floats,
+ * so every distance, and which triangle is nearest, is as before. */
+static spia_result renumber_vertices(spia_scan *s) {
+    const int32_t n = s->vertex_count;
+    const int64_t m = 3 * s->triangle_count;
+    int32_t *new_id = malloc(sizeof(int32_t) * (size_t)n);
+    float *positions = malloc(sizeof(float) * 3 * (size_t)n), *normals = malloc(sizeof(float) * 3 * (size_t)n);
+    if (!new_id || !positions || !normals) {
+        free(new_id), free(positions), free(normals);
+        return SPIA_ERROR_OUT_OF_MEMORY;
+    }
+    for (int32_t v = 0; v < n; ++v) new_id[v] = -1;
+    int32_t next = 0;
+    for (int64_t i = 0; i < m; ++i) {
+        const int32_t v = s->triangles[i];
+        if (new_id[v] < 0) new_id[v] = next++;
+        s->triangles[i] = new_id[v];
+    }
+    for (int32_t v = 0; v < n; ++v) {
+        if (new_id[v] < 0) new_id[v] = next++;
+        memcpy(positions + 3 * (int64_t)new_id[v], s->positions + 3 * (int64_t)v, sizeof(float) * 3);
+        memcpy(normals + 3 * (int64_t)new_id[v], s->normals + 3 * (int64_t)v, sizeof(float) * 3);
+    }
+    free(new_id);
+    free(s->positions), free(s->normals);
+    s->positions = positions, s->normals = normals;
+    s->bvh.positions = positions;
+    return SPIA_OK;
+}
+
 static int face_repeats_vertex(const int32_t *fv, int32_t size) {
     for (int32_t a = 0; a < size; ++a)
         for (int32_t b = a + 1; b < size; ++b)
@@ -281,6 +314,10 @@ spia_result spia_scan_create(const spia_mesh *mesh, spia_scan **out, spia_status
         for (int64_t i = 0; i < tris; ++i) polygon_of[i] = s->polygon_of[s->bvh.order[i]];
         free(s->polygon_of);
         s->polygon_of = polygon_of;
+    }
+    if (renumber_vertices(s) != SPIA_OK) {
+        scan_release(s);
+        return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the scan");
     }
     s->seconds[2] = spia__now() - t0;
     t0 = spia__now();
