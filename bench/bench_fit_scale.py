@@ -292,12 +292,15 @@ def child_command(args):
             "--"] + args
 
 
-def run_in_child(cage_size, scan_name):
+def run_in_child(cage_size, scan_name, addon_dir=None):
     out = os.path.join(CACHE, "case_%d_%s.json" % (cage_size, scan_name))
     if os.path.exists(out):
         os.remove(out)
     cmd = child_command(["--child", str(cage_size), scan_name, out])
-    proc = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    env = dict(os.environ)
+    if addon_dir:
+        env["SUBDIV_PIA_ADDON_DIR"] = os.path.abspath(addon_dir)
+    proc = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
     if proc.returncode != 0 or not os.path.isfile(out):
         sys.stdout.write(proc.stdout[-4000:])
         raise RuntimeError("case %d / %s failed (exit %d)" % (cage_size, scan_name, proc.returncode))
@@ -402,6 +405,10 @@ def main(argv):
     parser.add_argument("--force", action="store_true", help="remake the cached scans and cages")
     parser.add_argument("--prepare-only", action="store_true")
     parser.add_argument("--json", default=os.path.join(OUT, "fit_scale.json"))
+    parser.add_argument("--compare", metavar="ADDON_DIR", default=None,
+                        help="also run every case with the add-on in ADDON_DIR (a folder holding subdiv_pia, "
+                             "e.g. an earlier build), alternating with this one; its figures go to "
+                             "<json>_before.json and the table gets a column of its totals")
     parser.add_argument("--export-scan-data", nargs="+", metavar="SCAN", choices=list(SCANS),
                         help="write the scans and queries bench/bench_scan_scale.c reads, and stop")
     args = parser.parse_args(argv)
@@ -426,21 +433,36 @@ def main(argv):
     prepare(sorted({s for _, s in pairs}), sorted({c for c, _ in pairs}), args.force)
     if args.prepare_only:
         return
-    rows = []
+    rows, before_rows = [], []
     lines = table([])
     print("\n".join(lines), flush=True)
     for cage_size, scan_name in pairs:
-        runs = [run_in_child(cage_size, scan_name) for _ in range(max(1, args.repeat))]
-        r = min(runs, key=lambda x: x["total"])
-        rows.append(r)
-        print(table([r])[2], flush=True)
+        runs, before = [], []
+        for _ in range(max(1, args.repeat)):
+            if args.compare:
+                before.append(run_in_child(cage_size, scan_name, args.compare))
+                print(table([before[-1]])[2] + " before", flush=True)
+            runs.append(run_in_child(cage_size, scan_name))
+            print(table([runs[-1]])[2], flush=True)
+        rows.append(min(runs, key=lambda x: x["total"]))
+        if before:
+            before_rows.append(min(before, key=lambda x: x["total"]))
     rows.sort(key=lambda r: (r["scan_triangles"], r["cage_vertices"]))
+    before_rows.sort(key=lambda r: (r["scan_triangles"], r["cage_vertices"]))
     fitted = slopes(rows)
     lines = table(rows)
+    if before_rows:
+        lines += ["", "The same cases with the add-on in %s, run alternately with the above:" % args.compare, ""]
+        lines += table(before_rows)
     slope_lines = ["", "Log-log slopes (time ~ size^slope):", ""]
     for group, values in fitted.items():
         slope_lines.append("- %s: %s" % (group, ", ".join("%s %.2f" % (k, v) for k, v in values.items()
                                                            if v is not None)))
+    if before_rows:
+        slope_lines += ["", "Before (%s):" % args.compare, ""]
+        for group, values in slopes(before_rows).items():
+            slope_lines.append("- %s: %s" % (group, ", ".join("%s %.2f" % (k, v) for k, v in values.items()
+                                                               if v is not None)))
     print("\n".join(slope_lines))
     text = "\n".join(["Surface fit (subdiv_pia.api.interpolate, fit='SURFACE', levels=%d) from the call to the "
                       "new object, seconds, on %d threads, Blender %s; peak: the process's peak resident size "
@@ -452,6 +474,10 @@ def main(argv):
         f.write(text)
     with open(args.json, "w") as f:
         json.dump({"rows": rows, "slopes": fitted, "blender": bpy.app.version_string}, f, indent=1)
+    if before_rows:
+        with open(os.path.splitext(args.json)[0] + "_before.json", "w") as f:
+            json.dump({"rows": before_rows, "slopes": slopes(before_rows), "addon": args.compare,
+                       "blender": bpy.app.version_string}, f, indent=1)
     print("wrote %s and %s" % (os.path.relpath(os.path.join(OUT, "fit_scale.md"), ROOT),
                                os.path.relpath(args.json, ROOT)))
 
