@@ -287,6 +287,8 @@ def _declare(lib):
        ctypes.c_int32, ctypes.POINTER(P), ctypes.POINTER(_Status))
     fn("spia_surface_sample_count", ctypes.c_int64, ctypes.POINTER(_Mesh), ctypes.c_int32)
     fn("spia_scan_create", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(P), ctypes.POINTER(_Status))
+    fn("spia_scan_create_progress", ctypes.c_int, ctypes.POINTER(_Mesh), _PROGRESS, ctypes.c_void_p,
+       ctypes.POINTER(P), ctypes.POINTER(_Status))
     fn("spia_scan_free", None, P)
     fn("spia_scan_diagonal", ctypes.c_double, P)
     fn("spia_scan_closest_points", ctypes.c_int, P, ctypes.c_int64, _f32p, _f32p, _f32p, _f32p, _i32p,
@@ -767,14 +769,28 @@ def surface_stencils(mesh, samples_per_edge=4, boundary_smooth="ALL", use_crease
 class Scan:
     """A mesh prepared for closest-point queries (the library's own bounding volume hierarchy)."""
 
-    def __init__(self, mesh):
+    def __init__(self, mesh, progress=None):
+        """progress(phase, fraction) -> bool, called about every 0.1 s of the
+        build (phase 1 to 4, fraction of the whole done) and once at its end:
+        True cancels (PiaError 'CANCELLED', raised within a fraction of a
+        second)."""
         lib = _library()
         self._lib = lib
         self._handle = None
         handle = ctypes.c_void_p()
         status = _Status()
         cm = mesh._c()
-        code = lib.spia_scan_create(ctypes.byref(cm), ctypes.byref(handle), ctypes.byref(status))
+        if progress is None:
+            code = lib.spia_scan_create(ctypes.byref(cm), ctypes.byref(handle), ctypes.byref(status))
+        else:
+            def callback(_user, phase, fraction):
+                try:
+                    return 1 if progress(int(phase), float(fraction)) else 0
+                except Exception:  # an exception cannot cross C: treat it as a cancel
+                    return 1
+            c_callback = _PROGRESS(callback)
+            code = lib.spia_scan_create_progress(ctypes.byref(cm), c_callback, None, ctypes.byref(handle),
+                                                 ctypes.byref(status))
         if code != 0:
             _raise(code, status)
         self._handle = handle

@@ -52,6 +52,9 @@ void spia_scan_free(spia_scan *scan) { scan_release(scan); }
 
 double spia_scan_diagonal(const spia_scan *scan) { return scan ? scan->diagonal : 0.0; }
 
+/* Polls every 2^20 items of a loop on the calling thread. */
+#define POLL_EVERY(i) (((i) & 0xFFFFF) == 0)
+
 /* Boundary edges: the triangles' edges bucketed by their lower vertex (a
  * counting sort, linear in the edges), and in each bucket those whose upper
  * vertex occurs once.  Buckets are searched side by side; what is marked
@@ -71,6 +74,8 @@ static int compare_entry(const void *a, const void *b) {
 }
 
 typedef struct boundary_job {
+    spia__build_progress *progress;
+    int64_t vertex_count;
     const int64_t *begin; /* vertex_count + 1: bucket v is entries[begin[v], begin[v + 1]) */
     edge_entry *entries;
     uint8_t *once;        /* per slot: its edge is used by one triangle only */
@@ -80,8 +85,8 @@ typedef struct boundary_job {
 } boundary_job;
 
 static void bucket_range(void *context, int64_t first, int64_t last, int thread) {
-    (void)thread;
     const boundary_job *j = (const boundary_job *)context;
+    if (spia__build_poll(j->progress, thread, 0.2 + 0.6 * (double)first / (double)j->vertex_count)) return;
     for (int64_t v = first; v < last; ++v) {
         edge_entry *e = j->entries + j->begin[v];
         const int64_t k = j->begin[v + 1] - j->begin[v];
@@ -116,7 +121,7 @@ static void boundary_bits_range(void *context, int64_t first, int64_t last, int 
     }
 }
 
-static spia_result mark_boundary(spia_scan *s, int threads) {
+static spia_result mark_boundary(spia_scan *s, int threads, spia__build_progress *p) {
     const int64_t m = 3 * s->triangle_count, n = s->vertex_count;
     int64_t *begin = calloc((size_t)n + 1, sizeof(int64_t));
     edge_entry *e = malloc(sizeof(edge_entry) * (size_t)m);
@@ -128,27 +133,34 @@ static spia_result mark_boundary(spia_scan *s, int threads) {
         return SPIA_ERROR_OUT_OF_MEMORY;
     }
     const int32_t *tri = s->triangles;
+    spia_result r = SPIA_ERROR_CANCELLED;
     /* begin[v] counts the edges whose lower vertex is v, then (summed) is
      * the end of v's bucket; filled backwards it becomes the bucket's start. */
     for (int64_t i = 0; i < m; ++i) {
+        if (POLL_EVERY(i) && spia__build_poll(p, 0, 0.1 * (double)i / (double)m)) goto done;
         const int32_t a = tri[i], b = tri[i % 3 == 2 ? i - 2 : i + 1];
         ++begin[a < b ? a : b];
     }
     for (int64_t v = 1; v <= n; ++v) begin[v] += begin[v - 1];
     for (int64_t i = m - 1; i >= 0; --i) {
+        if (POLL_EVERY(i) && spia__build_poll(p, 0, 0.1 + 0.1 * (double)(m - i) / (double)m)) goto done;
         const int32_t a = tri[i], b = tri[i % 3 == 2 ? i - 2 : i + 1];
         edge_entry *x = e + --begin[a < b ? a : b];
         x->hi = a < b ? b : a;
         x->slot = (uint32_t)i;
     }
-    boundary_job job = {begin, e, once, tri, vertex_boundary, s->boundary_bits};
-    spia__parallel_for(threads, n, 16384, bucket_range, &job);
-    free(e), free(begin);
-    for (int64_t i = 0; i < m; ++i)
-        if (once[i]) vertex_boundary[tri[i]] = vertex_boundary[tri[i % 3 == 2 ? i - 2 : i + 1]] = 1;
-    spia__parallel_for(threads, s->triangle_count, 65536, boundary_bits_range, &job);
-    free(once), free(vertex_boundary);
-    return SPIA_OK;
+    {
+        boundary_job job = {p, n, begin, e, once, tri, vertex_boundary, s->boundary_bits};
+        spia__parallel_for(threads, n, 16384, bucket_range, &job);
+        if (spia__build_poll(p, 0, 0.8)) goto done;
+        for (int64_t i = 0; i < m; ++i)
+            if (once[i]) vertex_boundary[tri[i]] = vertex_boundary[tri[i % 3 == 2 ? i - 2 : i + 1]] = 1;
+        spia__parallel_for(threads, s->triangle_count, 65536, boundary_bits_range, &job);
+    }
+    r = SPIA_OK;
+done:
+    free(e), free(begin), free(once), free(vertex_boundary);
+    return r;
 }
 
 /* The vertices renumbered in the order the triangles (in leaf order) first
@@ -156,7 +168,7 @@ static spia_result mark_boundary(spia_scan *s, int threads) {
  * in memory, and a query that reads a leaf's triangles reads a line or two
  * of positions instead of one a corner.  The positions are the same floats,
  * so every distance, and which triangle is nearest, is as before. */
-static spia_result renumber_vertices(spia_scan *s) {
+static spia_result renumber_vertices(spia_scan *s, spia__build_progress *p) {
     const int32_t n = s->vertex_count;
     const int64_t m = 3 * s->triangle_count;
     int32_t *new_id = malloc(sizeof(int32_t) * (size_t)n);
@@ -171,6 +183,10 @@ static spia_result renumber_vertices(spia_scan *s) {
         const int32_t v = s->triangles[i];
         if (new_id[v] < 0) new_id[v] = next++;
         s->triangles[i] = new_id[v];
+    }
+    if (spia__build_poll(p, 0, 0.5)) { /* the triangles are the scan's own: freed with it */
+        free(new_id), free(positions), free(normals);
+        return SPIA_ERROR_CANCELLED;
     }
     for (int32_t v = 0; v < n; ++v) {
         if (new_id[v] < 0) new_id[v] = next++;
@@ -191,7 +207,33 @@ static int face_repeats_vertex(const int32_t *fv, int32_t size) {
     return 0;
 }
 
+/* The phases of a build and where each starts in the whole (roughly their
+ * shares of the time): checks, fans and normals, hierarchy, boundary. */
+static const double phase_start[5] = {0.0, 0.02, 0.18, 0.86, 1.0};
+
+static void phase(spia__build_progress *p, int32_t k) {
+    p->phase = k + 1;
+    p->from = phase_start[k];
+    p->to = phase_start[k + 1];
+}
+
+static spia_result cancelled(spia_status *status, const char *where) {
+    return spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled while %s", where);
+}
+
 spia_result spia_scan_create(const spia_mesh *mesh, spia_scan **out, spia_status *status) {
+    return spia_scan_create_progress(mesh, NULL, NULL, out, status);
+}
+
+spia_result spia_scan_create_progress(const spia_mesh *mesh, spia_progress_fn progress, void *progress_user_data,
+                                      spia_scan **out, spia_status *status) {
+    spia__build_progress pr;
+    memset(&pr, 0, sizeof pr);
+    pr.fn = progress;
+    pr.user_data = progress_user_data;
+    pr.interval = 0.1;
+    spia__counter_set(&pr.cancelled, 0);
+    spia__build_progress *const p = progress ? &pr : NULL;
     if (!out) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "out must not be NULL");
     *out = NULL;
     if (!mesh) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "the scan mesh must not be NULL");
@@ -205,13 +247,20 @@ spia_result spia_scan_create(const spia_mesh *mesh, spia_scan **out, spia_status
     const int32_t n = mesh->vertex_count;
     double t0 = spia__now();
     const double start = t0;
-    for (int64_t i = 0; i < 3 * (int64_t)n; ++i)
+    pr.last = t0;
+    phase(&pr, 0);
+    for (int64_t i = 0; i < 3 * (int64_t)n; ++i) {
+        if (POLL_EVERY(i) && spia__build_poll(p, 0, (double)i / (6.0 * (double)n)))
+            return cancelled(status, "checking the scan");
         if (!isfinite(mesh->positions[i]))
             return spia__fail(status, SPIA_ERROR_NONFINITE, i / 3, "scan vertex %lld has a non-finite coordinate",
                               (long long)(i / 3));
+    }
     /* Count triangles (fans), checking sizes and indices. */
     int64_t tris = 0, corner = 0, skipped = 0;
     for (int32_t f = 0; f < mesh->face_count; ++f) {
+        if (POLL_EVERY(f) && spia__build_poll(p, 0, 0.5 + 0.5 * (double)f / (double)mesh->face_count))
+            return cancelled(status, "checking the scan");
         const int32_t size = mesh->face_sizes[f];
         if (size < 3)
             return spia__fail(status, SPIA_ERROR_FACE_SIZE, f, "scan face %d has %d corners (at least 3 needed)", f,
@@ -241,6 +290,7 @@ spia_result spia_scan_create(const spia_mesh *mesh, spia_scan **out, spia_status
     s->skipped_faces = skipped;
     s->seconds[0] = spia__now() - start;
     t0 = spia__now();
+    phase(&pr, 1);
     s->positions = malloc(sizeof(float) * 3 * (size_t)n);
     s->normals = calloc(3 * (size_t)n, sizeof(float));
     s->triangles = malloc(sizeof(int32_t) * 3 * (size_t)tris);
@@ -258,6 +308,11 @@ spia_result spia_scan_create(const spia_mesh *mesh, spia_scan **out, spia_status
     int64_t t = 0;
     corner = 0;
     for (int32_t f = 0; f < mesh->face_count; ++f) {
+        if (POLL_EVERY(f) && spia__build_poll(p, 0, 0.8 * (double)f / (double)mesh->face_count)) {
+            free(acc);
+            scan_release(s);
+            return cancelled(status, "making the scan's triangles");
+        }
         const int32_t size = mesh->face_sizes[f];
         const int32_t *fv = mesh->face_vertices + corner;
         corner += size;
@@ -296,12 +351,14 @@ spia_result spia_scan_create(const spia_mesh *mesh, spia_scan **out, spia_status
     free(acc);
     s->seconds[1] = spia__now() - t0;
     t0 = spia__now();
+    phase(&pr, 2);
 
     /* The hierarchy sorts the triangles into its leaf order; the polygons
      * they came from follow. */
     {
-        const spia_result r = spia__bvh_build(&s->bvh, s->positions, s->triangles, tris, spia__processor_count(),
-                                              status);
+        pr.to = phase_start[2] + 0.9 * (phase_start[3] - phase_start[2]); /* the rest: renumbering */
+        const spia_result r = spia__bvh_build_progress(&s->bvh, s->positions, s->triangles, tris,
+                                                       spia__processor_count(), p, status);
         if (r != SPIA_OK) {
             scan_release(s);
             return r;
@@ -315,17 +372,34 @@ spia_result spia_scan_create(const spia_mesh *mesh, spia_scan **out, spia_status
         free(s->polygon_of);
         s->polygon_of = polygon_of;
     }
-    if (renumber_vertices(s) != SPIA_OK) {
-        scan_release(s);
-        return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the scan");
+    phase(&pr, 2);
+    pr.from = phase_start[2] + 0.9 * (phase_start[3] - phase_start[2]);
+    {
+        const spia_result r = renumber_vertices(s, p);
+        if (r != SPIA_OK) {
+            scan_release(s);
+            return r == SPIA_ERROR_CANCELLED ? cancelled(status, "ordering the scan's vertices")
+                                             : spia__fail(status, r, -1, "out of memory for the scan");
+        }
     }
     s->seconds[2] = spia__now() - t0;
     t0 = spia__now();
-    if (mark_boundary(s, spia__processor_count()) != SPIA_OK) {
-        scan_release(s);
-        return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the scan's boundary");
+    phase(&pr, 3);
+    {
+        const spia_result r = mark_boundary(s, spia__processor_count(), p);
+        if (r != SPIA_OK) {
+            scan_release(s);
+            return r == SPIA_ERROR_CANCELLED ? cancelled(status, "finding the scan's boundary")
+                                             : spia__fail(status, r, -1, "out of memory for the scan's boundary");
+        }
     }
     s->seconds[3] = spia__now() - t0;
+    /* Once more at the end, whatever the interval: a caller sees 1. */
+    pr.last = -INFINITY;
+    if (spia__build_poll(p, 0, 1.0)) {
+        scan_release(s);
+        return cancelled(status, "finishing the scan");
+    }
     *out = s;
     spia__ok(status);
     return SPIA_OK;

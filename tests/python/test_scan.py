@@ -126,3 +126,50 @@ def brute_force_distance(p, a, b, c):
         return np.linalg.norm(u + t[:, None] * (v - u) - p, axis=1)
     edges = np.minimum(np.minimum(seg(a, b), seg(b, c)), seg(c, a))
     return np.where(face, np.minimum(np.abs(h), edges), edges)
+
+
+def big_scan_mesh(native, n=700):
+    """About a million triangles: a build of a fraction of a second to a second."""
+    pos, tris = grid(n)
+    return native.Mesh(pos.astype(np.float32), np.full(len(tris), 3, np.int32), tris.astype(np.int32).ravel())
+
+
+def test_scan_progress_reports_every_phase_and_ends_at_one(native):
+    mesh = big_scan_mesh(native)
+    calls = []
+    scan = native.Scan(mesh, progress=lambda phase, fraction: calls.append((phase, fraction)) and False)
+    assert calls and calls[-1] == (4, 1.0)
+    phases = [c[0] for c in calls]
+    fractions = [c[1] for c in calls]
+    assert phases == sorted(phases) and fractions == sorted(fractions)
+    assert all(0.0 <= f <= 1.0 for f in fractions)
+    plain = native.Scan(mesh)
+    q = mesh.positions[::997] + np.float32(0.25)
+    assert all(np.array_equal(a, b) for a, b in zip(scan.closest_points(q), plain.closest_points(q)))
+
+
+@pytest.mark.parametrize("when", ["first", "hierarchy", "boundary", "end"])
+def test_scan_build_cancels_promptly(native, when):
+    import time
+    mesh = big_scan_mesh(native, 1000)
+    stopped = []
+
+    def progress(phase, fraction):
+        if ((when == "first") or (when == "hierarchy" and phase == 3) or (when == "boundary" and phase == 4)
+                or (when == "end" and fraction == 1.0)):
+            stopped.append(time.perf_counter())
+            return True
+        return False
+    with pytest.raises(native.PiaError) as error:
+        native.Scan(mesh, progress=progress)
+    assert error.value.code == 'CANCELLED'
+    assert stopped, "no call in that phase"
+    assert time.perf_counter() - stopped[0] < 0.5
+
+
+def test_scan_progress_exception_cancels(native):
+    def progress(phase, fraction):
+        raise RuntimeError("stop")
+    with pytest.raises(native.PiaError) as error:
+        native.Scan(big_scan_mesh(native, 300), progress=progress)
+    assert error.value.code == 'CANCELLED'
