@@ -27,6 +27,18 @@
 /* scan.c's phase timer (not exported by the library). */
 void spia__scan_timings(const spia_scan *scan, double seconds[4]);
 
+/* The peak resident size so far, in MB (Linux; -1 elsewhere). */
+static double peak_mb(void) {
+    FILE *f = fopen("/proc/self/status", "r");
+    if (!f) return -1.0;
+    char line[256];
+    double kb = -1.0;
+    while (fgets(line, sizeof line, f))
+        if (!strncmp(line, "VmHWM:", 6)) kb = atof(line + 6);
+    fclose(f);
+    return kb / 1024.0;
+}
+
 static void *read_all(const char *path, size_t *size) {
     FILE *f = fopen(path, "rb");
     if (!f) return NULL;
@@ -77,6 +89,7 @@ int main(int argc, char **argv) {
     for (int64_t i = 0; i < 3 * q; ++i) points[i] = qf[i];
     printf("scan: %d vertices, %d faces; %lld queries; %d threads\n", mesh.vertex_count, mesh.face_count,
            (long long)q, threads);
+    const double base_mb = peak_mb();
     for (int rep = 0; rep < reps; ++rep) {
         spia_scan *scan = NULL;
         spia_status st;
@@ -88,6 +101,9 @@ int main(int argc, char **argv) {
         const double create = spia__now() - t0;
         double phase[4];
         spia__scan_timings(scan, phase);
+        if (rep == 0)
+            printf("peak resident size: %.0f MB before spia_scan_create, %.0f MB after it (the build's peak)\n",
+                   base_mb, peak_mb());
         const double diag = spia_scan_diagonal(scan);
         t0 = spia__now();
         spia__scan_closest_points_double(scan, q, points, NULL, closest, normals, dist, NULL, edge, threads);

@@ -523,6 +523,17 @@ SPIA_API double spia_scan_diagonal(const spia_scan *scan);
 SPIA_API spia_result spia_scan_closest_points(const spia_scan *scan, int64_t count, const float *points,
                                               float *closest, float *normals, float *distances, int32_t *faces,
                                               uint8_t *on_boundary, spia_status *status);
+/* spia_scan_closest_points with a progress callback, called on the calling
+ * thread about every 0.1 s and once at the end: iteration 1, and
+ * relative_error the fraction of the points done (roughly: points are
+ * taken in pieces).  Nonzero cancels within a fraction of a second:
+ * SPIA_ERROR_CANCELLED, with the buffers partly written.  progress may be
+ * NULL. */
+SPIA_API spia_result spia_scan_closest_points_progress(const spia_scan *scan, int64_t count, const float *points,
+                                                       float *closest, float *normals, float *distances,
+                                                       int32_t *faces, uint8_t *on_boundary,
+                                                       spia_progress_fn progress, void *progress_user_data,
+                                                       spia_status *status);
 
 /* ------------------------------------------------------------------------ */
 /* Fitting a cage to a scan                                                  */

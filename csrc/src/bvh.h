@@ -77,6 +77,15 @@ typedef struct spia__build_progress {
  * build is cancelled (now or before).  p may be NULL. */
 int spia__build_poll(spia__build_progress *p, int thread, double fraction);
 
+/* spia__scan_closest_points_double (internal.h) polling `progress` (may be
+ * NULL) every 256 points: for a long query (a fit's round on a large
+ * scan) that a caller wants to be able to cancel.  Returns nonzero when
+ * cancelled, the outputs then partly written.  Defined in scan.c. */
+int spia__scan_closest_points_polled(const spia_scan *s, int64_t count, const double *points,
+                                     const float *radius, float *closest, float *normals, float *distances,
+                                     int32_t *faces, uint8_t *on_boundary, int threads,
+                                     spia__build_progress *progress);
+
 /* spia__bvh_build polling `progress` (which may be NULL) from every thread;
  * fails also with SPIA_ERROR_CANCELLED, leaving nothing allocated and the
  * triangles in their first order. */

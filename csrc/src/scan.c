@@ -464,11 +464,13 @@ typedef struct closest_task {
     float *closest, *normals, *distances;
     int32_t *faces;
     uint8_t *on_boundary;
+    spia__build_progress *progress; /* NULL for none */
+    int64_t count;
 } closest_task;
 
 static void closest_range(void *context, int64_t begin, int64_t end, int thread) {
-    (void)thread;
     const closest_task *t = (const closest_task *)context;
+    if (spia__build_poll(t->progress, thread, (double)begin / (double)t->count)) return;
     for (int64_t i = begin; i < end; ++i) {
         double p[3];
         for (int c = 0; c < 3; ++c) p[c] = t->points_double ? t->points_double[3 * i + c] : t->points_float[3 * i + c];
@@ -480,13 +482,29 @@ static void closest_range(void *context, int64_t begin, int64_t end, int thread)
 void spia__scan_closest_points_double(const spia_scan *s, int64_t count, const double *points, const float *radius,
                                       float *closest, float *normals, float *distances, int32_t *faces,
                                       uint8_t *on_boundary, int threads) {
-    closest_task task = {s, points, NULL, radius, closest, normals, distances, faces, on_boundary};
+    spia__scan_closest_points_polled(s, count, points, radius, closest, normals, distances, faces, on_boundary,
+                                     threads, NULL);
+}
+
+int spia__scan_closest_points_polled(const spia_scan *s, int64_t count, const double *points, const float *radius,
+                                     float *closest, float *normals, float *distances, int32_t *faces,
+                                     uint8_t *on_boundary, int threads, spia__build_progress *progress) {
+    closest_task task = {s, points, NULL, radius, closest, normals, distances, faces, on_boundary, progress, count};
     spia__parallel_for(threads, count, 256, closest_range, &task);
+    return progress && spia__counter_get(&progress->cancelled) ? 1 : 0;
 }
 
 spia_result spia_scan_closest_points(const spia_scan *scan, int64_t count, const float *points, float *closest,
                                      float *normals, float *distances, int32_t *faces, uint8_t *on_boundary,
                                      spia_status *status) {
+    return spia_scan_closest_points_progress(scan, count, points, closest, normals, distances, faces, on_boundary,
+                                             NULL, NULL, status);
+}
+
+spia_result spia_scan_closest_points_progress(const spia_scan *scan, int64_t count, const float *points,
+                                              float *closest, float *normals, float *distances, int32_t *faces,
+                                              uint8_t *on_boundary, spia_progress_fn progress,
+                                              void *progress_user_data, spia_status *status) {
     if (!scan) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "scan must not be NULL");
     if (count < 0) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "negative point count");
     if (count > 0 && !points) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "points must not be NULL");
@@ -494,8 +512,23 @@ spia_result spia_scan_closest_points(const spia_scan *scan, int64_t count, const
         if (!isfinite(points[i]))
             return spia__fail(status, SPIA_ERROR_NONFINITE, i / 3, "query point %lld is not finite",
                               (long long)(i / 3));
-    closest_task task = {scan, NULL, points, NULL, closest, normals, distances, faces, on_boundary};
+    spia__build_progress pr;
+    memset(&pr, 0, sizeof pr);
+    pr.fn = progress;
+    pr.user_data = progress_user_data;
+    pr.interval = 0.1;
+    pr.phase = 1;
+    pr.from = 0.0, pr.to = 1.0;
+    pr.last = spia__now();
+    spia__counter_set(&pr.cancelled, 0);
+    closest_task task = {scan, NULL, points, NULL, closest, normals, distances, faces, on_boundary,
+                         progress ? &pr : NULL, count};
     spia__parallel_for(spia__processor_count(), count, 256, closest_range, &task);
+    if (progress) {
+        pr.last = -INFINITY;
+        if (spia__build_poll(&pr, 0, 1.0))
+            return spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled during the closest-point queries");
+    }
     spia__ok(status);
     return SPIA_OK;
 }

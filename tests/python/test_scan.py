@@ -173,3 +173,24 @@ def test_scan_progress_exception_cancels(native):
     with pytest.raises(native.PiaError) as error:
         native.Scan(big_scan_mesh(native, 300), progress=progress)
     assert error.value.code == 'CANCELLED'
+
+
+def test_closest_points_progress_and_cancel(native):
+    import time
+    scan = native.Scan(big_scan_mesh(native, 300))
+    rng = np.random.default_rng(0)
+    q = np.concatenate([rng.uniform(0, 300, (400000, 2)), rng.uniform(-3, 3, (400000, 1))], 1).astype(np.float32)
+    calls = []
+    got = scan.closest_points(q[:20000], progress=lambda phase, f: calls.append((phase, f)) and False)
+    assert calls[-1] == (1, 1.0)
+    plain = scan.closest_points(q[:20000])
+    assert all(np.array_equal(a, b) for a, b in zip(got, plain))
+    stopped = []
+
+    def stop(phase, fraction):
+        stopped.append(time.perf_counter())
+        return True
+    with pytest.raises(native.PiaError) as error:
+        scan.closest_points(q, progress=stop)
+    assert error.value.code == 'CANCELLED'
+    assert time.perf_counter() - stopped[0] < 0.5
