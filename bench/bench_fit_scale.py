@@ -233,6 +233,30 @@ def prepare(scans, cages, force):
 # --------------------------------------------------------------------------
 # One case, in this process
 
+class RssSampler:
+    """The resident size every 20 ms on a thread of its own: when the peak
+    was reached, to tell which phase sets it."""
+
+    def __init__(self):
+        import threading
+        self.samples = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def _run(self):
+        while not self._stop.is_set():
+            self.samples.append((time.perf_counter(), proc_status("VmRSS") or 0))
+            self._stop.wait(0.02)
+
+    def __enter__(self):
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        self._stop.set()
+        self._thread.join()
+
+
 def run_case(cage_size, scan_name):
     pia = ensure_addon()
     api, native = pia.api, pia.api.native
@@ -246,9 +270,12 @@ def run_case(cage_size, scan_name):
     tris = int(np.sum(api.read_face_sizes(scan.data) - 2))
     seconds = {}
 
+    starts = {}
+
     def timed(key, fn):
         def wrapper(*a, **k):
             t0 = time.perf_counter()
+            starts.setdefault(key, t0)
             try:
                 return fn(*a, **k)
             finally:
@@ -261,10 +288,17 @@ def run_case(cage_size, scan_name):
     bpy.context.view_layer.update()
     rss = proc_status("VmRSS")
     peak_reset = reset_peak()
-    t0 = time.perf_counter()
-    new_obj, report = api.interpolate(cage, target=scan, fit='SURFACE', levels=LEVELS)
-    total = time.perf_counter() - t0
+    with RssSampler() as sampler:
+        t0 = time.perf_counter()
+        new_obj, report = api.interpolate(cage, target=scan, fit='SURFACE', levels=LEVELS)
+        total = time.perf_counter() - t0
     hwm = proc_status("VmHWM")
+    # Where the sampled peak fell: after the scan was made (so in the fit),
+    # and within the fit's first stencil_seconds (the stencils) or later.
+    peak_t, peak_rss = max(sampler.samples, key=lambda x: x[1]) if sampler.samples else (t0, 0)
+    fit_start = starts.get("compute_cage", t0)
+    scan_end = starts.get("scan_create", t0) + seconds.get("scan_create", 0.0)
+    rss_after_scan = max([r for t, r in sampler.samples if t <= fit_start] or [0])
     fit = report.stencil_seconds + report.query_seconds + report.solve_seconds
     return {
         "cage": cage_size, "scan": scan_name,
@@ -281,6 +315,8 @@ def run_case(cage_size, scan_name):
         "rss_before": rss, "peak": hwm if peak_reset else None,
         "peak_growth": (hwm - rss) if (peak_reset and hwm and rss) else None,
         "new_object": new_obj.name,
+        "sampled_peak": peak_rss, "sampled_peak_after_fit_start": peak_t - fit_start,
+        "peak_in_scan_build": bool(peak_t <= scan_end), "rss_peak_before_fit": rss_after_scan,
     }
 
 
