@@ -177,9 +177,9 @@ bench-scan: build
 	$(CC) -O3 -DNDEBUG -pthread -Icsrc/include -Ibuild/bench/scan_base bench/bench_scan_scale.c \
 	  build/bench/scan_base/scan.c build/bench/scan_base/bvh.c build/bench/scan_base/threads.c \
 	  build/bench/scan_base/status.c build/bench/scan_base/message.c -lm -o build/bench/spia_bench_scan_base
-	for s in $(SCAN_CASES); do for i in 1 2; do \
-	  echo "== $$s, $(SCAN_BASE)"; build/bench/spia_bench_scan_base out/bench/fit_scale/$$s.bin out/bench/fit_scale/queries_50000.bin --reps 1; \
-	  echo "== $$s, this tree"; build/bench/bench/spia_bench_scan out/bench/fit_scale/$$s.bin out/bench/fit_scale/queries_50000.bin --reps 1; \
+	d=$$(ls -td out/bench/fit_scale/blender-* | head -1); for s in $(SCAN_CASES); do for i in 1 2; do \
+	  echo "== $$s, $(SCAN_BASE)"; build/bench/spia_bench_scan_base $$d/$$s.bin $$d/queries_50000.bin --reps 1; \
+	  echo "== $$s, this tree"; build/bench/bench/spia_bench_scan $$d/$$s.bin $$d/queries_50000.bin --reps 1; \
 	done; done
 
 # Closest points: the library's hierarchy against Embree's point query (the

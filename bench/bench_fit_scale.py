@@ -6,7 +6,8 @@
         [--repeat N] [--force] [--json out/bench/fit_scale.json]
     /work/.../bpy/5.2/bin/python bench/bench_fit_scale.py [same arguments]
 
-Scans (cached as .blend under out/bench/fit_scale/, --force remakes them):
+Scans (cached as .blend under out/bench/fit_scale/blender-<version>/,
+--force remakes them):
 tests/data/dragon_res2.obj as it is and refined by Blender's Subdivision
 Surface modifier, SIMPLE (the surface stays the same, only denser: every fit
 does the same work per sample, whatever the scan's size), applied:
@@ -54,7 +55,9 @@ sys.path.insert(0, HERE)
 import fit_cases  # noqa: E402
 
 OUT = os.path.join(ROOT, "out", "bench")
-CACHE = os.path.join(OUT, "fit_scale")
+# Per Blender version: a .blend written by one cannot always be read by an
+# older one (5.0 changed the file header).
+CACHE = os.path.join(OUT, "fit_scale", "blender-%d.%d" % bpy.app.version[:2])
 LEVELS = 1
 CAGE_SIZES = [6000, 12000, 25000, 50000, 100000]
 TARGET_CAGE = 50000
@@ -378,6 +381,12 @@ def slopes(rows):
     against scan size (rows under one cage)."""
     out = {}
     by_scan, by_cage = {}, {}
+    # The number of rounds differs from case to case (the fit stops when
+    # they stop paying): per round (and the two evaluations besides) too.
+    extra = [("query_per_round", ""), ("solve_per_round", "")]
+    for r in rows:
+        r["query_per_round"] = r["query"] / (r["rounds"] + 2)
+        r["solve_per_round"] = r["solve"] / max(r["rounds"], 1)
     for r in rows:
         by_scan.setdefault(r["scan"], []).append(r)
         by_cage.setdefault(r["cage"], []).append(r)
@@ -387,7 +396,7 @@ def slopes(rows):
                 continue
             xs = [r[xkey] for r in group]
             out["%s sizes (%s %s)" % (label, "scan" if label == "cage" else "cage", key)] = {
-                c: slope(xs, [max(r[c], 1e-4) for r in group]) for c, _ in COLUMNS + [("peak_growth", "")]
+                c: slope(xs, [max(r[c], 1e-4) for r in group]) for c, _ in COLUMNS + extra + [("peak_growth", "")]
                 if all(r[c] is not None for r in group)}
     return out
 
