@@ -23,7 +23,7 @@ PACKAGE = dist/subdiv_pia-$(VERSION)-linux-x64.zip
 WINDOWS_PACKAGE = dist/subdiv_pia-$(VERSION)-windows-x64.zip
 
 .PHONY: all deps build package test test-c test-asan test-tsan test-fuzz fuzz test-python test-package test-blender \
-        blenders demo bench bench-scale bench-solve bench-closest bench-live bench-hard clean
+        blenders demo bench bench-scale bench-solve bench-closest bench-live bench-hard bench-fit-scale bench-scan clean
 
 all: build
 
@@ -145,6 +145,42 @@ bench-live: build
 # `bench/bench_hard.py --quick --only NAME` for a short run.
 bench-hard: build
 	$(PYTHON) bench/bench_hard.py
+
+# The surface fit against cage size (6k to 100k vertices) and scan size (0.2M
+# to 7.3M triangles), each case in a process of its own, from the call to
+# the new object, by phase, with peak memory (bench/bench_fit_scale.py; the
+# scans and cages are made once and cached in out/bench/fit_scale/).  Writes
+# out/bench/fit_scale.md, .json and the log-log plot fit_scale.png.
+# FIT_SCALE_ARGS=--grid full for every pair, --grid target for the 50k cage
+# on the two largest scans.
+FIT_SCALE_ARGS ?=
+bench-fit-scale: build
+	$(BLENDER_RUN) --python bench/bench_fit_scale.py -- $(FIT_SCALE_ARGS)
+	$(PYTHON) bench/plot_fit_scale.py
+
+# spia_scan_create by phase and the fit's closest-point queries on the cached
+# scans (bench/bench_scan_scale.c, scan.c and bvh.c compiled in), for this
+# tree and, side by side, for git revision SCAN_BASE (default HEAD).
+SCAN_BASE ?= HEAD
+SCAN_CASES ?= dragon_s2 dragon_s1t1
+bench-scan: build
+	$(BLENDER_RUN) --python bench/bench_fit_scale.py -- --export-scan-data $(SCAN_CASES)
+	cmake -S . -B build/bench -DCMAKE_BUILD_TYPE=Release -DSPIA_BENCH=ON -DSPIA_TESTS=OFF
+	cmake --build build/bench --target spia_bench_scan --parallel 2
+	rm -rf build/bench/scan_base && mkdir -p build/bench/scan_base
+	for f in scan.c bvh.c bvh.h threads.c threads.h status.c message.c internal.h; do \
+	  git show $(SCAN_BASE):csrc/src/$$f > build/bench/scan_base/$$f; done
+	grep -q spia__scan_timings build/bench/scan_base/scan.c || \
+	  printf '%s\n' 'void spia__scan_timings(const void *s, double *t);' \
+	  'void spia__scan_timings(const void *s, double *t) { (void)s; for (int i = 0; i < 4; ++i) t[i] = 0; }' \
+	  >> build/bench/scan_base/scan.c
+	$(CC) -O3 -DNDEBUG -pthread -Icsrc/include -Ibuild/bench/scan_base bench/bench_scan_scale.c \
+	  build/bench/scan_base/scan.c build/bench/scan_base/bvh.c build/bench/scan_base/threads.c \
+	  build/bench/scan_base/status.c build/bench/scan_base/message.c -lm -o build/bench/spia_bench_scan_base
+	d=$$(ls -td out/bench/fit_scale/blender-* | head -1); for s in $(SCAN_CASES); do for i in 1 2; do \
+	  echo "== $$s, $(SCAN_BASE)"; build/bench/spia_bench_scan_base $$d/$$s.bin $$d/queries_50000.bin --reps 1; \
+	  echo "== $$s, this tree"; build/bench/bench/spia_bench_scan $$d/$$s.bin $$d/queries_50000.bin --reps 1; \
+	done; done
 
 # Closest points: the library's hierarchy against Embree's point query (the
 # system's Embree 4 or 3, linked into the benchmark only; without one the

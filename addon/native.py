@@ -295,10 +295,14 @@ def _declare(lib):
        ctypes.c_int32, ctypes.POINTER(P), ctypes.POINTER(_Status))
     fn("spia_surface_sample_count", ctypes.c_int64, ctypes.POINTER(_Mesh), ctypes.c_int32)
     fn("spia_scan_create", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(P), ctypes.POINTER(_Status))
+    fn("spia_scan_create_progress", ctypes.c_int, ctypes.POINTER(_Mesh), _PROGRESS, ctypes.c_void_p,
+       ctypes.POINTER(P), ctypes.POINTER(_Status))
     fn("spia_scan_free", None, P)
     fn("spia_scan_diagonal", ctypes.c_double, P)
     fn("spia_scan_closest_points", ctypes.c_int, P, ctypes.c_int64, _f32p, _f32p, _f32p, _f32p, _i32p,
        ctypes.POINTER(ctypes.c_uint8), ctypes.POINTER(_Status))
+    fn("spia_scan_closest_points_progress", ctypes.c_int, P, ctypes.c_int64, _f32p, _f32p, _f32p, _f32p, _i32p,
+       ctypes.POINTER(ctypes.c_uint8), _PROGRESS, ctypes.c_void_p, ctypes.POINTER(_Status))
     fn("spia_fit", ctypes.c_int, ctypes.POINTER(_Mesh), P, ctypes.POINTER(_Options), ctypes.POINTER(_FitOptions),
        _f32p, ctypes.POINTER(_FitReport), ctypes.POINTER(_Status))
 
@@ -775,14 +779,28 @@ def surface_stencils(mesh, samples_per_edge=4, boundary_smooth="ALL", use_crease
 class Scan:
     """A mesh prepared for closest-point queries (the library's own bounding volume hierarchy)."""
 
-    def __init__(self, mesh):
+    def __init__(self, mesh, progress=None):
+        """progress(phase, fraction) -> bool, called about every 0.1 s of the
+        build (phase 1 to 4, fraction of the whole done) and once at its end:
+        True cancels (PiaError 'CANCELLED', raised within a fraction of a
+        second)."""
         lib = _library()
         self._lib = lib
         self._handle = None
         handle = ctypes.c_void_p()
         status = _Status()
         cm = mesh._c()
-        code = lib.spia_scan_create(ctypes.byref(cm), ctypes.byref(handle), ctypes.byref(status))
+        if progress is None:
+            code = lib.spia_scan_create(ctypes.byref(cm), ctypes.byref(handle), ctypes.byref(status))
+        else:
+            def callback(_user, phase, fraction):
+                try:
+                    return 1 if progress(int(phase), float(fraction)) else 0
+                except Exception:  # an exception cannot cross C: treat it as a cancel
+                    return 1
+            c_callback = _PROGRESS(callback)
+            code = lib.spia_scan_create_progress(ctypes.byref(cm), c_callback, None, ctypes.byref(handle),
+                                                 ctypes.byref(status))
         if code != 0:
             _raise(code, status)
         self._handle = handle
@@ -798,10 +816,11 @@ class Scan:
         """Bounding-box diagonal of the scan's faces."""
         return self._lib.spia_scan_diagonal(self._handle)
 
-    def closest_points(self, points, with_boundary=False):
+    def closest_points(self, points, with_boundary=False, progress=None):
         """For points (N, 3): (closest (N, 3), normals (N, 3), distances (N,), faces (N,)), and with
         with_boundary=True also on_boundary (N,) bool: the closest point is on the scan's boundary
-        (the point is beyond the scan's edge, over a hole)."""
+        (the point is beyond the scan's edge, over a hole).  progress(1, fraction) -> bool is called
+        about every 0.1 s and at the end; True cancels (PiaError 'CANCELLED')."""
         points = _as(points, np.float32, (3,))
         n = len(points)
         closest = np.empty((n, 3), np.float32)
@@ -810,10 +829,20 @@ class Scan:
         faces = np.empty(n, np.int32)
         boundary = np.empty(n, np.uint8)
         status = _Status()
-        code = self._lib.spia_scan_closest_points(
-            self._handle, n, _ptr(points, ctypes.c_float), _ptr(closest, ctypes.c_float),
-            _ptr(normals, ctypes.c_float), _ptr(distances, ctypes.c_float), _ptr(faces, ctypes.c_int32),
-            _ptr(boundary, ctypes.c_uint8), ctypes.byref(status))
+        outputs = (_ptr(points, ctypes.c_float), _ptr(closest, ctypes.c_float),
+                   _ptr(normals, ctypes.c_float), _ptr(distances, ctypes.c_float), _ptr(faces, ctypes.c_int32),
+                   _ptr(boundary, ctypes.c_uint8))
+        if progress is None:
+            code = self._lib.spia_scan_closest_points(self._handle, n, *outputs, ctypes.byref(status))
+        else:
+            def callback(_user, phase, fraction):
+                try:
+                    return 1 if progress(int(phase), float(fraction)) else 0
+                except Exception:  # an exception cannot cross C: treat it as a cancel
+                    return 1
+            c_callback = _PROGRESS(callback)
+            code = self._lib.spia_scan_closest_points_progress(self._handle, n, *outputs, c_callback, None,
+                                                               ctypes.byref(status))
         if code != 0:
             _raise(code, status)
         if with_boundary:

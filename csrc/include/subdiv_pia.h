@@ -492,6 +492,15 @@ SPIA_API int64_t spia_surface_sample_count(const spia_mesh *mesh, int32_t sample
  */
 typedef struct spia_scan spia_scan;
 SPIA_API spia_result spia_scan_create(const spia_mesh *mesh, spia_scan **out, spia_status *status);
+/* spia_scan_create with a progress callback, called on the calling thread
+ * about every 0.1 s of the build and once at its end: iteration is the
+ * phase (1 checking the mesh, 2 triangles and normals, 3 the hierarchy, 4
+ * the boundary) and relative_error the fraction of the whole build done,
+ * 0 to 1.  Returning nonzero cancels: SPIA_ERROR_CANCELLED, within a
+ * fraction of a second (every thread stops at its next check), with
+ * nothing left allocated and *out NULL.  progress may be NULL. */
+SPIA_API spia_result spia_scan_create_progress(const spia_mesh *mesh, spia_progress_fn progress,
+                                               void *progress_user_data, spia_scan **out, spia_status *status);
 SPIA_API void spia_scan_free(spia_scan *scan);
 /* The bounding-box diagonal of the scan's faces, the unit of every relative
  * distance the fitting reports. */
@@ -514,6 +523,17 @@ SPIA_API double spia_scan_diagonal(const spia_scan *scan);
 SPIA_API spia_result spia_scan_closest_points(const spia_scan *scan, int64_t count, const float *points,
                                               float *closest, float *normals, float *distances, int32_t *faces,
                                               uint8_t *on_boundary, spia_status *status);
+/* spia_scan_closest_points with a progress callback, called on the calling
+ * thread about every 0.1 s and once at the end: iteration 1, and
+ * relative_error the fraction of the points done (roughly: points are
+ * taken in pieces).  Nonzero cancels within a fraction of a second:
+ * SPIA_ERROR_CANCELLED, with the buffers partly written.  progress may be
+ * NULL. */
+SPIA_API spia_result spia_scan_closest_points_progress(const spia_scan *scan, int64_t count, const float *points,
+                                                       float *closest, float *normals, float *distances,
+                                                       int32_t *faces, uint8_t *on_boundary,
+                                                       spia_progress_fn progress, void *progress_user_data,
+                                                       spia_status *status);
 
 /* ------------------------------------------------------------------------ */
 /* Fitting a cage to a scan                                                  */

@@ -322,7 +322,34 @@ typedef struct builder {
     const int32_t *triangles;
     prim_ref *refs;
     bins *piece_bins; /* MAX_PIECES, for binning on several threads */
+    spia__build_progress *progress;
+    spia__counter subtrees_done;
+    int64_t subtree_count;
 } builder;
+
+int spia__build_poll(spia__build_progress *p, int thread, double fraction) {
+    if (!p || !p->fn) return 0;
+    if (spia__counter_get(&p->cancelled)) return 1;
+    if (thread != 0) return 0;
+    const double now = spia__now();
+    if (now - p->last < p->interval) return 0;
+    p->last = now;
+    fraction = fraction < 0.0 ? 0.0 : (fraction > 1.0 ? 1.0 : fraction);
+    if (p->fn(p->user_data, p->phase, p->from + (p->to - p->from) * fraction)) {
+        spia__counter_set(&p->cancelled, 1);
+        return 1;
+    }
+    return 0;
+}
+
+/* The share of the build's time that the subtrees take (the rest: boxes,
+ * top levels, leaf order). */
+#define SUBTREE_SHARE 0.8
+
+static double subtree_fraction(builder *b) {
+    return 0.1 + SUBTREE_SHARE * (double)spia__counter_get(&b->subtrees_done) /
+                     (double)(b->subtree_count > 0 ? b->subtree_count : 1);
+}
 
 typedef struct binning_job {
     const builder *b;
@@ -569,12 +596,12 @@ typedef struct subtree {
     spia__bvh_node *root;
     node_vec nodes;
     int32_t level;
-    int failed;
+    int failed; /* 1: out of memory; 2: cancelled */
 } subtree;
 
 #define BUILD_STACK (3 * SPIA__BVH_MAX_DEPTH + 4)
 
-static void build_subtree(const builder *b, subtree *st) {
+static void build_subtree(builder *b, subtree *st, int thread) {
     task *stack = malloc(sizeof(task) * BUILD_STACK);
     if (!stack) {
         st->failed = 1;
@@ -584,7 +611,12 @@ static void build_subtree(const builder *b, subtree *st) {
     stack[top++] = st->root_task;
     st->level = st->root_task.level;
     int root = 1;
+    uint32_t made = 0;
     while (top > 0) {
+        if ((++made & 1023) == 0 && spia__build_poll(b->progress, thread, subtree_fraction(b))) {
+            st->failed = 2;
+            break;
+        }
         const task t = stack[--top];
         task children[4];
         int count;
@@ -600,14 +632,20 @@ static void build_subtree(const builder *b, subtree *st) {
 }
 
 typedef struct subtree_job {
-    const builder *b;
+    builder *b;
     subtree *subtrees;
 } subtree_job;
 
 static void subtree_range(void *context, int64_t begin, int64_t end, int thread) {
-    (void)thread;
     const subtree_job *j = (const subtree_job *)context;
-    for (int64_t i = begin; i < end; ++i) build_subtree(j->b, &j->subtrees[i]);
+    for (int64_t i = begin; i < end; ++i) {
+        if (spia__build_poll(j->b->progress, thread, subtree_fraction(j->b))) {
+            j->subtrees[i].failed = 2;
+            continue;
+        }
+        build_subtree(j->b, &j->subtrees[i], thread);
+        spia__counter_add(&j->b->subtrees_done, 1);
+    }
 }
 
 typedef struct refs_job {
@@ -682,8 +720,18 @@ static spia_result out_of_memory(spia_status *status, int64_t triangle_count) {
 
 static uint32_t task_size(const subtree *s) { return s->root_task.r.end - s->root_task.r.begin; }
 
+static spia_result cancelled(spia_status *status) {
+    return spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled while building the scan's hierarchy");
+}
+
 spia_result spia__bvh_build(spia__bvh *bvh, const float *positions, int32_t *triangles, int64_t triangle_count,
                             int threads, spia_status *status) {
+    return spia__bvh_build_progress(bvh, positions, triangles, triangle_count, threads, NULL, status);
+}
+
+spia_result spia__bvh_build_progress(spia__bvh *bvh, const float *positions, int32_t *triangles,
+                                     int64_t triangle_count, int threads, spia__build_progress *progress,
+                                     spia_status *status) {
     memset(bvh, 0, sizeof *bvh);
     if (triangle_count < 1 || triangle_count > (int64_t)(UINT32_MAX / 3))
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "cannot build a hierarchy of %lld triangles",
@@ -695,6 +743,9 @@ spia_result spia__bvh_build(spia__bvh *bvh, const float *positions, int32_t *tri
     b.triangles = triangles;
     b.refs = malloc(sizeof(prim_ref) * (size_t)n);
     b.piece_bins = malloc(sizeof(bins) * MAX_PIECES);
+    b.progress = progress;
+    spia__counter_set(&b.subtrees_done, 0);
+    b.subtree_count = 1;
     aabb *piece_box = malloc(sizeof(aabb) * 2 * MAX_PIECES);
     node_vec top = {NULL, 0, 0};
     subtree *subtrees = calloc(MAX_TOP_TASKS, sizeof(subtree));
@@ -740,6 +791,10 @@ spia_result spia__bvh_build(spia__bvh *bvh, const float *positions, int32_t *tri
     if (threads > 1) {
         const uint32_t small = n / (8 * (uint32_t)threads) > 4096 ? n / (8 * (uint32_t)threads) : 4096;
         while (open + 3 <= MAX_TOP_TASKS) {
+            if (spia__build_poll(progress, 0, 0.1 * (double)open / MAX_TOP_TASKS)) {
+                result = cancelled(status);
+                goto done;
+            }
             int largest = 0;
             for (int i = 1; i < open; ++i)
                 if (task_size(&subtrees[i]) > task_size(&subtrees[largest])) largest = i;
@@ -771,10 +826,16 @@ spia_result spia__bvh_build(spia__bvh *bvh, const float *positions, int32_t *tri
             subtrees[j - 1] = x;
         }
     for (int i = 0; i < open; ++i) subtrees[i].root = top.v + subtrees[i].root_task.slot;
+    b.subtree_count = open;
     {
         subtree_job job = {&b, subtrees};
         spia__parallel_for(threads, open, 1, subtree_range, &job);
     }
+    for (int i = 0; i < open; ++i)
+        if (subtrees[i].failed == 2) {
+            result = cancelled(status);
+            goto done;
+        }
     uint64_t total = top.n;
     int32_t level = 0;
     for (int i = 0; i < open; ++i) {

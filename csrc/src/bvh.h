@@ -5,6 +5,7 @@
 #define SPIA_BVH_H
 
 #include "subdiv_pia.h"
+#include "threads.h"
 
 #include <stddef.h>
 #include <stdint.h>
@@ -56,6 +57,41 @@ typedef struct spia__bvh {
  * triangles are in their first order and nothing is left allocated. */
 spia_result spia__bvh_build(spia__bvh *bvh, const float *positions, int32_t *triangles, int64_t triangle_count,
                             int threads, spia_status *status);
+
+/* The progress of a long build (a scan's): the caller's callback, called
+ * on the calling thread only (thread 0 of the parallel loops), at most
+ * every `interval` seconds, with `phase` and the fraction of the whole
+ * build done.  A nonzero return cancels: `cancelled` is raised, and every
+ * thread stops at its next poll. */
+typedef struct spia__build_progress {
+    spia_progress_fn fn; /* NULL: never called, never cancelled */
+    void *user_data;
+    int32_t phase;
+    double interval, last;
+    double from, to; /* the part of the whole that the phase under way spans */
+    spia__counter cancelled;
+} spia__build_progress;
+
+/* Polls p from thread `thread` with the phase `fraction` done: calls the
+ * callback when on thread 0 and the interval has passed.  Nonzero when the
+ * build is cancelled (now or before).  p may be NULL. */
+int spia__build_poll(spia__build_progress *p, int thread, double fraction);
+
+/* spia__scan_closest_points_double (internal.h) polling `progress` (may be
+ * NULL) every 256 points: for a long query (a fit's round on a large
+ * scan) that a caller wants to be able to cancel.  Returns nonzero when
+ * cancelled, the outputs then partly written.  Defined in scan.c. */
+int spia__scan_closest_points_polled(const spia_scan *s, int64_t count, const double *points,
+                                     const float *radius, float *closest, float *normals, float *distances,
+                                     int32_t *faces, uint8_t *on_boundary, int threads,
+                                     spia__build_progress *progress);
+
+/* spia__bvh_build polling `progress` (which may be NULL) from every thread;
+ * fails also with SPIA_ERROR_CANCELLED, leaving nothing allocated and the
+ * triangles in their first order. */
+spia_result spia__bvh_build_progress(spia__bvh *bvh, const float *positions, int32_t *triangles,
+                                     int64_t triangle_count, int threads, spia__build_progress *progress,
+                                     spia_status *status);
 void spia__bvh_free(spia__bvh *bvh);
 
 /* The bytes the hierarchy holds (nodes and order; not the borrowed arrays). */

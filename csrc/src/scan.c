@@ -26,7 +26,16 @@ struct spia_scan {
     unsigned char *boundary_bits;
     double diagonal;
     int64_t skipped_faces; /* faces that repeat a vertex: left out              */
+    /* Seconds of spia_scan_create's phases: checks, copy and fans with the
+     * normals, hierarchy, boundary (for benchmarks: spia__scan_timings). */
+    double seconds[4];
 };
+
+/* The library does not export it; benchmarks that compile scan.c in do. */
+void spia__scan_timings(const spia_scan *scan, double seconds[4]);
+void spia__scan_timings(const spia_scan *scan, double seconds[4]) {
+    for (int i = 0; i < 4; ++i) seconds[i] = scan ? scan->seconds[i] : 0.0;
+}
 
 static void scan_release(spia_scan *s) {
     if (!s) return;
@@ -43,49 +52,151 @@ void spia_scan_free(spia_scan *scan) { scan_release(scan); }
 
 double spia_scan_diagonal(const spia_scan *scan) { return scan ? scan->diagonal : 0.0; }
 
-/* Boundary edges: sort the triangles' edges by (low, high) vertex and find
- * those that occur once. */
-typedef struct edge_ref {
-    int32_t lo, hi;
-    int64_t slot; /* 3 * triangle + k */
-} edge_ref;
+/* Polls every 2^20 items of a loop on the calling thread. */
+#define POLL_EVERY(i) (((i) & 0xFFFFF) == 0)
 
-static int compare_edge(const void *a, const void *b) {
-    const edge_ref *x = (const edge_ref *)a, *y = (const edge_ref *)b;
-    if (x->lo != y->lo) return x->lo < y->lo ? -1 : 1;
-    if (x->hi != y->hi) return x->hi < y->hi ? -1 : 1;
-    return (x->slot > y->slot) - (x->slot < y->slot);
+/* Boundary edges: the triangles' edges bucketed by their lower vertex (a
+ * counting sort, linear in the edges), and in each bucket those whose upper
+ * vertex occurs once.  Buckets are searched side by side; what is marked
+ * does not depend on the order within a bucket, so neither on the threads. */
+typedef struct edge_entry {
+    int32_t hi;
+    uint32_t slot; /* 3 * triangle + k: edge k runs from corner k to corner k + 1 */
+} edge_entry;
+
+/* Buckets larger than this (a fan's hub, a huge n-gon's first corner) are
+ * sorted instead of searched pairwise. */
+#define BUCKET_PAIRWISE 48
+
+static int compare_entry(const void *a, const void *b) {
+    const edge_entry *x = (const edge_entry *)a, *y = (const edge_entry *)b;
+    return (x->hi > y->hi) - (x->hi < y->hi);
 }
 
-static spia_result mark_boundary(spia_scan *s) {
-    const int64_t m = 3 * s->triangle_count;
-    edge_ref *e = malloc(sizeof(edge_ref) * (size_t)m);
-    unsigned char *vertex_boundary = calloc((size_t)s->vertex_count, 1);
-    s->boundary_bits = calloc((size_t)s->triangle_count, 1);
-    if (!e || !vertex_boundary || !s->boundary_bits) {
-        free(e), free(vertex_boundary);
+typedef struct boundary_job {
+    spia__build_progress *progress;
+    int64_t vertex_count;
+    const int64_t *begin; /* vertex_count + 1: bucket v is entries[begin[v], begin[v + 1]) */
+    edge_entry *entries;
+    uint8_t *once;        /* per slot: its edge is used by one triangle only */
+    const int32_t *triangles;
+    const uint8_t *vertex_boundary;
+    unsigned char *bits;
+} boundary_job;
+
+static void bucket_range(void *context, int64_t first, int64_t last, int thread) {
+    const boundary_job *j = (const boundary_job *)context;
+    if (spia__build_poll(j->progress, thread, 0.2 + 0.6 * (double)first / (double)j->vertex_count)) return;
+    for (int64_t v = first; v < last; ++v) {
+        edge_entry *e = j->entries + j->begin[v];
+        const int64_t k = j->begin[v + 1] - j->begin[v];
+        if (k <= BUCKET_PAIRWISE) {
+            for (int64_t a = 0; a < k; ++a) {
+                int twin = 0;
+                for (int64_t b = 0; b < k && !twin; ++b) twin = b != a && e[b].hi == e[a].hi;
+                if (!twin) j->once[e[a].slot] = 1;
+            }
+        } else {
+            qsort(e, (size_t)k, sizeof *e, compare_entry);
+            for (int64_t a = 0; a < k;) {
+                int64_t b = a + 1;
+                while (b < k && e[b].hi == e[a].hi) ++b;
+                if (b - a == 1) j->once[e[a].slot] = 1;
+                a = b;
+            }
+        }
+    }
+}
+
+static void boundary_bits_range(void *context, int64_t first, int64_t last, int thread) {
+    (void)thread;
+    const boundary_job *j = (const boundary_job *)context;
+    for (int64_t t = first; t < last; ++t) {
+        unsigned char bits = 0;
+        for (int k = 0; k < 3; ++k) {
+            bits |= (unsigned char)(j->once[3 * t + k] << k);
+            bits |= (unsigned char)(j->vertex_boundary[j->triangles[3 * t + k]] << (3 + k));
+        }
+        j->bits[t] = bits;
+    }
+}
+
+static spia_result mark_boundary(spia_scan *s, int threads, spia__build_progress *p) {
+    const int64_t m = 3 * s->triangle_count, n = s->vertex_count;
+    int64_t *begin = calloc((size_t)n + 1, sizeof(int64_t));
+    edge_entry *e = malloc(sizeof(edge_entry) * (size_t)m);
+    uint8_t *once = calloc((size_t)m, 1);
+    uint8_t *vertex_boundary = calloc((size_t)n, 1);
+    s->boundary_bits = malloc((size_t)s->triangle_count);
+    if (!begin || !e || !once || !vertex_boundary || !s->boundary_bits) {
+        free(begin), free(e), free(once), free(vertex_boundary);
         return SPIA_ERROR_OUT_OF_MEMORY;
     }
+    const int32_t *tri = s->triangles;
+    spia_result r = SPIA_ERROR_CANCELLED;
+    /* begin[v] counts the edges whose lower vertex is v, then (summed) is
+     * the end of v's bucket; filled backwards it becomes the bucket's start. */
     for (int64_t i = 0; i < m; ++i) {
-        const int32_t a = s->triangles[i], b = s->triangles[i % 3 == 2 ? i - 2 : i + 1];
-        e[i].lo = a < b ? a : b;
-        e[i].hi = a < b ? b : a;
-        e[i].slot = i;
+        if (POLL_EVERY(i) && spia__build_poll(p, 0, 0.1 * (double)i / (double)m)) goto done;
+        const int32_t a = tri[i], b = tri[i % 3 == 2 ? i - 2 : i + 1];
+        ++begin[a < b ? a : b];
     }
-    qsort(e, (size_t)m, sizeof(edge_ref), compare_edge);
-    for (int64_t i = 0; i < m;) {
-        int64_t j = i + 1;
-        while (j < m && e[j].lo == e[i].lo && e[j].hi == e[i].hi) ++j;
-        if (j - i == 1) {
-            s->boundary_bits[e[i].slot / 3] |= (unsigned char)(1u << (e[i].slot % 3));
-            vertex_boundary[e[i].lo] = vertex_boundary[e[i].hi] = 1;
-        }
-        i = j;
+    for (int64_t v = 1; v <= n; ++v) begin[v] += begin[v - 1];
+    for (int64_t i = m - 1; i >= 0; --i) {
+        if (POLL_EVERY(i) && spia__build_poll(p, 0, 0.1 + 0.1 * (double)(m - i) / (double)m)) goto done;
+        const int32_t a = tri[i], b = tri[i % 3 == 2 ? i - 2 : i + 1];
+        edge_entry *x = e + --begin[a < b ? a : b];
+        x->hi = a < b ? b : a;
+        x->slot = (uint32_t)i;
     }
-    for (int64_t t = 0; t < s->triangle_count; ++t)
-        for (int k = 0; k < 3; ++k)
-            if (vertex_boundary[s->triangles[3 * t + k]]) s->boundary_bits[t] |= (unsigned char)(1u << (3 + k));
-    free(e), free(vertex_boundary);
+    {
+        boundary_job job = {p, n, begin, e, once, tri, vertex_boundary, s->boundary_bits};
+        spia__parallel_for(threads, n, 16384, bucket_range, &job);
+        if (spia__build_poll(p, 0, 0.8)) goto done;
+        for (int64_t i = 0; i < m; ++i)
+            if (once[i]) vertex_boundary[tri[i]] = vertex_boundary[tri[i % 3 == 2 ? i - 2 : i + 1]] = 1;
+        spia__parallel_for(threads, s->triangle_count, 65536, boundary_bits_range, &job);
+    }
+    r = SPIA_OK;
+done:
+    free(e), free(begin), free(once), free(vertex_boundary);
+    return r;
+}
+
+/* The vertices renumbered in the order the triangles (in leaf order) first
+ * use them, those no triangle uses last: a leaf's corners then lie together
+ * in memory, and a query that reads a leaf's triangles reads a line or two
+ * of positions instead of one a corner.  The positions are the same floats,
+ * so every distance, and which triangle is nearest, is as before. */
+static spia_result renumber_vertices(spia_scan *s, spia__build_progress *p) {
+    const int32_t n = s->vertex_count;
+    const int64_t m = 3 * s->triangle_count;
+    int32_t *new_id = malloc(sizeof(int32_t) * (size_t)n);
+    float *positions = malloc(sizeof(float) * 3 * (size_t)n), *normals = malloc(sizeof(float) * 3 * (size_t)n);
+    if (!new_id || !positions || !normals) {
+        free(new_id), free(positions), free(normals);
+        return SPIA_ERROR_OUT_OF_MEMORY;
+    }
+    for (int32_t v = 0; v < n; ++v) new_id[v] = -1;
+    int32_t next = 0;
+    for (int64_t i = 0; i < m; ++i) {
+        const int32_t v = s->triangles[i];
+        if (new_id[v] < 0) new_id[v] = next++;
+        s->triangles[i] = new_id[v];
+    }
+    if (spia__build_poll(p, 0, 0.5)) { /* the triangles are the scan's own: freed with it */
+        free(new_id), free(positions), free(normals);
+        return SPIA_ERROR_CANCELLED;
+    }
+    for (int32_t v = 0; v < n; ++v) {
+        if (new_id[v] < 0) new_id[v] = next++;
+        memcpy(positions + 3 * (int64_t)new_id[v], s->positions + 3 * (int64_t)v, sizeof(float) * 3);
+        memcpy(normals + 3 * (int64_t)new_id[v], s->normals + 3 * (int64_t)v, sizeof(float) * 3);
+    }
+    free(new_id);
+    free(s->positions), free(s->normals);
+    s->positions = positions, s->normals = normals;
+    s->bvh.positions = positions;
     return SPIA_OK;
 }
 
@@ -96,7 +207,33 @@ static int face_repeats_vertex(const int32_t *fv, int32_t size) {
     return 0;
 }
 
+/* The phases of a build and where each starts in the whole (roughly their
+ * shares of the time): checks, fans and normals, hierarchy, boundary. */
+static const double phase_start[5] = {0.0, 0.02, 0.18, 0.86, 1.0};
+
+static void phase(spia__build_progress *p, int32_t k) {
+    p->phase = k + 1;
+    p->from = phase_start[k];
+    p->to = phase_start[k + 1];
+}
+
+static spia_result cancelled(spia_status *status, const char *where) {
+    return spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled while %s", where);
+}
+
 spia_result spia_scan_create(const spia_mesh *mesh, spia_scan **out, spia_status *status) {
+    return spia_scan_create_progress(mesh, NULL, NULL, out, status);
+}
+
+spia_result spia_scan_create_progress(const spia_mesh *mesh, spia_progress_fn progress, void *progress_user_data,
+                                      spia_scan **out, spia_status *status) {
+    spia__build_progress pr;
+    memset(&pr, 0, sizeof pr);
+    pr.fn = progress;
+    pr.user_data = progress_user_data;
+    pr.interval = 0.1;
+    spia__counter_set(&pr.cancelled, 0);
+    spia__build_progress *const p = progress ? &pr : NULL;
     if (!out) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "out must not be NULL");
     *out = NULL;
     if (!mesh) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "the scan mesh must not be NULL");
@@ -108,13 +245,22 @@ spia_result spia_scan_create(const spia_mesh *mesh, spia_scan **out, spia_status
     if (!mesh->positions || !mesh->face_sizes || !mesh->face_vertices)
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "the scan's positions and faces must not be NULL");
     const int32_t n = mesh->vertex_count;
-    for (int64_t i = 0; i < 3 * (int64_t)n; ++i)
+    double t0 = spia__now();
+    const double start = t0;
+    pr.last = t0;
+    phase(&pr, 0);
+    for (int64_t i = 0; i < 3 * (int64_t)n; ++i) {
+        if (POLL_EVERY(i) && spia__build_poll(p, 0, (double)i / (6.0 * (double)n)))
+            return cancelled(status, "checking the scan");
         if (!isfinite(mesh->positions[i]))
             return spia__fail(status, SPIA_ERROR_NONFINITE, i / 3, "scan vertex %lld has a non-finite coordinate",
                               (long long)(i / 3));
+    }
     /* Count triangles (fans), checking sizes and indices. */
     int64_t tris = 0, corner = 0, skipped = 0;
     for (int32_t f = 0; f < mesh->face_count; ++f) {
+        if (POLL_EVERY(f) && spia__build_poll(p, 0, 0.5 + 0.5 * (double)f / (double)mesh->face_count))
+            return cancelled(status, "checking the scan");
         const int32_t size = mesh->face_sizes[f];
         if (size < 3)
             return spia__fail(status, SPIA_ERROR_FACE_SIZE, f, "scan face %d has %d corners (at least 3 needed)", f,
@@ -142,6 +288,9 @@ spia_result spia_scan_create(const spia_mesh *mesh, spia_scan **out, spia_status
     s->vertex_count = n;
     s->triangle_count = tris;
     s->skipped_faces = skipped;
+    s->seconds[0] = spia__now() - start;
+    t0 = spia__now();
+    phase(&pr, 1);
     s->positions = malloc(sizeof(float) * 3 * (size_t)n);
     s->normals = calloc(3 * (size_t)n, sizeof(float));
     s->triangles = malloc(sizeof(int32_t) * 3 * (size_t)tris);
@@ -159,6 +308,11 @@ spia_result spia_scan_create(const spia_mesh *mesh, spia_scan **out, spia_status
     int64_t t = 0;
     corner = 0;
     for (int32_t f = 0; f < mesh->face_count; ++f) {
+        if (POLL_EVERY(f) && spia__build_poll(p, 0, 0.8 * (double)f / (double)mesh->face_count)) {
+            free(acc);
+            scan_release(s);
+            return cancelled(status, "making the scan's triangles");
+        }
         const int32_t size = mesh->face_sizes[f];
         const int32_t *fv = mesh->face_vertices + corner;
         corner += size;
@@ -195,12 +349,16 @@ spia_result spia_scan_create(const spia_mesh *mesh, spia_scan **out, spia_status
             for (int q = 0; q < 3; ++q) s->normals[3 * (int64_t)v + q] = (float)(a[q] / len);
     }
     free(acc);
+    s->seconds[1] = spia__now() - t0;
+    t0 = spia__now();
+    phase(&pr, 2);
 
     /* The hierarchy sorts the triangles into its leaf order; the polygons
      * they came from follow. */
     {
-        const spia_result r = spia__bvh_build(&s->bvh, s->positions, s->triangles, tris, spia__processor_count(),
-                                              status);
+        pr.to = phase_start[2] + 0.9 * (phase_start[3] - phase_start[2]); /* the rest: renumbering */
+        const spia_result r = spia__bvh_build_progress(&s->bvh, s->positions, s->triangles, tris,
+                                                       spia__processor_count(), p, status);
         if (r != SPIA_OK) {
             scan_release(s);
             return r;
@@ -214,9 +372,33 @@ spia_result spia_scan_create(const spia_mesh *mesh, spia_scan **out, spia_status
         free(s->polygon_of);
         s->polygon_of = polygon_of;
     }
-    if (mark_boundary(s) != SPIA_OK) {
+    phase(&pr, 2);
+    pr.from = phase_start[2] + 0.9 * (phase_start[3] - phase_start[2]);
+    {
+        const spia_result r = renumber_vertices(s, p);
+        if (r != SPIA_OK) {
+            scan_release(s);
+            return r == SPIA_ERROR_CANCELLED ? cancelled(status, "ordering the scan's vertices")
+                                             : spia__fail(status, r, -1, "out of memory for the scan");
+        }
+    }
+    s->seconds[2] = spia__now() - t0;
+    t0 = spia__now();
+    phase(&pr, 3);
+    {
+        const spia_result r = mark_boundary(s, spia__processor_count(), p);
+        if (r != SPIA_OK) {
+            scan_release(s);
+            return r == SPIA_ERROR_CANCELLED ? cancelled(status, "finding the scan's boundary")
+                                             : spia__fail(status, r, -1, "out of memory for the scan's boundary");
+        }
+    }
+    s->seconds[3] = spia__now() - t0;
+    /* Once more at the end, whatever the interval: a caller sees 1. */
+    pr.last = -INFINITY;
+    if (spia__build_poll(p, 0, 1.0)) {
         scan_release(s);
-        return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the scan's boundary");
+        return cancelled(status, "finishing the scan");
     }
     *out = s;
     spia__ok(status);
@@ -282,11 +464,13 @@ typedef struct closest_task {
     float *closest, *normals, *distances;
     int32_t *faces;
     uint8_t *on_boundary;
+    spia__build_progress *progress; /* NULL for none */
+    int64_t count;
 } closest_task;
 
 static void closest_range(void *context, int64_t begin, int64_t end, int thread) {
-    (void)thread;
     const closest_task *t = (const closest_task *)context;
+    if (spia__build_poll(t->progress, thread, (double)begin / (double)t->count)) return;
     for (int64_t i = begin; i < end; ++i) {
         double p[3];
         for (int c = 0; c < 3; ++c) p[c] = t->points_double ? t->points_double[3 * i + c] : t->points_float[3 * i + c];
@@ -298,13 +482,29 @@ static void closest_range(void *context, int64_t begin, int64_t end, int thread)
 void spia__scan_closest_points_double(const spia_scan *s, int64_t count, const double *points, const float *radius,
                                       float *closest, float *normals, float *distances, int32_t *faces,
                                       uint8_t *on_boundary, int threads) {
-    closest_task task = {s, points, NULL, radius, closest, normals, distances, faces, on_boundary};
+    spia__scan_closest_points_polled(s, count, points, radius, closest, normals, distances, faces, on_boundary,
+                                     threads, NULL);
+}
+
+int spia__scan_closest_points_polled(const spia_scan *s, int64_t count, const double *points, const float *radius,
+                                     float *closest, float *normals, float *distances, int32_t *faces,
+                                     uint8_t *on_boundary, int threads, spia__build_progress *progress) {
+    closest_task task = {s, points, NULL, radius, closest, normals, distances, faces, on_boundary, progress, count};
     spia__parallel_for(threads, count, 256, closest_range, &task);
+    return progress && spia__counter_get(&progress->cancelled) ? 1 : 0;
 }
 
 spia_result spia_scan_closest_points(const spia_scan *scan, int64_t count, const float *points, float *closest,
                                      float *normals, float *distances, int32_t *faces, uint8_t *on_boundary,
                                      spia_status *status) {
+    return spia_scan_closest_points_progress(scan, count, points, closest, normals, distances, faces, on_boundary,
+                                             NULL, NULL, status);
+}
+
+spia_result spia_scan_closest_points_progress(const spia_scan *scan, int64_t count, const float *points,
+                                              float *closest, float *normals, float *distances, int32_t *faces,
+                                              uint8_t *on_boundary, spia_progress_fn progress,
+                                              void *progress_user_data, spia_status *status) {
     if (!scan) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "scan must not be NULL");
     if (count < 0) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "negative point count");
     if (count > 0 && !points) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "points must not be NULL");
@@ -312,8 +512,23 @@ spia_result spia_scan_closest_points(const spia_scan *scan, int64_t count, const
         if (!isfinite(points[i]))
             return spia__fail(status, SPIA_ERROR_NONFINITE, i / 3, "query point %lld is not finite",
                               (long long)(i / 3));
-    closest_task task = {scan, NULL, points, NULL, closest, normals, distances, faces, on_boundary};
+    spia__build_progress pr;
+    memset(&pr, 0, sizeof pr);
+    pr.fn = progress;
+    pr.user_data = progress_user_data;
+    pr.interval = 0.1;
+    pr.phase = 1;
+    pr.from = 0.0, pr.to = 1.0;
+    pr.last = spia__now();
+    spia__counter_set(&pr.cancelled, 0);
+    closest_task task = {scan, NULL, points, NULL, closest, normals, distances, faces, on_boundary,
+                         progress ? &pr : NULL, count};
     spia__parallel_for(spia__processor_count(), count, 256, closest_range, &task);
+    if (progress) {
+        pr.last = -INFINITY;
+        if (spia__build_poll(&pr, 0, 1.0))
+            return spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled during the closest-point queries");
+    }
     spia__ok(status);
     return SPIA_OK;
 }
