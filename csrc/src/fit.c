@@ -655,7 +655,8 @@ static spia_result scan_side_prepare(const spia_mesh *cage, const spia_adjacency
     if (r != SPIA_OK) return r;
     const int32_t gv = spia__limit_grid_vertex_count(b->grid), gf = spia__limit_grid_face_count(b->grid);
     int32_t scan_n = 0;
-    const float *P = spia__scan_positions(scan, &scan_n);
+    const int32_t *original = NULL;
+    const float *P = spia__scan_positions(scan, &scan_n, &original);
     b->grid_pos = malloc(sizeof(float) * 3 * (size_t)(gv > 0 ? gv : 1));
     b->grid_sizes = malloc(sizeof(int32_t) * (size_t)(gf > 0 ? gf : 1));
     uint8_t *used = malloc((size_t)scan_n + 1);
@@ -679,7 +680,7 @@ static spia_result scan_side_prepare(const spia_mesh *cage, const spia_adjacency
     int64_t k = 0;
     for (int32_t v = 0; v < scan_n; ++v)
         if (used[v]) {
-            b->scan_vertex[k] = v;
+            b->scan_vertex[k] = original ? original[v] : v;
             for (int c = 0; c < 3; ++c) b->scan_pts[3 * k + c] = P[3 * (int64_t)v + c];
             ++k;
         }
@@ -1049,7 +1050,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
             report->query_seconds += spia__now() - t0;
             if (report->scan_distances) {
                 int32_t scan_n = 0;
-                spia__scan_positions(scan, &scan_n);
+                spia__scan_positions(scan, &scan_n, NULL);
                 const double unit = diagonal > 0.0 ? diagonal : 1.0;
                 for (int32_t v = 0; v < scan_n; ++v) report->scan_distances[v] = -1.0f;
                 for (int64_t k = 0; k < b.scan_count; ++k)

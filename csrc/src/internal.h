@@ -276,9 +276,10 @@ spia_result spia__limit_grid_evaluate(const spia__limit_grid *grid, const double
                                       spia_status *status);
 void spia__limit_grid_free(spia__limit_grid *grid);
 
-/* The scan's own copy of its positions (scan.c), and which vertices its
- * triangles use (used: vertex_count bytes, 1 or 0). */
-const float *spia__scan_positions(const spia_scan *scan, int32_t *vertex_count);
+/* The scan's own copy of its positions (scan.c), in its own order, with
+ * (original, when not NULL) each vertex's index in the mesh it was made
+ * from; and which of them its triangles use (used: vertex_count bytes). */
+const float *spia__scan_positions(const spia_scan *scan, int32_t *vertex_count, const int32_t **original);
 void spia__scan_used_vertices(const spia_scan *scan, uint8_t *used);
 
 /* Closest points for points in double (scan.c); no argument checks.  radius,

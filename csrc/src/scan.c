@@ -26,6 +26,7 @@ struct spia_scan {
     unsigned char *boundary_bits;
     double diagonal;
     int64_t skipped_faces; /* faces that repeat a vertex: left out              */
+    int32_t *original;     /* vertex -> its index in the mesh given (renumbered)    */
     /* Seconds of spia_scan_create's phases: checks, copy and fans with the
      * normals, hierarchy, boundary (for benchmarks: spia__scan_timings). */
     double seconds[4];
@@ -45,6 +46,7 @@ static void scan_release(spia_scan *s) {
     free(s->triangles);
     free(s->polygon_of);
     free(s->boundary_bits);
+    free(s->original);
     free(s);
 }
 
@@ -173,7 +175,8 @@ static spia_result renumber_vertices(spia_scan *s, spia__build_progress *p) {
     const int64_t m = 3 * s->triangle_count;
     int32_t *new_id = malloc(sizeof(int32_t) * (size_t)n);
     float *positions = malloc(sizeof(float) * 3 * (size_t)n), *normals = malloc(sizeof(float) * 3 * (size_t)n);
-    if (!new_id || !positions || !normals) {
+    s->original = malloc(sizeof(int32_t) * (size_t)n);
+    if (!new_id || !positions || !normals || !s->original) {
         free(new_id), free(positions), free(normals);
         return SPIA_ERROR_OUT_OF_MEMORY;
     }
@@ -190,6 +193,7 @@ static spia_result renumber_vertices(spia_scan *s, spia__build_progress *p) {
     }
     for (int32_t v = 0; v < n; ++v) {
         if (new_id[v] < 0) new_id[v] = next++;
+        s->original[new_id[v]] = v;
         memcpy(positions + 3 * (int64_t)new_id[v], s->positions + 3 * (int64_t)v, sizeof(float) * 3);
         memcpy(normals + 3 * (int64_t)new_id[v], s->normals + 3 * (int64_t)v, sizeof(float) * 3);
     }
@@ -533,8 +537,9 @@ spia_result spia_scan_closest_points_progress(const spia_scan *scan, int64_t cou
     return SPIA_OK;
 }
 
-const float *spia__scan_positions(const spia_scan *scan, int32_t *vertex_count) {
+const float *spia__scan_positions(const spia_scan *scan, int32_t *vertex_count, const int32_t **original) {
     *vertex_count = scan->vertex_count;
+    if (original) *original = scan->original;
     return scan->positions;
 }
 
