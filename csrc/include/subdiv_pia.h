@@ -651,7 +651,7 @@ typedef struct spia_fit_report {
     /* Distances the other way: from each scan vertex that a face uses to
      * the limit surface (refined one level finer than the samples,
      * ceil(log2 samples_per_edge) + 1 levels, and coarser while that would
-     * make more than 8M quads), relative to the scan's
+     * make more than 2M quads), relative to the scan's
      * diagonal, for the cage given and the cage written.  `ignored` counts
      * the scan vertices farther than the cut-off: scan parts the surface
      * does not reach.  Catmull-Clark only; all zero with

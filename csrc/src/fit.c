@@ -642,7 +642,7 @@ static void stiffen(const spia_mesh *cage, const spia_adjacency *adj, const uint
  * that its flat quads stay within a sixteenth of a sample spacing's
  * curvature sag of the surface, and one level coarser at a time while it
  * would have more than SCAN_GRID_FACES quads (at least one level). */
-#define SCAN_GRID_FACES (8 << 20)
+#define SCAN_GRID_FACES (2 << 20)
 static spia_result scan_side_prepare(const spia_mesh *cage, const spia_adjacency *adj, const spia_options *opt,
                                      int32_t per_edge, const spia_scan *scan, fit_buffers *b, spia_status *status) {
     int32_t levels = 1;
