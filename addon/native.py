@@ -776,6 +776,16 @@ def surface_stencils(mesh, samples_per_edge=4, boundary_smooth="ALL", use_crease
     return Stencils(handle.value, lib, columns=mesh.vertex_count)
 
 
+def _phase_callback(progress):
+    """progress(phase, fraction) -> bool as the C callback (keep it alive for the call)."""
+    def callback(_user, phase, fraction):
+        try:
+            return 1 if progress(int(phase), float(fraction)) else 0
+        except Exception:  # an exception cannot cross C: treat it as a cancel
+            return 1
+    return _PROGRESS(callback)
+
+
 class Scan:
     """A mesh prepared for closest-point queries (the library's own bounding volume hierarchy)."""
 
@@ -793,12 +803,7 @@ class Scan:
         if progress is None:
             code = lib.spia_scan_create(ctypes.byref(cm), ctypes.byref(handle), ctypes.byref(status))
         else:
-            def callback(_user, phase, fraction):
-                try:
-                    return 1 if progress(int(phase), float(fraction)) else 0
-                except Exception:  # an exception cannot cross C: treat it as a cancel
-                    return 1
-            c_callback = _PROGRESS(callback)
+            c_callback = _phase_callback(progress)
             code = lib.spia_scan_create_progress(ctypes.byref(cm), c_callback, None, ctypes.byref(handle),
                                                  ctypes.byref(status))
         if code != 0:
@@ -835,12 +840,7 @@ class Scan:
         if progress is None:
             code = self._lib.spia_scan_closest_points(self._handle, n, *outputs, ctypes.byref(status))
         else:
-            def callback(_user, phase, fraction):
-                try:
-                    return 1 if progress(int(phase), float(fraction)) else 0
-                except Exception:  # an exception cannot cross C: treat it as a cancel
-                    return 1
-            c_callback = _PROGRESS(callback)
+            c_callback = _phase_callback(progress)
             code = self._lib.spia_scan_closest_points_progress(self._handle, n, *outputs, c_callback, None,
                                                                ctypes.byref(status))
         if code != 0:
