@@ -704,9 +704,10 @@ def check_memory(mesh, settings, scan=None):
             % (need / 2.0 ** 30, mesh.vertex_count, len(mesh.face_sizes), total / 2.0 ** 30))
 
 
-def compute_cage(obj, settings, progress=None, mesh=None, scan=None):
+def compute_cage(obj, settings, progress=None, mesh=None, scan=None, measure_scan=True):
     """Run the solver on obj's mesh data (not its modifiers), or on mesh if given.
-    With scan (a native.Scan), fit the cage to it instead (native.fit).
+    With scan (a native.Scan), fit the cage to it instead (native.fit;
+    measure_scan=False leaves out the scan-to-surface distances).
 
     Returns (cage, report): a native.Report, or a native.FitReport for a fit."""
     scheme = settings["scheme"]
@@ -731,7 +732,7 @@ def compute_cage(obj, settings, progress=None, mesh=None, scan=None):
         if scan is not None:
             return native.fit(cage_mesh, scan, mode=settings["fit"],
                               samples_per_edge=settings["fit_samples"], cutoff=settings["fit_cutoff"],
-                              smoothing=settings["fit_smoothing"], **options)
+                              smoothing=settings["fit_smoothing"], measure_scan=measure_scan, **options)
         return native.interpolate(cage_mesh, **options)
     except native.PiaError as error:
         named = _shape_error(error, values, settings)

@@ -217,7 +217,9 @@ def _rebuild(cage, source, settings, scan):
         bpy.data.meshes.remove(mesh)
         mesh = tri
     try:
-        positions, report = api.compute_cage(source, settings, mesh=mesh, scan=scan)
+        # an update is about the cage: the scan-to-surface distances (a
+        # hierarchy over the refined surface) are left to a full fit
+        positions, report = api.compute_cage(source, settings, mesh=mesh, scan=scan, measure_scan=False)
     except BaseException:
         bpy.data.meshes.remove(mesh)
         raise
