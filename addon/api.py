@@ -1073,7 +1073,7 @@ def store_fit(obj, report, settings):
         obj["pia_fit_ignored_%s" % when] = int(d.ignored)
     # The other way: the scan's vertices to the limit surface; "unreached"
     # is the share of them farther than the cut-off.
-    scan_points = int(getattr(report, "scan_point_count", 0) or 0)
+    scan_points = int(report.scan_point_count)
     obj["pia_fit_scan_points"] = scan_points
     if scan_points:
         for when, d in (("before", report.scan_before), ("after", report.scan_after)):
@@ -1081,10 +1081,9 @@ def store_fit(obj, report, settings):
             obj["pia_fit_scan_p95_%s" % when] = float(d.p95)
             obj["pia_fit_scan_max_%s" % when] = float(d.max)
             obj["pia_fit_scan_unreached_%s" % when] = float(d.ignored) / scan_points
-    folded = getattr(report, "folded_after", -1)
-    if folded is not None and folded >= 0 and report.sample_count:
+    if report.folded_after >= 0 and report.sample_count:
         obj["pia_fit_folded_before"] = float(report.folded_before) / report.sample_count
-        obj["pia_fit_folded_after"] = float(folded) / report.sample_count
+        obj["pia_fit_folded_after"] = float(report.folded_after) / report.sample_count
     for key in ("fit_cutoff", "fit_smoothing", "fit_samples"):
         obj["pia_" + key] = settings[key]
     obj["pia_distance_scale"] = HEAT_SCALE
@@ -1313,11 +1312,11 @@ def format_fit_report(report, target_name):
         line += ", %d iterations" % report.iterations
     if a.ignored:
         line += "; %d of %d samples beyond the cut-off ignored" % (a.ignored, report.sample_count)
-    if getattr(report, "scan_point_count", 0):
+    if report.scan_point_count:
         s = report.scan_after
         line += ("; scan to surface: mean %.2g, 95th percentile %.2g, max %.2g, %.2g%% of the scan "
                  "farther than the cut-off" % (s.mean, s.p95, s.max, 100.0 * s.ignored / report.scan_point_count))
-    if getattr(report, "folded_after", -1) > 0 and report.sample_count:
+    if report.folded_after > 0 and report.sample_count:
         line += "; %.2g%% of the samples face away from the scan" % (100.0 * report.folded_after / report.sample_count)
     if report.status != 'CONVERGED':
         line += " (%s: %s)" % (report.status.lower().replace("_", " "), report.message)

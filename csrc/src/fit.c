@@ -260,11 +260,11 @@ static void robust_weights(const float *d, int64_t count, double c, float *w) {
 
 /* Within a round the progress callback is called at least every
  * PROGRESS_INTERVAL seconds from the long steps (closest points in chunks
- * of QUERY_CHUNK, each conjugate-gradient step), with the round under way
- * so that a cancel is answered promptly at
- * every scale.  These calls repeat the last call's figures (the rounds
- * done and their mean distance, or the VERTICES solve's last iteration and
- * error; 0 and the cage given's mean before any). */
+ * of QUERY_CHUNK, each conjugate-gradient step), so that a cancel is
+ * answered promptly at every scale.  These calls repeat the last call's
+ * figures (the rounds done and their mean distance, or the VERTICES
+ * solve's last iteration and error; 0 and the cage given's mean before
+ * any). */
 #define PROGRESS_INTERVAL 0.2
 #define QUERY_CHUNK 65536
 typedef struct fit_clock {
