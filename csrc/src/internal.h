@@ -261,6 +261,15 @@ spia_result spia__require_triangles(const spia_mesh *mesh, spia_status *status);
 /* Catmull-Clark limit stencils at samples inside faces (catmark_osd.cpp). */
 spia_result spia__osd_surface_stencils(const spia_mesh *mesh, const spia_adjacency *adj, const spia_options *options,
                                        int32_t samples_per_edge, spia_stencils **out, spia_status *status);
+/* The same rows face by face: for each ptex face in order, emit gets its
+ * columns (mesh numbering, each once) and its samples' weights over them,
+ * samples_per_edge^2 rows of `width` (sample j's at weights + j * width);
+ * a nonzero return stops it with SPIA_ERROR_OUT_OF_MEMORY. */
+typedef int (*spia__sample_block_fn)(void *user, int64_t ptex, int32_t width, const int32_t *columns,
+                                     const double *weights);
+spia_result spia__osd_surface_blocks(const spia_mesh *mesh, const spia_adjacency *adj, const spia_options *options,
+                                     int32_t samples_per_edge, spia__sample_block_fn emit, void *user,
+                                     spia_status *status);
 
 /* The Catmull-Clark limit surface as a quad mesh (catmark_osd.cpp): the
  * cage refined uniformly `levels` times with every vertex at its limit
