@@ -29,6 +29,7 @@
  * VERTICES: the cage's limit points go to their closest scan points and the
  * cage is solved to interpolate them. */
 #include "internal.h"
+#include "threads.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -105,39 +106,230 @@ spia_result spia_surface_stencils_create(const spia_mesh *mesh, const spia_optio
     return r;
 }
 
-/* ---- sparse products ---------------------------------------------------- */
+/* ---- the samples as dense blocks ---------------------------------------- */
 
-/* The least-squares kernels run on one thread: they are a millisecond or two
- * each, and OpenMP's barriers between so many short loops cost more than
- * they save whenever the cores are shared (ten times slower measured on a
- * busy 2-core machine).  The closest-point queries, the bulk of a round,
- * run on every core (scan.c). */
+/* The samples of one ptex face combine the same cage vertices (the face's
+ * patch points), so each ptex face's rows are kept as one dense block over
+ * those vertices, column by column (a column's weights for all the face's
+ * samples side by side), in float: a pass over a block gives its samples'
+ * positions, or the whole normal-equation product M^T B M x of its samples
+ * at once, reading each weight once, without an index per weight, in loops
+ * the compiler vectorises, the sums in double.  On the 50k-vertex cage (800k
+ * samples) a round's solve took 1.9 s as sparse rows and their transpose
+ * in double, 1.1 s as double blocks and 0.8 to 1.1 s as float blocks (runs
+ * one after another on a quiet machine).  Float
+ * weights move a sample by at most 6e-8 of the cage's extent, well inside
+ * the float32 the cage is read and written in.
+ *
+ * The products run on up to two threads (the closest-point queries, the
+ * bulk of a round, on every core: scan.c); on the 2-processor test machine
+ * two measured no faster than one, the kernels being bound by arithmetic on
+ * processors that seem to share a core. */
+typedef struct sample_blocks {
+    int64_t groups;   /* ptex faces */
+    int32_t per;      /* samples per ptex face */
+    int64_t *start;   /* groups + 1: the columns of block g are cols[start[g] .. start[g + 1]) */
+    int32_t *cols;
+    float *w;         /* block g at w + per * start[g]: column j's per weights at + per * j */
+    double *u;        /* BLOCK_PIECES * 3 * per: per piece, a block's samples' vectors (x, y, z apart) */
+    double *extra;    /* (BLOCK_PIECES - 1) * 3 * columns: the later pieces' sums */
+    int32_t columns;
+    int threads;
+} sample_blocks;
 
-/* y = M x, 3 doubles per point. */
-static void rows_apply(const spia_stencils *M, const double *x, double *y) {
-    for (int32_t r = 0; r < M->rows; ++r) spia__row_product(M, r, x, y + 3 * (int64_t)r);
+/* The products run in this many pieces of the blocks, whatever the number
+ * of threads, each piece summing into a vector of its own; the sums are
+ * added in piece order, so the results do not depend on the threads. */
+#define BLOCK_PIECES 2
+
+static void blocks_free(sample_blocks *B) {
+    free(B->start), free(B->cols), free(B->w), free(B->u), free(B->extra);
+    memset(B, 0, sizeof *B);
 }
 
-/* The transpose of a stencil table (columns become rows), as a table. */
-static spia_stencils *transpose(const spia_stencils *M, int32_t columns) {
-    spia_stencils *T = spia__stencils_alloc(columns, M->nnz);
-    if (!T) return NULL;
-    for (int64_t k = 0; k < M->nnz; ++k) T->offsets[M->indices[k] + 1]++;
-    for (int32_t c = 0; c < columns; ++c) T->offsets[c + 1] += T->offsets[c];
-    int64_t *fill = malloc(sizeof(int64_t) * ((size_t)columns + 1));
-    if (!fill) {
-        spia_stencils_free(T);
-        return NULL;
+/* The blocks as OpenSubdiv's part hands them over (spia__osd_surface_blocks),
+ * the arrays grown as they come. */
+typedef struct block_sink {
+    sample_blocks *B;
+    int64_t capacity; /* columns cols and w have room for */
+    int32_t *order;   /* a block's kept columns, by column */
+    int32_t order_capacity;
+} block_sink;
+
+static int block_sink_add(void *user, int64_t ptex, int32_t width, const int32_t *columns, const double *weights) {
+    block_sink *k = user;
+    sample_blocks *B = k->B;
+    if (ptex >= B->groups) return 1;
+    const int64_t at = B->start[ptex], per = B->per;
+    if (at + width > k->capacity) {
+        int64_t cap = k->capacity > 0 ? k->capacity : 4096;
+        while (cap < at + width) cap *= 2;
+        int32_t *cols = realloc(B->cols, sizeof(int32_t) * (size_t)cap);
+        if (cols) B->cols = cols;
+        float *w = realloc(B->w, sizeof(float) * (size_t)cap * (size_t)per);
+        if (w) B->w = w;
+        if (!cols || !w) return 1;
+        k->capacity = cap;
     }
-    memcpy(fill, T->offsets, sizeof(int64_t) * ((size_t)columns + 1));
-    for (int32_t r = 0; r < M->rows; ++r)
-        for (int64_t k = M->offsets[r]; k < M->offsets[r + 1]; ++k) {
-            const int64_t at = fill[M->indices[k]]++;
-            T->indices[at] = r;
-            T->weights[at] = M->weights[k];
+    if (width > k->order_capacity) {
+        int32_t *order = realloc(k->order, sizeof(int32_t) * (size_t)width);
+        if (!order) return 1;
+        k->order = order;
+        k->order_capacity = width;
+    }
+    /* The columns whose weights are not all zero, in increasing order (the
+     * blocks of neighbouring faces then touch the cage in the same order,
+     * which the caches like). */
+    int32_t kept = 0;
+    for (int32_t i = 0; i < width; ++i) {
+        int any = 0;
+        for (int64_t s = 0; s < per && !any; ++s) any = (float)weights[s * width + i] != 0.0f;
+        if (!any) continue;
+        int32_t place = kept++;
+        while (place > 0 && columns[k->order[place - 1]] > columns[i]) {
+            k->order[place] = k->order[place - 1];
+            --place;
         }
-    free(fill);
-    return T;
+        k->order[place] = i;
+    }
+    for (int32_t j = 0; j < kept; ++j) {
+        const int32_t i = k->order[j];
+        B->cols[at + j] = columns[i];
+        float *col = B->w + per * (at + j);
+        for (int64_t s = 0; s < per; ++s) col[s] = (float)weights[s * width + i];
+    }
+    B->start[ptex + 1] = at + kept;
+    return 0;
+}
+
+/* The sample blocks of the cage (per ptex face, per_edge^2 samples). */
+static spia_result blocks_build(const spia_mesh *cage, const spia_adjacency *adj, const spia_options *opt,
+                                int32_t per_edge, sample_blocks *B, spia_status *status) {
+    memset(B, 0, sizeof *B);
+    B->per = per_edge * per_edge;
+    B->columns = cage->vertex_count;
+    B->threads = opt->threads > BLOCK_PIECES ? BLOCK_PIECES : opt->threads < 1 ? 1 : opt->threads;
+    B->groups = spia_surface_sample_count(cage, per_edge) / B->per;
+    B->start = calloc((size_t)B->groups + 1, sizeof(int64_t));
+    B->u = malloc(sizeof(double) * 3 * BLOCK_PIECES * (size_t)B->per);
+    B->extra = malloc(sizeof(double) * 3 * (BLOCK_PIECES - 1) * (size_t)(B->columns > 0 ? B->columns : 1));
+    if (!B->start || !B->u || !B->extra) {
+        blocks_free(B);
+        return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the sample stencils");
+    }
+    block_sink sink = {B, 0, NULL, 0};
+    spia_result r = spia__osd_surface_blocks(cage, adj, opt, per_edge, block_sink_add, &sink, status);
+    free(sink.order);
+    if (r != SPIA_OK) {
+        blocks_free(B);
+        return r;
+    }
+    return SPIA_OK;
+}
+
+static inline int64_t block_width(const sample_blocks *B, int64_t g) { return B->start[g + 1] - B->start[g]; }
+
+/* u = block g times the columns of x: its samples' positions. */
+static inline void block_forward(const sample_blocks *B, int64_t g, const double *x, double *u) {
+    const int32_t *cols = B->cols + B->start[g];
+    const int64_t width = block_width(B, g);
+    const int32_t per = B->per;
+    const float *w = B->w + per * B->start[g];
+    double *ux = u, *uy = u + per, *uz = u + 2 * per;
+    for (int32_t s = 0; s < per; ++s) ux[s] = uy[s] = uz[s] = 0.0;
+    for (int64_t j = 0; j < width; ++j) {
+        const double *p = x + 3 * (int64_t)cols[j];
+        const float *col = w + per * j;
+        const double px = p[0], py = p[1], pz = p[2];
+        for (int32_t s = 0; s < per; ++s) {
+            ux[s] += col[s] * px;
+            uy[s] += col[s] * py;
+            uz[s] += col[s] * pz;
+        }
+    }
+}
+
+/* out[cols] += block g transposed times u. */
+static inline void block_backward(const sample_blocks *B, int64_t g, const double *u, double *out) {
+    const int32_t *cols = B->cols + B->start[g];
+    const int64_t width = block_width(B, g);
+    const int32_t per = B->per;
+    const float *w = B->w + per * B->start[g];
+    const double *ux = u, *uy = u + per, *uz = u + 2 * per;
+    for (int64_t j = 0; j < width; ++j) {
+        const float *col = w + per * j;
+        double a[2] = {0.0, 0.0}, b[2] = {0.0, 0.0}, c[2] = {0.0, 0.0};
+        int32_t s = 0;
+        for (; s + 2 <= per; s += 2)
+            for (int l = 0; l < 2; ++l) {
+                a[l] += col[s + l] * ux[s + l];
+                b[l] += col[s + l] * uy[s + l];
+                c[l] += col[s + l] * uz[s + l];
+            }
+        for (; s < per; ++s) a[0] += col[s] * ux[s], b[0] += col[s] * uy[s], c[0] += col[s] * uz[s];
+        double *p = out + 3 * (int64_t)cols[j];
+        p[0] += a[0] + a[1], p[1] += b[0] + b[1], p[2] += c[0] + c[1];
+    }
+}
+
+/* The pieces: a block product over [begin, end) of the blocks, as piece
+ * number begin / grain. */
+typedef void (*block_piece_fn)(const void *context, const sample_blocks *B, int64_t begin, int64_t end, double *u,
+                               double *out);
+typedef struct block_run {
+    const sample_blocks *B;
+    block_piece_fn fn;
+    const void *context;
+    double *out;
+    int64_t grain;
+} block_run;
+
+static void block_run_piece(void *context, int64_t begin, int64_t end, int thread) {
+    (void)thread;
+    const block_run *run = context;
+    const int64_t piece = begin / run->grain;
+    const sample_blocks *B = run->B;
+    double *out = piece == 0 ? run->out : B->extra + 3 * (piece - 1) * (int64_t)B->columns;
+    if (piece > 0) memset(out, 0, sizeof(double) * 3 * (size_t)B->columns);
+    run->fn(run->context, B, begin, end, B->u + 3 * piece * B->per, out);
+}
+
+/* Runs fn over the blocks in BLOCK_PIECES pieces; `out` (3 per column)
+ * gets the sum, when `summed`, or is written by piece 0 alone (fn writing
+ * only its own blocks' places). */
+static void blocks_run(const sample_blocks *B, block_piece_fn fn, const void *context, double *out, int summed) {
+    block_run run = {B, fn, context, out, (B->groups + BLOCK_PIECES - 1) / BLOCK_PIECES};
+    if (run.grain < 1) run.grain = 1;
+    spia__parallel_for(B->threads, B->groups, run.grain, block_run_piece, &run);
+    if (!summed) return;
+    const int64_t pieces = (B->groups + run.grain - 1) / run.grain, N3 = 3 * (int64_t)B->columns;
+    for (int64_t piece = 1; piece < pieces; ++piece) {
+        const double *e = B->extra + (piece - 1) * N3;
+        for (int64_t i = 0; i < N3; ++i) out[i] += e[i];
+    }
+}
+
+/* X = M x, 3 doubles per sample. */
+typedef struct apply_context {
+    const double *x;
+    double *X;
+} apply_context;
+
+static void positions_piece(const void *context, const sample_blocks *B, int64_t begin, int64_t end, double *u,
+                            double *out) {
+    (void)out;
+    const apply_context *a = context;
+    const int32_t per = B->per;
+    for (int64_t g = begin; g < end; ++g) {
+        block_forward(B, g, a->x, u);
+        double *X = a->X + 3 * g * per;
+        for (int32_t s = 0; s < per; ++s) X[3 * s] = u[s], X[3 * s + 1] = u[per + s], X[3 * s + 2] = u[2 * per + s];
+    }
+}
+
+static void blocks_apply(const sample_blocks *B, const double *x, double *X) {
+    apply_context a = {x, X};
+    blocks_run(B, positions_piece, &a, NULL, 0);
 }
 
 /* ---- distances ------------------------------------------------------------ */
@@ -315,7 +507,7 @@ static int closest_in_chunks(const spia_scan *scan, int64_t count, const double 
 /* ---- the least-squares rounds --------------------------------------------- */
 
 typedef struct fit_system {
-    const spia_stencils *M, *Mt;
+    const sample_blocks *blocks; /* the sample stencils */
     int32_t n;              /* cage vertices */
     int64_t S;              /* samples */
     const float *normals;   /* S * 3 */
@@ -331,8 +523,8 @@ typedef struct fit_system {
     const int32_t *nb;
     const unsigned char *free_vertex;
     const double *stiffness; /* n: per-vertex factor on the Laplacian term (the fold guard) */
-    double *tmp_s;          /* S * 3 */
     double *tmp_n;          /* n * 3 */
+    double *tmp_diag;       /* n * 6 */
 } fit_system;
 
 /* g = B_s u with B_s = w_s (n n^T + alpha I). */
@@ -400,21 +592,62 @@ static void fairness_add(const fit_system *f, const double *x, double *z) {
     laplacian_transpose_add(f, f->tmp_n, f->lambda, z);
 }
 
-/* out = M^T g for per-sample vectors g. */
-static void gather(const fit_system *f, const double *g, double *out) {
-    const spia_stencils *T = f->Mt;
-    for (int32_t v = 0; v < f->n; ++v) spia__row_product(T, v, g, out + 3 * (int64_t)v);
+/* Whether any sample of block g pulls. */
+static inline int block_pulls(const fit_system *f, int64_t g) {
+    const float *w = f->weight + g * f->blocks->per;
+    for (int32_t s = 0; s < f->blocks->per; ++s)
+        if (w[s] != 0.0f) return 1;
+    return 0;
 }
 
-/* y = A x, the normal-equation matrix. */
-static void system_apply(const fit_system *f, const double *x, double *y) {
-    double *t = f->tmp_s;
-    rows_apply(f->M, x, t);
-    for (int64_t s = 0; s < f->S; ++s) {
-        double u[3] = {t[3 * s], t[3 * s + 1], t[3 * s + 2]};
-        apply_b(f, s, u, t + 3 * s);
+typedef struct normal_context {
+    const fit_system *f;
+    const double *x;     /* system_apply's x */
+    const float *T;      /* the right-hand side's targets */
+} normal_context;
+
+/* out += M^T B M x over blocks [begin, end). */
+static void normal_piece(const void *context, const sample_blocks *B, int64_t begin, int64_t end, double *u,
+                         double *out) {
+    const normal_context *c = context;
+    const fit_system *f = c->f;
+    const int32_t per = B->per;
+    for (int64_t g = begin; g < end; ++g) {
+        if (!block_pulls(f, g)) continue;
+        block_forward(B, g, c->x, u);
+        for (int32_t s = 0; s < per; ++s) {
+            double in[3] = {u[s], u[per + s], u[2 * per + s]}, v[3];
+            apply_b(f, g * per + s, in, v);
+            u[s] = v[0], u[per + s] = v[1], u[2 * per + s] = v[2];
+        }
+        block_backward(B, g, u, out);
     }
-    gather(f, t, y);
+}
+
+/* out += M^T (B-weighted targets) over blocks [begin, end). */
+static void target_piece(const void *context, const sample_blocks *B, int64_t begin, int64_t end, double *u,
+                         double *out) {
+    const normal_context *c = context;
+    const fit_system *f = c->f;
+    const int32_t per = B->per;
+    for (int64_t g = begin; g < end; ++g) {
+        if (!block_pulls(f, g)) continue;
+        for (int32_t s = 0; s < per; ++s) {
+            const int64_t q = g * per + s;
+            double v[3];
+            target_b(f, q, c->T + 3 * q, f->X + 3 * q, v);
+            u[s] = v[0], u[per + s] = v[1], u[2 * per + s] = v[2];
+        }
+        block_backward(B, g, u, out);
+    }
+}
+
+/* y = A x, the normal-equation matrix: M^T B M x block by block, then the
+ * fairness and the damping. */
+static void system_apply(const fit_system *f, const double *x, double *y) {
+    memset(y, 0, sizeof(double) * 3 * (size_t)f->n);
+    normal_context c = {f, x, NULL};
+    blocks_run(f->blocks, normal_piece, &c, y, 1);
     if (f->lambda > 0.0) {
         fairness_add(f, x, y);
     }
@@ -464,27 +697,40 @@ static int least_squares_round(fit_system *f, const float *T, const double *V0, 
     double *b = work, *r = work + N3, *z = work + 2 * N3, *p = work + 3 * N3, *Ap = work + 4 * N3;
     /* b = M^T B T + lambda Lap^T Lap V0 + damping V (the damping anchors the
      * current iterate, so it does not bias the fit). */
-    double *t = f->tmp_s;
-    for (int64_t s = 0; s < f->S; ++s) target_b(f, s, T + 3 * s, f->X + 3 * s, t + 3 * s);
-    gather(f, t, b);
+    const sample_blocks *B = f->blocks;
+    const int32_t per = B->per;
+    memset(b, 0, sizeof(double) * (size_t)N3);
+    normal_context c = {f, NULL, T};
+    blocks_run(B, target_piece, &c, b, 1);
     if (f->lambda > 0.0) {
         fairness_add(f, V0, b);
     }
     for (int64_t i = 0; i < N3; ++i) b[i] += f->damping * V[i];
 
     /* Block-Jacobi preconditioner: sum_s m_si^2 B_s + lambda (Lap^T Lap)_ii + damping. */
-    const spia_stencils *Mt = f->Mt;
-    for (int32_t v = 0; v < f->n; ++v) {
-        double a[6] = {0, 0, 0, 0, 0, 0};
-        for (int64_t k = Mt->offsets[v]; k < Mt->offsets[v + 1]; ++k) {
-            const int64_t s = Mt->indices[k];
-            if (f->weight[s] == 0.0) continue;
-            const double w2 = Mt->weights[k] * Mt->weights[k] * f->weight[s];
-            const float *nn = f->normals + 3 * s;
-            const double al = f->alpha + f->beta, kp = w2 * (1.0 - f->beta);
-            a[0] += kp * nn[0] * nn[0] + w2 * al, a[1] += kp * nn[0] * nn[1], a[2] += kp * nn[0] * nn[2];
-            a[3] += kp * nn[1] * nn[1] + w2 * al, a[4] += kp * nn[1] * nn[2], a[5] += kp * nn[2] * nn[2] + w2 * al;
+    double *diag = f->tmp_diag;
+    memset(diag, 0, sizeof(double) * 6 * (size_t)f->n);
+    for (int64_t g = 0; g < B->groups; ++g) {
+        if (!block_pulls(f, g)) continue;
+        const int64_t width = block_width(B, g);
+        const int32_t *cols = B->cols + B->start[g];
+        const float *w = B->w + per * B->start[g];
+        for (int32_t s = 0; s < per; ++s) {
+            const int64_t q = g * per + s;
+            if (f->weight[q] == 0.0f) continue;
+            const float *nn = f->normals + 3 * q;
+            const double al = f->alpha + f->beta, kp = 1.0 - f->beta;
+            const double e[6] = {kp * nn[0] * nn[0] + al, kp * nn[0] * nn[1], kp * nn[0] * nn[2],
+                                 kp * nn[1] * nn[1] + al, kp * nn[1] * nn[2], kp * nn[2] * nn[2] + al};
+            for (int64_t j = 0; j < width; ++j) {
+                const double m = w[per * j + s], w2 = m * m * f->weight[q];
+                double *a = diag + 6 * (int64_t)cols[j];
+                for (int c = 0; c < 6; ++c) a[c] += w2 * e[c];
+            }
         }
+    }
+    for (int32_t v = 0; v < f->n; ++v) {
+        double *a = diag + 6 * (int64_t)v;
         const int64_t na = f->nb_start[v], nb = f->nb_start[v + 1];
         double lap = 0.0; /* (Lap^T C Lap)_vv */
         if (nb > na) {
@@ -530,8 +776,9 @@ static int least_squares_round(fit_system *f, const float *T, const double *V0, 
 /* ---- the entry point -------------------------------------------------------- */
 
 typedef struct fit_buffers {
-    spia_stencils *M, *Mt, *L;
-    double *V0, *V, *best, *X, *X_prev, *work, *precond, *tmp_s, *tmp_n;
+    spia_stencils *L;
+    sample_blocks blocks;
+    double *V0, *V, *best, *X, *X_prev, *work, *precond, *tmp_n, *tmp_diag;
     float *radius;
     int evaluated;
     float *T, *N, *d, *scratch, *targets, *solved, *wts;
@@ -555,10 +802,9 @@ typedef struct fit_buffers {
 } fit_buffers;
 
 static void buffers_free(fit_buffers *b) {
-    spia_stencils_free(b->M);
-    spia_stencils_free(b->Mt);
+    blocks_free(&b->blocks);
     spia_stencils_free(b->L);
-    free(b->V0), free(b->V), free(b->best), free(b->X), free(b->X_prev), free(b->radius), free(b->work), free(b->precond), free(b->tmp_s);
+    free(b->V0), free(b->V), free(b->best), free(b->X), free(b->X_prev), free(b->radius), free(b->work), free(b->precond), free(b->tmp_diag);
     free(b->tmp_n), free(b->T), free(b->N), free(b->d), free(b->scratch), free(b->targets), free(b->solved);
     free(b->wts), free(b->on_boundary);
     free(b->nb_start), free(b->nb), free(b->free_vertex), free(b->sample_face);
@@ -761,7 +1007,7 @@ static int evaluate(const spia_scan *scan, fit_buffers *b, const double *V, int6
                     int threads, double *query_seconds, fit_clock *clock) {
     const double t0 = spia__now();
     if (b->evaluated) memcpy(b->X_prev, b->X, sizeof(double) * 3 * (size_t)S);
-    rows_apply(b->M, V, b->X);
+    blocks_apply(&b->blocks, V, b->X);
     if (b->evaluated)
         for (int64_t s = 0; s < S; ++s) {
             const double *x = b->X + 3 * s, *y = b->X_prev + 3 * s;
@@ -831,9 +1077,9 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
      * (VERTICES only) there are none, and the limit points are measured. */
     const int surface_samples = opt.scheme == SPIA_SCHEME_CATMULL_CLARK;
     if (surface_samples) {
-        r = spia__osd_surface_stencils(cage, &adj, &surface_opt, fo.samples_per_edge, &b.M, status);
+        r = blocks_build(cage, &adj, &surface_opt, fo.samples_per_edge, &b.blocks, status);
         if (r != SPIA_OK) goto done;
-        S = b.M->rows;
+        S = b.blocks.groups * b.blocks.per;
     }
     report->sample_count = S;
     report->stencil_seconds += spia__now() - t0;
@@ -846,7 +1092,6 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
     for (int64_t i = 0; i < N3; ++i) b.V0[i] = b.V[i] = b.best[i] = cage->positions[i];
     if (S > 0) {
         b.X = malloc(sizeof(double) * 3 * (size_t)S);
-        b.tmp_s = malloc(sizeof(double) * 3 * (size_t)S);
         b.T = malloc(sizeof(float) * 3 * (size_t)S);
         b.N = malloc(sizeof(float) * 3 * (size_t)S);
         b.d = malloc(sizeof(float) * (size_t)S);
@@ -854,7 +1099,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         b.on_boundary = malloc((size_t)S);
         b.X_prev = malloc(sizeof(double) * 3 * (size_t)S);
         b.radius = malloc(sizeof(float) * (size_t)S);
-        if (!b.X || !b.tmp_s || !b.T || !b.N || !b.d || !b.scratch || !b.on_boundary || !b.X_prev || !b.radius)
+        if (!b.X || !b.T || !b.N || !b.d || !b.scratch || !b.on_boundary || !b.X_prev || !b.radius)
             goto oom;
         if ((r = build_sample_faces(cage, fo.samples_per_edge, S, &b)) != SPIA_OK) {
             if (r == SPIA_ERROR_OUT_OF_MEMORY) goto oom;
@@ -950,14 +1195,14 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
             }
         report->rounds = 1;
     } else {
-        b.Mt = transpose(b.M, n);
         b.work = malloc(sizeof(double) * 5 * (size_t)N3);
         b.precond = malloc(sizeof(double) * 9 * (size_t)n);
         b.tmp_n = malloc(sizeof(double) * (size_t)N3);
+        b.tmp_diag = malloc(sizeof(double) * 6 * (size_t)(n > 0 ? n : 1));
         b.wts = malloc(sizeof(float) * (size_t)S);
         b.stiffness = malloc(sizeof(double) * (size_t)(n > 0 ? n : 1));
         b.mark = malloc((size_t)n + 1);
-        if (!b.Mt || !b.work || !b.precond || !b.tmp_n || !b.wts || !b.stiffness || !b.mark) goto oom;
+        if (!b.work || !b.precond || !b.tmp_n || !b.tmp_diag || !b.wts || !b.stiffness || !b.mark) goto oom;
         for (int32_t v = 0; v < n; ++v) b.stiffness[v] = 1.0;
         const int guard = !(fo.flags & SPIA_FIT_ALLOW_FOLDS) && fo.samples_per_edge >= 2;
         if (build_neighbours(cage, &adj, &b) != SPIA_OK) goto oom;
@@ -965,7 +1210,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         int32_t free_count = 0;
         for (int32_t v = 0; v < n; ++v) free_count += b.free_vertex[v];
         fit_system f;
-        f.M = b.M, f.Mt = b.Mt, f.n = n, f.S = S, f.normals = b.N, f.dist = b.d, f.weight = b.wts, f.on_boundary = b.on_boundary, f.cutoff_abs = cutoff_abs;
+        f.blocks = &b.blocks, f.n = n, f.S = S, f.normals = b.N, f.dist = b.d, f.weight = b.wts, f.on_boundary = b.on_boundary, f.cutoff_abs = cutoff_abs;
         f.alpha = fo.point_weight;
         f.beta = fo.slide_weight;
         f.X = b.X;
@@ -974,7 +1219,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
          * sample reaches (and global drift) determined. */
         f.damping = 1e-6 * (1.0 + f.lambda) * (double)S / (double)(free_count > 0 ? free_count : 1);
         f.nb_start = b.nb_start, f.nb = b.nb, f.free_vertex = b.free_vertex, f.stiffness = b.stiffness;
-        f.tmp_s = b.tmp_s, f.tmp_n = b.tmp_n;
+        f.tmp_n = b.tmp_n, f.tmp_diag = b.tmp_diag;
         double best_score = mean_clamped(b.d, guard ? b.folded : NULL, S, cutoff_abs);
         if (report->history && report->history_capacity > 0) {
             report->history[0] = mean_within(b.d, S, cutoff_abs) / (diagonal > 0.0 ? diagonal : 1.0);
