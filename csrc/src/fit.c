@@ -487,13 +487,14 @@ static int clock_forward(void *user, int32_t iteration, double value) {
 /* Closest points in chunks, the clock ticking between them; returns 1 when
  * cancelled (the rest left undone). */
 static int closest_in_chunks(const spia_scan *scan, int64_t count, const double *points, const float *radius,
-                             float *closest, float *normals, float *distances, uint8_t *on_boundary, int threads,
-                             fit_clock *clock) {
+                             float *closest, float *normals, float *distances, int32_t *faces, uint8_t *on_boundary,
+                             int threads, fit_clock *clock) {
     for (int64_t at = 0; at < count; at += QUERY_CHUNK) {
         const int64_t n = count - at < QUERY_CHUNK ? count - at : QUERY_CHUNK;
         spia__scan_closest_points_double(scan, n, points + 3 * at, radius ? radius + at : NULL,
                                          closest ? closest + 3 * at : NULL, normals ? normals + 3 * at : NULL,
-                                         distances + at, NULL, on_boundary ? on_boundary + at : NULL, threads);
+                                         distances + at, faces ? faces + at : NULL, on_boundary ? on_boundary + at : NULL,
+                                         threads);
         if (clock_tick(clock)) return 1;
     }
     return 0;
@@ -795,8 +796,8 @@ typedef struct fit_buffers {
     /* The scan side: the limit surface as a quad grid, its positions, its
      * face sizes (all 4), and the scan vertices measured, in double. */
     spia__limit_grid *grid;
-    float *grid_pos, *scan_d, *scan_scratch;
-    int32_t *grid_sizes, *scan_vertex;
+    float *grid_pos, *scan_d, *scan_scratch, *scan_radius;
+    int32_t *grid_sizes, *scan_vertex, *scan_quad;
     double *scan_pts;
     int64_t scan_count;
 } fit_buffers;
@@ -811,6 +812,7 @@ static void buffers_free(fit_buffers *b) {
     free(b->dots), free(b->folded), free(b->mark), free(b->stiffness);
     if (b->grid) spia__limit_grid_free(b->grid);
     free(b->grid_pos), free(b->scan_d), free(b->scan_scratch), free(b->grid_sizes), free(b->scan_vertex);
+    free(b->scan_radius), free(b->scan_quad);
     free(b->scan_pts);
 }
 
@@ -919,7 +921,9 @@ static spia_result scan_side_prepare(const spia_mesh *cage, const spia_adjacency
     b->scan_pts = malloc(sizeof(double) * 3 * (size_t)(count + 1));
     b->scan_d = malloc(sizeof(float) * (size_t)(count + 1));
     b->scan_scratch = malloc(sizeof(float) * (size_t)(count + 1));
-    if (!b->scan_vertex || !b->scan_pts || !b->scan_d || !b->scan_scratch) {
+    b->scan_radius = malloc(sizeof(float) * (size_t)(count + 1));
+    b->scan_quad = malloc(sizeof(int32_t) * (size_t)(count + 1));
+    if (!b->scan_vertex || !b->scan_pts || !b->scan_d || !b->scan_scratch || !b->scan_radius || !b->scan_quad) {
         free(used);
         return SPIA_ERROR_OUT_OF_MEMORY;
     }
@@ -934,11 +938,31 @@ static spia_result scan_side_prepare(const spia_mesh *cage, const spia_adjacency
     return SPIA_OK;
 }
 
-/* The distances of the scan vertices to the limit surface of cage V. */
+/* The distances of the scan vertices to the limit surface of cage V.  The
+ * first measure keeps each vertex's closest grid quad; a later one starts
+ * each search from the distance to the nearest corner of that quad on the
+ * new surface (a bound, as every grid vertex lies on the surface), which
+ * prunes most of the hierarchy. */
 static spia_result scan_side_measure(fit_buffers *b, const double *V, double cutoff_abs, double diagonal, int threads,
-                                     fit_clock *clock, spia_fit_distances *out, spia_status *status) {
+                                     int warm, fit_clock *clock, spia_fit_distances *out, spia_status *status) {
     spia_result r = spia__limit_grid_evaluate(b->grid, V, b->grid_pos, status);
     if (r != SPIA_OK) return r;
+    if (warm) {
+        const int32_t *quads = spia__limit_grid_quads(b->grid), faces = spia__limit_grid_face_count(b->grid);
+        for (int64_t k = 0; k < b->scan_count; ++k) {
+            const int32_t q = b->scan_quad[k];
+            float bound = INFINITY;
+            if (q >= 0 && q < faces)
+                for (int c = 0; c < 4; ++c) {
+                    const float *g = b->grid_pos + 3 * (int64_t)quads[4 * (int64_t)q + c];
+                    const double *p = b->scan_pts + 3 * k;
+                    const double dx = p[0] - g[0], dy = p[1] - g[1], dz = p[2] - g[2];
+                    const float d = (float)(sqrt(dx * dx + dy * dy + dz * dz) * (1.0 + 1e-5) + 1e-7 * diagonal);
+                    if (d < bound) bound = d;
+                }
+            b->scan_radius[k] = bound;
+        }
+    }
     spia_mesh view;
     memset(&view, 0, sizeof view);
     view.vertex_count = spia__limit_grid_vertex_count(b->grid);
@@ -949,8 +973,8 @@ static spia_result scan_side_measure(fit_buffers *b, const double *V, double cut
     spia_scan *surface = NULL;
     if ((r = spia_scan_create(&view, &surface, status)) != SPIA_OK) return r;
     const int cancelled = clock_tick(clock) ||
-                          closest_in_chunks(surface, b->scan_count, b->scan_pts, NULL, NULL, NULL, b->scan_d, NULL,
-                                            threads, clock);
+                          closest_in_chunks(surface, b->scan_count, b->scan_pts, warm ? b->scan_radius : NULL, NULL,
+                                            NULL, b->scan_d, warm ? NULL : b->scan_quad, NULL, threads, clock);
     spia_scan_free(surface);
     if (cancelled)
         return spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled measuring the scan's distances to the surface");
@@ -1015,7 +1039,7 @@ static int evaluate(const spia_scan *scan, fit_buffers *b, const double *V, int6
                                       (x[2] - y[2]) * (x[2] - y[2]));
             b->radius[s] = (float)((b->d[s] + moved) * (1.0 + 1e-5) + 1e-7 * diagonal);
         }
-    const int cancelled = closest_in_chunks(scan, S, b->X, b->evaluated ? b->radius : NULL, b->T, b->N, b->d,
+    const int cancelled = closest_in_chunks(scan, S, b->X, b->evaluated ? b->radius : NULL, b->T, b->N, b->d, NULL,
                                             b->on_boundary, threads, clock);
     b->evaluated = 1;
     *query_seconds += spia__now() - t0;
@@ -1126,7 +1150,8 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
                 if (r == SPIA_ERROR_OUT_OF_MEMORY) goto oom;
                 goto done;
             }
-            if ((r = scan_side_measure(&b, b.V0, cutoff_abs, diagonal, opt.threads, &clock, &report->scan_before, status)) !=
+            if ((r = scan_side_measure(&b, b.V0, cutoff_abs, diagonal, opt.threads, 0, &clock, &report->scan_before,
+                                       status)) !=
                 SPIA_OK)
                 goto done;
             report->scan_point_count = b.scan_count;
@@ -1289,7 +1314,8 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
             fo.samples_per_edge < 2 ? -1 : find_folds(b.dots, b.d, b.on_boundary, S, cutoff_abs, sign, b.folded);
         if (b.grid) {
             t0 = spia__now();
-            if ((r = scan_side_measure(&b, b.best, cutoff_abs, diagonal, opt.threads, &clock, &report->scan_after, status)) !=
+            if ((r = scan_side_measure(&b, b.best, cutoff_abs, diagonal, opt.threads, 1, &clock, &report->scan_after,
+                                       status)) !=
                 SPIA_OK)
                 goto done;
             report->query_seconds += spia__now() - t0;
