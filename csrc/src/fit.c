@@ -607,7 +607,8 @@ typedef struct normal_context {
     const float *T;      /* the right-hand side's targets */
 } normal_context;
 
-/* out += M^T B M x over blocks [begin, end). */
+/* Over blocks [begin, end): out += M^T B M x, or with targets T the
+ * right-hand side's share, out += M^T (B-weighted targets). */
 static void normal_piece(const void *context, const sample_blocks *B, int64_t begin, int64_t end, double *u,
                          double *out) {
     const normal_context *c = context;
@@ -615,28 +616,16 @@ static void normal_piece(const void *context, const sample_blocks *B, int64_t be
     const int32_t per = B->per;
     for (int64_t g = begin; g < end; ++g) {
         if (!block_pulls(f, g)) continue;
-        block_forward(B, g, c->x, u);
-        for (int32_t s = 0; s < per; ++s) {
-            double in[3] = {u[s], u[per + s], u[2 * per + s]}, v[3];
-            apply_b(f, g * per + s, in, v);
-            u[s] = v[0], u[per + s] = v[1], u[2 * per + s] = v[2];
-        }
-        block_backward(B, g, u, out);
-    }
-}
-
-/* out += M^T (B-weighted targets) over blocks [begin, end). */
-static void target_piece(const void *context, const sample_blocks *B, int64_t begin, int64_t end, double *u,
-                         double *out) {
-    const normal_context *c = context;
-    const fit_system *f = c->f;
-    const int32_t per = B->per;
-    for (int64_t g = begin; g < end; ++g) {
-        if (!block_pulls(f, g)) continue;
+        if (!c->T) block_forward(B, g, c->x, u);
         for (int32_t s = 0; s < per; ++s) {
             const int64_t q = g * per + s;
             double v[3];
-            target_b(f, q, c->T + 3 * q, f->X + 3 * q, v);
+            if (c->T) {
+                target_b(f, q, c->T + 3 * q, f->X + 3 * q, v);
+            } else {
+                const double in[3] = {u[s], u[per + s], u[2 * per + s]};
+                apply_b(f, q, in, v);
+            }
             u[s] = v[0], u[per + s] = v[1], u[2 * per + s] = v[2];
         }
         block_backward(B, g, u, out);
@@ -702,7 +691,7 @@ static int least_squares_round(fit_system *f, const float *T, const double *V0, 
     const int32_t per = B->per;
     memset(b, 0, sizeof(double) * (size_t)N3);
     normal_context c = {f, NULL, T};
-    blocks_run(B, target_piece, &c, b, 1);
+    blocks_run(B, normal_piece, &c, b, 1);
     if (f->lambda > 0.0) {
         fairness_add(f, V0, b);
     }

@@ -288,15 +288,20 @@ static void add_random_creases(tmesh *m, double fraction, uint64_t seed) {
         if (next() < 0.02) tmesh_vertex_crease(m, v, 0.4f);
 }
 
-static void compare(const tmesh &m, const std::string &name, int quality, bool preserve, bool creases,
-                    int osd_version = 0) {
-    Rows ref = reference_rows(m, quality, preserve, creases, osd_version);
-    spia_mesh mesh = tmesh_view(&m);
+static spia_options options_for(int quality, bool preserve, bool creases, int osd_version) {
     spia_options o = spia_options_default();
     o.quality = quality;
     o.boundary_smooth = preserve ? SPIA_BOUNDARY_SMOOTH_PRESERVE_CORNERS : SPIA_BOUNDARY_SMOOTH_ALL;
     o.ignore_creases = creases ? 0 : 1;
     o.opensubdiv_version = osd_version;
+    return o;
+}
+
+static void compare(const tmesh &m, const std::string &name, int quality, bool preserve, bool creases,
+                    int osd_version = 0) {
+    Rows ref = reference_rows(m, quality, preserve, creases, osd_version);
+    spia_mesh mesh = tmesh_view(&m);
+    spia_options o = options_for(quality, preserve, creases, osd_version);
     spia_stencils *s = nullptr;
     spia_status st;
     spia_result res = spia_limit_stencils_create(&mesh, &o, &s, &st);
@@ -333,11 +338,7 @@ static void compare_surface(const tmesh &m, const std::string &name, int quality
     const int per_edge = 2;
     Rows ref = reference_rows(m, quality, preserve, creases, osd_version, per_edge);
     spia_mesh mesh = tmesh_view(&m);
-    spia_options o = spia_options_default();
-    o.quality = quality;
-    o.boundary_smooth = preserve ? SPIA_BOUNDARY_SMOOTH_PRESERVE_CORNERS : SPIA_BOUNDARY_SMOOTH_ALL;
-    o.ignore_creases = creases ? 0 : 1;
-    o.opensubdiv_version = osd_version;
+    spia_options o = options_for(quality, preserve, creases, osd_version);
     spia_stencils *s = nullptr;
     spia_status st;
     spia_result res = spia_surface_stencils_create(&mesh, &o, per_edge, &s, &st);
