@@ -154,12 +154,18 @@ typedef struct block_sink {
     int64_t capacity; /* columns cols and w have room for */
     int32_t *order;   /* a block's kept columns, by column */
     int32_t order_capacity;
+    int64_t next;     /* the ptex face expected next */
+    int out_of_order; /* a face came out of order (not memory) */
 } block_sink;
 
 static int block_sink_add(void *user, int64_t ptex, int32_t width, const int32_t *columns, const double *weights) {
     block_sink *k = user;
     sample_blocks *B = k->B;
-    if (ptex >= B->groups) return 1;
+    if (ptex != k->next || ptex >= B->groups) {
+        k->out_of_order = 1;
+        return 1;
+    }
+    ++k->next;
     const int64_t at = B->start[ptex], per = B->per;
     if (at + width > k->capacity) {
         int64_t cap = k->capacity > 0 ? k->capacity : 4096;
@@ -217,9 +223,12 @@ static spia_result blocks_build(const spia_mesh *cage, const spia_adjacency *adj
         blocks_free(B);
         return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the sample stencils");
     }
-    block_sink sink = {B, 0, NULL, 0};
+    block_sink sink = {B, 0, NULL, 0, 0, 0};
     spia_result r = spia__osd_surface_blocks(cage, adj, opt, per_edge, block_sink_add, &sink, status);
     free(sink.order);
+    if (r == SPIA_OK && sink.next != B->groups) sink.out_of_order = 1;
+    if (sink.out_of_order)
+        r = spia__fail(status, SPIA_ERROR_INTERNAL, -1, "the sample stencils do not match the cage's faces");
     if (r != SPIA_OK) {
         blocks_free(B);
         return r;
