@@ -170,13 +170,16 @@ bench-scan: build
 	rm -rf build/bench/scan_base && mkdir -p build/bench/scan_base
 	for f in scan.c bvh.c bvh.h threads.c threads.h status.c message.c internal.h; do \
 	  git show $(SCAN_BASE):csrc/src/$$f > build/bench/scan_base/$$f; done
+	git show $(SCAN_BASE):csrc/src/clock.c > build/bench/scan_base/clock.c 2>/dev/null || \
+	  : > build/bench/scan_base/clock.c  # (before clock.c, status.c held the clock)
 	grep -q spia__scan_timings build/bench/scan_base/scan.c || \
 	  printf '%s\n' 'void spia__scan_timings(const void *s, double *t);' \
 	  'void spia__scan_timings(const void *s, double *t) { (void)s; for (int i = 0; i < 4; ++i) t[i] = 0; }' \
 	  >> build/bench/scan_base/scan.c
 	$(CC) -O3 -DNDEBUG -pthread -Icsrc/include -Ibuild/bench/scan_base bench/bench_scan_scale.c \
 	  build/bench/scan_base/scan.c build/bench/scan_base/bvh.c build/bench/scan_base/threads.c \
-	  build/bench/scan_base/status.c build/bench/scan_base/message.c -lm -o build/bench/spia_bench_scan_base
+	  build/bench/scan_base/status.c build/bench/scan_base/clock.c build/bench/scan_base/message.c -lm \
+	  -o build/bench/spia_bench_scan_base
 	d=$$(ls -td out/bench/fit_scale/blender-* | head -1); for s in $(SCAN_CASES); do for i in 1 2; do \
 	  echo "== $$s, $(SCAN_BASE)"; build/bench/spia_bench_scan_base $$d/$$s.bin $$d/queries_50000.bin --reps 1; \
 	  echo "== $$s, this tree"; build/bench/bench/spia_bench_scan $$d/$$s.bin $$d/queries_50000.bin --reps 1; \

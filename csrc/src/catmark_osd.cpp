@@ -58,7 +58,6 @@ using namespace OpenSubdiv;
 namespace {
 
 typedef Far::LimitStencilTableFactoryReal<double> LimitFactory;
-typedef Far::LimitStencilTableReal<double> LimitTable;
 typedef std::pair<int32_t, double> Entry;  // column, weight
 
 const float kInfiniteSharpness = Sdc::Crease::SHARPNESS_INFINITE;  // 10

@@ -299,7 +299,7 @@ static void block_run_piece(void *context, int64_t begin, int64_t end, int threa
     const int64_t piece = begin / run->grain;
     const sample_blocks *B = run->B;
     double *out = piece == 0 ? run->out : B->extra + 3 * (piece - 1) * (int64_t)B->columns;
-    if (piece > 0) memset(out, 0, sizeof(double) * 3 * (size_t)B->columns);
+    if (piece > 0 && run->out) memset(out, 0, sizeof(double) * 3 * (size_t)B->columns);
     run->fn(run->context, B, begin, end, B->u + 3 * piece * B->per, out);
 }
 

@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
-/* Result codes, messages, options and the clock. */
+/* Result codes, messages and options. */
 #define _POSIX_C_SOURCE 200809L
 #include "internal.h"
 #include "threads.h"
@@ -74,10 +74,4 @@ spia_result spia__resolve_options(const spia_options *in, spia_options *out, spi
     *out = o;
     spia__ok(status);
     return SPIA_OK;
-}
-
-double spia__now(void) {
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
