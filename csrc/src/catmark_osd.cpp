@@ -1926,7 +1926,8 @@ spia_result surface_blocks(const spia_mesh *m, const spia_adjacency *adj, const 
     // The faces for OpenSubdiv's patch table, on their part of the mesh.
     bool any_far = false;
     const std::vector<char> far_face = faces_for_far(m, adj, p, any_far);
-    std::vector<std::vector<FaceBlocks>> far_out;
+    std::vector<std::vector<FaceBlocks>> far_out;  // per face of the part
+    std::vector<int32_t> local_face_of;            // mesh face -> face of the part
     Part part;
     if (any_far) {
         std::vector<int32_t> marked;
@@ -1942,11 +1943,8 @@ spia_result surface_blocks(const spia_mesh *m, const spia_adjacency *adj, const 
         std::vector<char> wanted((size_t)local_faces, 0);
         for (int32_t i = 0; i < local_faces; ++i) wanted[(size_t)i] = far_face[(size_t)part.mesh_face(i)];
         if ((r = far_blocks(*part.refiner, opt, grid, wanted, far_out, status)) != SPIA_OK) return r;
-    }
-    std::vector<int32_t> local_face_of;
-    if (any_far) {
         local_face_of.assign((size_t)m->face_count, -1);
-        for (int32_t i = 0; i < (int32_t)far_out.size(); ++i) local_face_of[(size_t)part.mesh_face(i)] = i;
+        for (int32_t i = 0; i < local_faces; ++i) local_face_of[(size_t)part.mesh_face(i)] = i;
     }
 
     const Far::TopologyRefiner &refiner = *p.refiner;
@@ -2035,9 +2033,7 @@ struct RowsOut {
 
 spia_result surface(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, int32_t per_edge,
                     spia_stencils **out, spia_status *status) {
-    int64_t ptex = 0;
-    for (int32_t f = 0; f < m->face_count; ++f) ptex += m->face_sizes[f] == 4 ? 1 : m->face_sizes[f];
-    const int64_t rows = ptex * per_edge * per_edge;
+    const int64_t rows = spia_surface_sample_count(m, per_edge);
     if (rows > INT32_MAX / 64)
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1,
                           "%lld samples are too many (at most %d): lower samples_per_edge", (long long)rows,
