@@ -101,8 +101,11 @@ test-package: package
 
 # The Blender suite against the installed package, in every Blender here:
 # Debian's, the other Debian release's (chroot), PyPI's bpy builds.
+# BLENDER_SUITE_FLAGS=--discard-venvs keeps one or two bpy venvs (1 GB each)
+# on disk at a time instead of all of them.
+BLENDER_SUITE_FLAGS ?=
 test-blender: package
-	$(SUDO) $(PYTHON) tools/blenders.py test $(PACKAGE)
+	$(SUDO) $(PYTHON) tools/blenders.py test $(BLENDER_SUITE_FLAGS) $(PACKAGE)
 
 blenders:
 	$(PYTHON) tools/blenders.py list

@@ -28,6 +28,7 @@ import re
 import shutil
 import subprocess
 import sys
+import threading
 import time
 import xml.etree.ElementTree as ElementTree
 
@@ -144,7 +145,7 @@ def prepare_venv(python, venv, version, numpy_requirement):
     shutil.rmtree(venv, ignore_errors=True)
     debian.run([python, "-m", "venv", venv])
     debian.run([os.path.join(venv, "bin", "python"), "-m", "pip", "install", "-q", "--disable-pip-version-check",
-                "bpy==" + version, numpy_requirement, "pytest"])
+                "--no-cache-dir", "bpy==" + version, numpy_requirement, "pytest"])
     with open(stamp, "w") as f:
         f.write(want + "\n")
 
@@ -237,16 +238,22 @@ def run_suite(index, blender, package, extra):
     return counts(junits), problems, time.time() - t0, log
 
 
-def test(package, jobs, only, extra):
+def test(package, jobs, only, extra, discard):
+    """The suite in every Blender; with `discard`, each bpy venv is removed
+    once its suite has run and at most jobs + 1 of them exist at a time (each
+    is about 1 GB: all of them together can fill a small disk)."""
     blenders, notes = discover()
     if only:
         blenders = [b for b in blenders if any(o in b.name or o in b.how for o in only)]
     rows = {}
+    slots = threading.BoundedSemaphore(jobs + 1)
 
     def prepare(b):
         """Installs b's Blender (venv or chroot); None when it is ready."""
         try:
             if b.prepare:
+                if discard:
+                    slots.acquire()
                 prepare_venv(*b.prepare)
             if b.root:
                 b.chroot_path = prepare_chroot(*b.root)
@@ -257,14 +264,19 @@ def test(package, jobs, only, extra):
             return "could not be installed: %s" % exc
 
     def one(i, b):
-        print("starting the suite in %s (%s)" % (b.name, b.how), flush=True)
-        c, problems, seconds, log = run_suite(i, b, package, extra)
-        print("finished %s (%s): %s%s" % (b.name, b.how, c, "; " + "; ".join(problems) if problems else ""),
-              flush=True)
-        if problems or c["failed"]:
-            print("---- last lines of %s ----\n%s" % (log, "".join(open(log, errors="replace").readlines()[-60:])),
+        try:
+            print("starting the suite in %s (%s)" % (b.name, b.how), flush=True)
+            c, problems, seconds, log = run_suite(i, b, package, extra)
+            print("finished %s (%s): %s%s" % (b.name, b.how, c, "; " + "; ".join(problems) if problems else ""),
                   flush=True)
-        rows[id(b)] = (b, c, problems, seconds)
+            if problems or c["failed"]:
+                print("---- last lines of %s ----\n%s" % (log, "".join(open(log, errors="replace").readlines()[-60:])),
+                      flush=True)
+            rows[id(b)] = (b, c, problems, seconds)
+        finally:
+            if discard and b.prepare:
+                shutil.rmtree(b.prepare[1], ignore_errors=True)
+                slots.release()
 
     # Installing (mostly downloading) goes on in this thread while the
     # suites of the Blenders already installed run in the pool.
@@ -274,6 +286,9 @@ def test(package, jobs, only, extra):
             problem = prepare(b)
             if problem:
                 rows[id(b)] = (b, None, [problem], 0.0)
+                if discard and b.prepare:
+                    shutil.rmtree(b.prepare[1], ignore_errors=True)
+                    slots.release()
             else:
                 running.append(pool.submit(one, i, b))
         for future in running:
@@ -302,6 +317,8 @@ def main(argv):
     t.add_argument("package")
     t.add_argument("-j", "--jobs", type=int, default=2)
     t.add_argument("--only", action="append", default=[], help="only Blenders whose name or origin contains this")
+    t.add_argument("--discard-venvs", action="store_true",
+                   help="remove each bpy venv after its suite (default: keep them for the next run)")
     extra = argv[argv.index("--") + 1:] if "--" in argv else []
     args = parser.parse_args(argv[:argv.index("--")] if "--" in argv else argv)
     if args.command == "list":
@@ -311,7 +328,7 @@ def main(argv):
         for note in notes:
             print("not tested: " + note)
         return 0
-    return test(os.path.abspath(args.package), args.jobs, args.only, extra)
+    return test(os.path.abspath(args.package), args.jobs, args.only, extra, args.discard_venvs)
 
 
 if __name__ == "__main__":
