@@ -813,8 +813,9 @@ static int32_t run_length(const fast *f, const double *recent, int32_t known, do
 }
 
 /* One stage (all of the solve unless staged): sweeps until the tolerance,
- * max_iterations, stagnation or the float32 floor.  `known`: the residual
- * statistics of the cage as it is (err_all, mean, err), or NULL. */
+ * max_iterations, stagnation or the float32 floor.  known_stats: the
+ * residual statistics of the cage as it is (err_all, mean, err), or NULL
+ * to measure them. */
 static spia_result fast_stage(fast *f, const kernels *k, const spia_options *opt, double threshold, double scale,
                               int first_step, const double *known_stats, int32_t *it, int32_t *stuck_count,
                               stage_result *out, spia_report *report, spia_status *status) {
