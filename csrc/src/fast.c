@@ -120,11 +120,6 @@ static inline d4 d4_scale(d4 a, double s) { return d4_make(a.v[0] * s, a.v[1] * 
 #define V4_MUL(a, b) f4_mul((a), (b))
 #endif
 
-static inline f4 f4_load(const float *p) {
-    f4 v;
-    memcpy(&v, p, sizeof v);
-    return v;
-}
 
 /* Sums in double of weights times float rows (x, y, z and a lane that is
  * dropped), for the residual: two SSE2 registers where there are some
