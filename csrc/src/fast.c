@@ -971,10 +971,11 @@ spia_result spia__solve_fast(const spia_stencils *L, const float *targets, const
     const size_t lane = f.wide ? sizeof(double) : sizeof(float);
     f.blocks = ((int64_t)n + FAST_BLOCK - 1) / FAST_BLOCK;
     /* P and S with a float to spare: rows are read four lanes at a time. */
-    f.P = (float *)malloc(sizeof(float) * (3 * (size_t)n + 1));
-    f.S = opt->initial_cage ? (float *)malloc(sizeof(float) * (3 * (size_t)n + 1)) : f.P;
-    f.Y = calloc(4 * (size_t)n, lane);
-    f.B = malloc(4 * (size_t)n * lane);
+    f.P = (float *)spia__alloc_large(sizeof(float) * (3 * (size_t)n + 1));
+    f.S = opt->initial_cage ? (float *)spia__alloc_large(sizeof(float) * (3 * (size_t)n + 1)) : f.P;
+    f.Y = spia__alloc_large(4 * (size_t)n * lane);
+    f.B = spia__alloc_large(4 * (size_t)n * lane);
+    if (f.Y) memset(f.Y, 0, 4 * (size_t)n * lane);
     f.flags = (unsigned char *)calloc((size_t)n, 1);
     f.partial = (double *)malloc(sizeof(double) * 4 * (size_t)f.blocks);
     f.block_entry = (int64_t *)malloc(sizeof(int64_t) * ((size_t)f.blocks + 1));
