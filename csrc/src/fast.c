@@ -120,11 +120,6 @@ static inline d4 d4_scale(d4 a, double s) { return d4_make(a.v[0] * s, a.v[1] * 
 #define V4_MUL(a, b) f4_mul((a), (b))
 #endif
 
-static inline f4 f4_load(const float *p) {
-    f4 v;
-    memcpy(&v, p, sizeof v);
-    return v;
-}
 
 /* Sums in double of weights times float rows (x, y, z and a lane that is
  * dropped), for the residual: two SSE2 registers where there are some
@@ -821,8 +816,9 @@ static int32_t run_length(const fast *f, const double *recent, int32_t known, do
 }
 
 /* One stage (all of the solve unless staged): sweeps until the tolerance,
- * max_iterations, stagnation or the float32 floor.  `known`: the residual
- * statistics of the cage as it is (err_all, mean, err), or NULL. */
+ * max_iterations, stagnation or the float32 floor.  known_stats: the
+ * residual statistics of the cage as it is (err_all, mean, err), or NULL
+ * to measure them. */
 static spia_result fast_stage(fast *f, const kernels *k, const spia_options *opt, double threshold, double scale,
                               int first_step, const double *known_stats, int32_t *it, int32_t *stuck_count,
                               stage_result *out, spia_report *report, spia_status *status) {
@@ -983,10 +979,11 @@ spia_result spia__solve_fast(const spia_stencils *L, const float *targets, const
     const size_t lane = f.wide ? sizeof(double) : sizeof(float);
     f.blocks = ((int64_t)n + FAST_BLOCK - 1) / FAST_BLOCK;
     /* P and S with a float to spare: rows are read four lanes at a time. */
-    f.P = (float *)malloc(sizeof(float) * (3 * (size_t)n + 1));
-    f.S = opt->initial_cage ? (float *)malloc(sizeof(float) * (3 * (size_t)n + 1)) : f.P;
-    f.Y = calloc(4 * (size_t)n, lane);
-    f.B = malloc(4 * (size_t)n * lane);
+    f.P = (float *)spia__alloc_large(sizeof(float) * (3 * (size_t)n + 1));
+    f.S = opt->initial_cage ? (float *)spia__alloc_large(sizeof(float) * (3 * (size_t)n + 1)) : f.P;
+    f.Y = spia__alloc_large(4 * (size_t)n * lane);
+    f.B = spia__alloc_large(4 * (size_t)n * lane);
+    if (f.Y) memset(f.Y, 0, 4 * (size_t)n * lane);
     f.flags = (unsigned char *)calloc((size_t)n, 1);
     f.partial = (double *)malloc(sizeof(double) * 4 * (size_t)f.blocks);
     f.block_entry = (int64_t *)malloc(sizeof(int64_t) * ((size_t)f.blocks + 1));

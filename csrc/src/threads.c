@@ -15,6 +15,9 @@
 #include <sched.h>
 #include <unistd.h>
 #endif
+#ifdef __linux__
+#include <sys/mman.h>
+#endif
 
 #if defined(__x86_64__) || defined(__i386__) || defined(_M_X64) || defined(_M_IX86)
 #include <immintrin.h>
@@ -149,6 +152,19 @@ void spia__wait(int *rounds) {
 #else
     sched_yield();
 #endif
+}
+
+void *spia__alloc_large(size_t bytes) {
+#if defined(__linux__) && defined(MADV_HUGEPAGE)
+    const size_t huge = (size_t)2 << 20;
+    if (bytes >= 2 * huge) {
+        void *p = NULL;
+        if (posix_memalign(&p, huge, bytes) != 0) return NULL;
+        (void)madvise(p, bytes & ~(huge - 1), MADV_HUGEPAGE); /* advice only: no huge pages is fine */
+        return p;
+    }
+#endif
+    return malloc(bytes > 0 ? bytes : 1);
 }
 
 int spia__processor_count(void) {

@@ -7,6 +7,7 @@
 #ifndef SPIA_THREADS_H
 #define SPIA_THREADS_H
 
+#include <stddef.h>
 #include <stdint.h>
 
 #ifdef __cplusplus
@@ -29,6 +30,13 @@ void spia__parallel_for(int threads, int64_t count, int64_t grain, spia__range_f
 
 /* The processors this process may run on (at least 1). */
 int spia__processor_count(void);
+
+/* Room for a large array a solve fills at once, freed with free(): on
+ * Linux, from 4 MB, in 2 MB-aligned blocks the kernel is asked to back with
+ * huge pages (a fault per 4 KB page costs microseconds, more in virtual
+ * machines, and a solve of a million vertices touches some 50 MB afresh);
+ * elsewhere malloc's.  Not zeroed. */
+void *spia__alloc_large(size_t bytes);
 
 #ifndef __cplusplus
 /* A counter that threads of one loop share (the sweep pipeline's progress
