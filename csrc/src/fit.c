@@ -258,7 +258,8 @@ static inline void block_forward(const sample_blocks *B, int64_t g, const double
     }
 }
 
-/* out[cols] += block g transposed times u. */
+/* out[cols] += block g transposed times u.  Four partial sums per axis keep
+ * the additions independent (one chain each was the loop's bound). */
 static inline void block_backward(const sample_blocks *B, int64_t g, const double *u, double *out) {
     const int32_t *cols = B->cols + B->start[g];
     const int64_t width = block_width(B, g);
@@ -267,17 +268,20 @@ static inline void block_backward(const sample_blocks *B, int64_t g, const doubl
     const double *ux = u, *uy = u + per, *uz = u + 2 * per;
     for (int64_t j = 0; j < width; ++j) {
         const float *col = w + per * j;
-        double a[2] = {0.0, 0.0}, b[2] = {0.0, 0.0}, c[2] = {0.0, 0.0};
+        double a[4] = {0.0, 0.0, 0.0, 0.0}, b[4] = {0.0, 0.0, 0.0, 0.0}, c[4] = {0.0, 0.0, 0.0, 0.0};
         int32_t s = 0;
-        for (; s + 2 <= per; s += 2)
-            for (int l = 0; l < 2; ++l) {
-                a[l] += col[s + l] * ux[s + l];
-                b[l] += col[s + l] * uy[s + l];
-                c[l] += col[s + l] * uz[s + l];
+        for (; s + 4 <= per; s += 4)
+            for (int l = 0; l < 4; ++l) {
+                const double m = col[s + l];
+                a[l] += m * ux[s + l];
+                b[l] += m * uy[s + l];
+                c[l] += m * uz[s + l];
             }
         for (; s < per; ++s) a[0] += col[s] * ux[s], b[0] += col[s] * uy[s], c[0] += col[s] * uz[s];
         double *p = out + 3 * (int64_t)cols[j];
-        p[0] += a[0] + a[1], p[1] += b[0] + b[1], p[2] += c[0] + c[1];
+        p[0] += (a[0] + a[1]) + (a[2] + a[3]);
+        p[1] += (b[0] + b[1]) + (b[2] + b[3]);
+        p[2] += (c[0] + c[1]) + (c[2] + c[3]);
     }
 }
 
