@@ -137,19 +137,19 @@ static int32_t bfs(const graph *g, int32_t root, int32_t *queue, int32_t begin, 
 
 /* Scratch room for the plan's build, one block (so that all of it goes
  * back at once): what the search needs, then, in the same room, what
- * filling the plan needs. */
+ * filling the plan needs.  The transposed pattern, which only some tables'
+ * searches need, is not in it (level_order makes and frees its own), and
+ * the column offsets are computed again where they are written rather than
+ * kept: the build's peak is the table plus this room plus the plan. */
 typedef struct scratch {
     uint16_t *codes;     /* per table entry */
     int32_t *position;   /* per row; NULL in vertex order */
     int32_t *chunk_of;   /* per row; NULL in vertex order */
     /* the search: */
-    int64_t *in_offsets; /* rows + 1 */
-    int32_t *in_rows;    /* entries */
     int32_t *queue;      /* rows */
     unsigned char *colour;
     /* then the filling, in the same room: */
     int64_t *entry;      /* rows + 1 */
-    int32_t *deltas;     /* entries */
 } scratch;
 
 static size_t rounded(size_t bytes) { return (bytes + 15) & ~(size_t)15; }
@@ -157,8 +157,8 @@ static size_t rounded(size_t bytes) { return (bytes + 15) & ~(size_t)15; }
 /* The block for a table of n rows and `entries` entries, cut into its
  * arrays; NULL when out of memory. */
 static void *scratch_make(scratch *x, size_t n, size_t entries, int levels) {
-    const size_t search = levels ? rounded(8 * (n + 1)) + rounded(4 * entries) + rounded(4 * n) + rounded(n) : 0;
-    const size_t filling = rounded(8 * (n + 1)) + rounded(4 * entries);
+    const size_t search = levels ? rounded(4 * n) + rounded(n) : 0;
+    const size_t filling = rounded(8 * (n + 1));
     const size_t bytes = rounded(2 * entries) + (levels ? 2 * rounded(4 * n) : 0) + (search > filling ? search : filling);
     char *block = (char *)malloc(bytes), *at = block;
     if (!block) return NULL;
@@ -173,18 +173,11 @@ static void *scratch_make(scratch *x, size_t n, size_t entries, int levels) {
     }
     char *shared = at;
     if (levels) {
-        x->in_offsets = (int64_t *)at;
-        at += rounded(8 * (n + 1));
-        x->in_rows = (int32_t *)at;
-        at += rounded(4 * entries);
         x->queue = (int32_t *)at;
         at += rounded(4 * n);
         x->colour = (unsigned char *)at;
     }
-    at = shared;
-    x->entry = (int64_t *)at;
-    at += rounded(8 * (n + 1));
-    x->deltas = (int32_t *)at;
+    x->entry = (int64_t *)shared;
     return block;
 }
 
@@ -205,7 +198,14 @@ static int level_order(const spia_stencils *s, spia_plan *p, scratch *x, int bot
     p->chunk_start = NULL;
     p->order = (int32_t *)malloc(sizeof(int32_t) * (size_t)n);
     int ok = p->order != NULL;
-    if (ok && both_ways) graph_build(&g, s, x->in_offsets, x->in_rows);
+    int64_t *in_offsets = NULL;
+    int32_t *in_rows = NULL;
+    if (ok && both_ways) {
+        in_offsets = (int64_t *)malloc(sizeof(int64_t) * ((size_t)n + 1));
+        in_rows = (int32_t *)malloc(sizeof(int32_t) * (size_t)(s->nnz > 0 ? s->nnz : 1));
+        ok = in_offsets && in_rows;
+        if (ok) graph_build(&g, s, in_offsets, in_rows);
+    }
     if (ok) {
         /* Levels from a first row of each connected part, one part after
          * another: rows whose stencils hold only boundary rows are no roots
@@ -266,6 +266,8 @@ static int level_order(const spia_stencils *s, spia_plan *p, scratch *x, int bot
             }
         }
     }
+    free(in_offsets);
+    free(in_rows);
     return ok;
 }
 
@@ -315,7 +317,6 @@ typedef struct placing {
     spia_plan *p;
     const int32_t *position, *chunk_of; /* NULL: vertex order, one chunk */
     uint16_t *codes;                    /* per table entry: the dictionary's, then the plan's */
-    int32_t *deltas;                    /* per table entry: column position - row position */
     const int64_t *entry;               /* per position: its first entry in the plan */
     int64_t widest[256];                /* per thread: the largest |column position - row position| */
     int32_t reach[256];                 /* per thread */
@@ -372,7 +373,6 @@ static void measure_rows(void *context, int64_t r0, int64_t r1, int thread) {
             const int32_t j = s->indices[k];
             if (j != r && s->weights[k] >= 0.5 * largest) pl->codes[k] = (uint16_t)(pl->codes[k] + edges);
             const int64_t delta = (int64_t)position_of(pl, j) - i;
-            pl->deltas[k] = (int32_t)delta;
             const int64_t wide = delta > 0 ? delta : -delta;
             if (wide > widest) widest = wide;
             const int32_t apart = chunk_of(pl, j) > c ? chunk_of(pl, j) - c : c - chunk_of(pl, j);
@@ -399,21 +399,22 @@ static void place_rows(void *context, int64_t i0, int64_t i1, int thread) {
             if (i + LOOKAHEAD < i1) {
                 const int64_t ahead = s->offsets[p->order[i + LOOKAHEAD]];
                 PREFETCH(&pl->codes[ahead]);
-                PREFETCH(&pl->deltas[ahead]);
+                PREFETCH(&s->indices[ahead]);
             }
         }
         int64_t e = pl->entry[i];
         for (int pass = 0; pass < 2; ++pass)
             for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k) {
-                if ((pl->deltas[k] == 0) != (pass == 0)) continue; /* the row's own entry first */
+                const int32_t delta = position_of(pl, s->indices[k]) - (int32_t)i;
+                if ((delta == 0) != (pass == 0)) continue; /* the row's own entry first */
                 if (p->code8)
                     p->code8[e] = (uint8_t)pl->codes[k];
                 else
                     p->code16[e] = pl->codes[k];
                 if (p->delta16)
-                    p->delta16[e] = (int16_t)pl->deltas[k];
+                    p->delta16[e] = (int16_t)delta;
                 else
-                    p->delta32[e] = pl->deltas[k];
+                    p->delta32[e] = delta;
                 ++e;
             }
     }
@@ -527,7 +528,6 @@ spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status)
     pl.position = x.position;
     pl.chunk_of = x.chunk_of;
     pl.codes = codes;
-    pl.deltas = x.deltas;
     pl.entry = entry;
     spia__parallel_for(threads, n, 0, measure_rows, &pl);
     int64_t widest = 0;
