@@ -405,8 +405,9 @@ static void place_rows(void *context, int64_t i0, int64_t i1, int thread) {
         int64_t e = pl->entry[i];
         for (int pass = 0; pass < 2; ++pass)
             for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k) {
-                const int32_t delta = position_of(pl, s->indices[k]) - (int32_t)i;
-                if ((delta == 0) != (pass == 0)) continue; /* the row's own entry first */
+                const int32_t j = s->indices[k];
+                if ((j == r) != (pass == 0)) continue; /* the row's own entry first */
+                const int32_t delta = j == r ? 0 : position_of(pl, j) - (int32_t)i;
                 if (p->code8)
                     p->code8[e] = (uint8_t)pl->codes[k];
                 else
