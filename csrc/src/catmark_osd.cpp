@@ -1915,6 +1915,15 @@ std::vector<char> faces_for_far(const spia_mesh *m, const spia_adjacency *adj, c
     return face;
 }
 
+// What a sample block consumer's nonzero return stops the blocks with.
+spia_result emit_stopped(int stop, spia_status *status) {
+    if (stop == SPIA_ERROR_CANCELLED)
+        return spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled computing the sample stencils");
+    if (stop == SPIA_ERROR_INTERNAL)
+        return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "the sample stencils do not match the cage's faces");
+    return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the sample stencils");
+}
+
 spia_result surface_blocks(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, int32_t per_edge,
                            spia__sample_block_fn emit, void *user, spia_status *status) {
     Prepared p;
@@ -1963,8 +1972,8 @@ spia_result surface_blocks(const spia_mesh *m, const spia_adjacency *adj, const 
             for (const FaceBlocks &fb : subs) {
                 columns.resize(fb.columns.size());
                 for (size_t i = 0; i < columns.size(); ++i) columns[i] = p.vertex_of[(size_t)part.osd(fb.columns[i])];
-                if (emit(user, ptex++, (int32_t)columns.size(), columns.data(), fb.weights.data()))
-                    return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the sample stencils");
+                if (int stop = emit(user, ptex++, (int32_t)columns.size(), columns.data(), fb.weights.data()))
+                    return emit_stopped(stop, status);
             }
             continue;
         }
@@ -1998,8 +2007,8 @@ spia_result surface_blocks(const spia_mesh *m, const spia_adjacency *adj, const 
                 double *row = &block[(size_t)j * width];
                 for (size_t k = 0; k < cv.size(); ++k) row[slot[(size_t)cv[k]]] += w[k];
             }
-            if (emit(user, ptex, (int32_t)width, columns.data(), block.data()))
-                return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the sample stencils");
+            if (int stop = emit(user, ptex, (int32_t)width, columns.data(), block.data()))
+                return emit_stopped(stop, status);
         }
     }
     spia__ok(status);
@@ -2025,7 +2034,7 @@ struct RowsOut {
                 o.offsets.push_back((int64_t)o.indices.size());
             }
         } catch (const std::bad_alloc &) {
-            return 1;
+            return SPIA_ERROR_OUT_OF_MEMORY;
         }
         return 0;
     }

@@ -108,6 +108,49 @@ spia_result spia_surface_stencils_create(const spia_mesh *mesh, const spia_optio
 
 /* ---- the samples as dense blocks ---------------------------------------- */
 
+/* ---- progress ------------------------------------------------------------- */
+
+/* Within a round the progress callback is called at least every
+ * PROGRESS_INTERVAL seconds from the long steps (closest points in chunks
+ * of QUERY_CHUNK, each conjugate-gradient step), so that a cancel is
+ * answered promptly at every scale.  These calls repeat the last call's
+ * figures (the rounds done and their mean distance, or the VERTICES
+ * solve's last iteration and error; 0 and the cage given's mean before
+ * any). */
+#define PROGRESS_INTERVAL 0.2
+#define QUERY_CHUNK 65536
+typedef struct fit_clock {
+    spia_progress_fn fn;
+    void *user;
+    double last, mean;
+    int32_t round;
+    int cancelled;
+} fit_clock;
+
+static int clock_tick(fit_clock *c) {
+    if (!c->fn || c->cancelled) return c->cancelled;
+    const double now = spia__now();
+    if (now - c->last < PROGRESS_INTERVAL) return 0;
+    c->last = now;
+    if (c->fn(c->user, c->round, c->mean)) c->cancelled = 1;
+    return c->cancelled;
+}
+
+/* The clock ticking from a build with a progress callback of its own (the
+ * surface's grid as a scan): its phases and fractions are not passed on. */
+static int clock_scan_tick(void *user, int32_t phase, double fraction) {
+    (void)phase, (void)fraction;
+    return clock_tick((fit_clock *)user);
+}
+
+/* The solver's progress, passed on and remembered (for the ticks to repeat). */
+static int clock_forward(void *user, int32_t iteration, double value) {
+    fit_clock *c = (fit_clock *)user;
+    c->round = iteration, c->mean = value, c->last = spia__now();
+    if (c->fn(c->user, iteration, value)) c->cancelled = 1;
+    return c->cancelled;
+}
+
 /* The samples of one ptex face combine the same cage vertices (the face's
  * patch points), so each ptex face's rows are kept as one dense block over
  * those vertices, column by column (a column's weights for all the face's
@@ -155,17 +198,16 @@ typedef struct block_sink {
     int32_t *order;   /* a block's kept columns, by column */
     int32_t order_capacity;
     int64_t next;     /* the ptex face expected next */
-    int out_of_order; /* a face came out of order (not memory) */
+    fit_clock *clock; /* ticked every BLOCK_TICK faces */
 } block_sink;
+
+#define BLOCK_TICK 256
 
 static int block_sink_add(void *user, int64_t ptex, int32_t width, const int32_t *columns, const double *weights) {
     block_sink *k = user;
     sample_blocks *B = k->B;
-    if (ptex != k->next || ptex >= B->groups) {
-        k->out_of_order = 1;
-        return 1;
-    }
-    ++k->next;
+    if (ptex != k->next || ptex >= B->groups) return SPIA_ERROR_INTERNAL;
+    if (++k->next % BLOCK_TICK == 0 && clock_tick(k->clock)) return SPIA_ERROR_CANCELLED;
     const int64_t at = B->start[ptex], per = B->per;
     if (at + width > k->capacity) {
         int64_t cap = k->capacity > 0 ? k->capacity : 4096;
@@ -174,12 +216,12 @@ static int block_sink_add(void *user, int64_t ptex, int32_t width, const int32_t
         if (cols) B->cols = cols;
         float *w = realloc(B->w, sizeof(float) * (size_t)cap * (size_t)per);
         if (w) B->w = w;
-        if (!cols || !w) return 1;
+        if (!cols || !w) return SPIA_ERROR_OUT_OF_MEMORY;
         k->capacity = cap;
     }
     if (width > k->order_capacity) {
         int32_t *order = realloc(k->order, sizeof(int32_t) * (size_t)width);
-        if (!order) return 1;
+        if (!order) return SPIA_ERROR_OUT_OF_MEMORY;
         k->order = order;
         k->order_capacity = width;
     }
@@ -210,7 +252,7 @@ static int block_sink_add(void *user, int64_t ptex, int32_t width, const int32_t
 
 /* The sample blocks of the cage (per ptex face, per_edge^2 samples). */
 static spia_result blocks_build(const spia_mesh *cage, const spia_adjacency *adj, const spia_options *opt,
-                                int32_t per_edge, sample_blocks *B, spia_status *status) {
+                                int32_t per_edge, sample_blocks *B, fit_clock *clock, spia_status *status) {
     memset(B, 0, sizeof *B);
     B->per = per_edge * per_edge;
     B->columns = cage->vertex_count;
@@ -223,11 +265,10 @@ static spia_result blocks_build(const spia_mesh *cage, const spia_adjacency *adj
         blocks_free(B);
         return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the sample stencils");
     }
-    block_sink sink = {B, 0, NULL, 0, 0, 0};
+    block_sink sink = {B, 0, NULL, 0, 0, clock};
     spia_result r = spia__osd_surface_blocks(cage, adj, opt, per_edge, block_sink_add, &sink, status);
     free(sink.order);
-    if (r == SPIA_OK && sink.next != B->groups) sink.out_of_order = 1;
-    if (sink.out_of_order)
+    if (r == SPIA_OK && sink.next != B->groups)
         r = spia__fail(status, SPIA_ERROR_INTERNAL, -1, "the sample stencils do not match the cage's faces");
     if (r != SPIA_OK) {
         blocks_free(B);
@@ -347,10 +388,31 @@ static void blocks_apply(const sample_blocks *B, const double *x, double *X) {
 
 /* ---- distances ------------------------------------------------------------ */
 
-static int compare_float(const void *a, const void *b) {
-    const float x = *(const float *)a, y = *(const float *)b;
-    return (x > y) - (x < y);
+/* The k-th smallest of n floats (k < n), reordering a. */
+static float select_kth(float *a, int64_t n, int64_t k) {
+    int64_t lo = 0, hi = n - 1;
+    while (lo < hi) {
+        const float pivot = a[lo + (hi - lo) / 2];
+        int64_t i = lo, j = hi;
+        while (i <= j) {
+            while (a[i] < pivot) ++i;
+            while (a[j] > pivot) --j;
+            if (i <= j) {
+                const float t = a[i];
+                a[i] = a[j], a[j] = t;
+                ++i, --j;
+            }
+        }
+        if (k <= j)
+            hi = j;
+        else if (k >= i)
+            lo = i;
+        else
+            break;
+    }
+    return a[k];
 }
+
 
 /* Mean, 95th percentile and max of the distances within the cut-off,
  * relative to the diagonal; `scratch` holds count floats. */
@@ -369,11 +431,11 @@ static spia_fit_distances distance_stats(const float *d, int64_t count, double c
         if (d[i] > s.max) s.max = d[i];
     }
     if (n > 0) {
-        qsort(scratch, (size_t)n, sizeof(float), compare_float);
-        /* The nearest-rank percentile. */
+        /* The nearest-rank percentile, selected (a sort of the scan's
+         * millions of distances took half a second). */
         int64_t rank = (int64_t)ceil(0.95 * (double)n);
         if (rank < 1) rank = 1;
-        s.p95 = scratch[rank - 1];
+        s.p95 = select_kth(scratch, n, rank - 1);
         s.mean = sum / (double)n;
     }
     const double unit = diagonal > 0.0 ? diagonal : 1.0;
@@ -416,31 +478,6 @@ static void cutoff_weights(const float *d, const uint8_t *on_boundary, int64_t c
     for (int64_t i = 0; i < count; ++i) w[i] = d[i] <= cutoff_abs && !on_boundary[i] ? 1.0f : 0.0f;
 }
 
-/* The k-th smallest of n floats (k < n), reordering a. */
-static float select_kth(float *a, int64_t n, int64_t k) {
-    int64_t lo = 0, hi = n - 1;
-    while (lo < hi) {
-        const float pivot = a[lo + (hi - lo) / 2];
-        int64_t i = lo, j = hi;
-        while (i <= j) {
-            while (a[i] < pivot) ++i;
-            while (a[j] > pivot) --j;
-            if (i <= j) {
-                const float t = a[i];
-                a[i] = a[j], a[j] = t;
-                ++i, --j;
-            }
-        }
-        if (k <= j)
-            hi = j;
-        else if (k >= i)
-            lo = i;
-        else
-            break;
-    }
-    return a[k];
-}
-
 /* The median distance of the samples that pull (weight > 0); `scratch`
  * holds count floats.  0 when none does. */
 static double median_pulling(const float *d, const float *w, int64_t count, float *scratch) {
@@ -459,42 +496,6 @@ static void robust_weights(const float *d, int64_t count, double c, float *w) {
             const double r = d[i] * inv;
             w[i] = (float)(w[i] / (1.0 + r * r));
         }
-}
-
-/* ---- progress ------------------------------------------------------------- */
-
-/* Within a round the progress callback is called at least every
- * PROGRESS_INTERVAL seconds from the long steps (closest points in chunks
- * of QUERY_CHUNK, each conjugate-gradient step), so that a cancel is
- * answered promptly at every scale.  These calls repeat the last call's
- * figures (the rounds done and their mean distance, or the VERTICES
- * solve's last iteration and error; 0 and the cage given's mean before
- * any). */
-#define PROGRESS_INTERVAL 0.2
-#define QUERY_CHUNK 65536
-typedef struct fit_clock {
-    spia_progress_fn fn;
-    void *user;
-    double last, mean;
-    int32_t round;
-    int cancelled;
-} fit_clock;
-
-static int clock_tick(fit_clock *c) {
-    if (!c->fn || c->cancelled) return c->cancelled;
-    const double now = spia__now();
-    if (now - c->last < PROGRESS_INTERVAL) return 0;
-    c->last = now;
-    if (c->fn(c->user, c->round, c->mean)) c->cancelled = 1;
-    return c->cancelled;
-}
-
-/* The solver's progress, passed on and remembered (for the ticks to repeat). */
-static int clock_forward(void *user, int32_t iteration, double value) {
-    fit_clock *c = (fit_clock *)user;
-    c->round = iteration, c->mean = value, c->last = spia__now();
-    if (c->fn(c->user, iteration, value)) c->cancelled = 1;
-    return c->cancelled;
 }
 
 /* Closest points in chunks, the clock ticking between them; returns 1 when
@@ -887,6 +888,10 @@ static void stiffen(const spia_mesh *cage, const spia_adjacency *adj, const uint
 
 /* ---- the scan side ------------------------------------------------------ */
 
+static spia_result scan_side_cancelled(spia_status *status) {
+    return spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled measuring the scan's distances to the surface");
+}
+
 /* The limit surface's grid and the scan vertices to measure.  The grid is
  * one level finer than the samples (ceil(log2 per_edge) + 1 levels), so
  * that its flat quads stay within a sixteenth of a sample spacing's
@@ -894,7 +899,8 @@ static void stiffen(const spia_mesh *cage, const spia_adjacency *adj, const uint
  * would have more than SCAN_GRID_FACES quads (at least one level). */
 #define SCAN_GRID_FACES (2 << 20)
 static spia_result scan_side_prepare(const spia_mesh *cage, const spia_adjacency *adj, const spia_options *opt,
-                                     int32_t per_edge, const spia_scan *scan, fit_buffers *b, spia_status *status) {
+                                     int32_t per_edge, const spia_scan *scan, fit_buffers *b, fit_clock *clock,
+                                     spia_status *status) {
     int32_t levels = 1;
     while ((1 << levels) < per_edge) ++levels;
     ++levels;
@@ -903,6 +909,7 @@ static spia_result scan_side_prepare(const spia_mesh *cage, const spia_adjacency
     while (levels > 1 && (quads << (2 * (levels - 1))) > SCAN_GRID_FACES) --levels;
     spia_result r = spia__osd_limit_grid_create(cage, adj, opt, levels, &b->grid, status);
     if (r != SPIA_OK) return r;
+    if (clock_tick(clock)) return scan_side_cancelled(status);
     const int32_t gv = spia__limit_grid_vertex_count(b->grid), gf = spia__limit_grid_face_count(b->grid);
     int32_t scan_n = 0;
     const int32_t *original = NULL;
@@ -949,6 +956,7 @@ static spia_result scan_side_measure(fit_buffers *b, const double *V, double cut
                                      int warm, fit_clock *clock, spia_fit_distances *out, spia_status *status) {
     spia_result r = spia__limit_grid_evaluate(b->grid, V, b->grid_pos, status);
     if (r != SPIA_OK) return r;
+    if (clock_tick(clock)) return scan_side_cancelled(status);
     if (warm) {
         const int32_t *quads = spia__limit_grid_quads(b->grid), faces = spia__limit_grid_face_count(b->grid);
         for (int64_t k = 0; k < b->scan_count; ++k) {
@@ -973,13 +981,13 @@ static spia_result scan_side_measure(fit_buffers *b, const double *V, double cut
     view.face_sizes = b->grid_sizes;
     view.face_vertices = spia__limit_grid_quads(b->grid);
     spia_scan *surface = NULL;
-    if ((r = spia_scan_create(&view, &surface, status)) != SPIA_OK) return r;
+    if ((r = spia_scan_create_progress(&view, clock->fn ? clock_scan_tick : NULL, clock, &surface, status)) != SPIA_OK)
+        return r == SPIA_ERROR_CANCELLED ? scan_side_cancelled(status) : r;
     const int cancelled = clock_tick(clock) ||
                           closest_in_chunks(surface, b->scan_count, b->scan_pts, warm ? b->scan_radius : NULL, NULL,
                                             NULL, b->scan_d, warm ? NULL : b->scan_quad, NULL, threads, clock);
     spia_scan_free(surface);
-    if (cancelled)
-        return spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled measuring the scan's distances to the surface");
+    if (cancelled) return scan_side_cancelled(status);
     *out = distance_stats(b->scan_d, b->scan_count, cutoff_abs, diagonal, b->scan_scratch);
     return SPIA_OK;
 }
@@ -1103,7 +1111,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
      * (VERTICES only) there are none, and the limit points are measured. */
     const int surface_samples = opt.scheme == SPIA_SCHEME_CATMULL_CLARK;
     if (surface_samples) {
-        r = blocks_build(cage, &adj, &surface_opt, fo.samples_per_edge, &b.blocks, status);
+        r = blocks_build(cage, &adj, &surface_opt, fo.samples_per_edge, &b.blocks, &clock, status);
         if (r != SPIA_OK) goto done;
         S = b.blocks.groups * b.blocks.per;
     }
@@ -1148,7 +1156,8 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         if (fo.samples_per_edge < 2) report->folded_before = -1;
         if (!(fo.flags & SPIA_FIT_NO_SCAN_DISTANCES)) {
             t0 = spia__now();
-            if ((r = scan_side_prepare(cage, &adj, &surface_opt, fo.samples_per_edge, scan, &b, status)) != SPIA_OK) {
+            r = scan_side_prepare(cage, &adj, &surface_opt, fo.samples_per_edge, scan, &b, &clock, status);
+            if (r != SPIA_OK) {
                 if (r == SPIA_ERROR_OUT_OF_MEMORY) goto oom;
                 goto done;
             }

@@ -264,7 +264,8 @@ spia_result spia__osd_surface_stencils(const spia_mesh *mesh, const spia_adjacen
 /* The same rows face by face: for each ptex face in order, emit gets its
  * columns (mesh numbering, each once) and its samples' weights over them,
  * samples_per_edge^2 rows of `width` (sample j's at weights + j * width);
- * a nonzero return stops it with SPIA_ERROR_OUT_OF_MEMORY. */
+ * a nonzero return stops it: SPIA_ERROR_CANCELLED or SPIA_ERROR_INTERNAL
+ * with that result, anything else with SPIA_ERROR_OUT_OF_MEMORY. */
 typedef int (*spia__sample_block_fn)(void *user, int64_t ptex, int32_t width, const int32_t *columns,
                                      const double *weights);
 spia_result spia__osd_surface_blocks(const spia_mesh *mesh, const spia_adjacency *adj, const spia_options *options,

@@ -183,12 +183,14 @@ def test_progress_within_rounds_and_cancel(native):
     before the first round ends the callback has been called already
     (with round 0: closest points are queried in chunks between which it
     is called every 0.2 s), and a cancel there stops the fit.  Without the
-    scan-to-surface measure the first call comes within round 1; with it,
-    it may come while the scan's distances are measured first."""
+    scan-to-surface measure the first call comes within round 1 (or, on a
+    slow machine, while the sample stencils are built); with it, it may
+    come while the scan's distances are measured first."""
     scan = native.Scan(_obj_mesh(native, "dragon_res2.obj"))
     cage = _obj_mesh(native, "dragon_res2_quadriflow_cage.obj")
-    for measure_scan, phases in ((False, ("cancelled during fitting round 1",)),
-                                 (True, ("cancelled during fitting round 1",
+    stencils = "cancelled computing the sample stencils"
+    for measure_scan, phases in ((False, ("cancelled during fitting round 1", stencils)),
+                                 (True, ("cancelled during fitting round 1", stencils,
                                          "cancelled measuring the scan's distances to the surface"))):
         calls = []
 
