@@ -638,11 +638,15 @@ def scan_arrays(target, cage_obj, context=None):
             np.ascontiguousarray(face_vertices, np.int32))
 
 
-def make_scan(target, cage_obj, context=None):
-    """native.Scan of target's evaluated mesh in cage_obj's object space."""
+def make_scan(target, cage_obj, context=None, progress=None):
+    """native.Scan of target's evaluated mesh in cage_obj's object space.
+    progress(iteration, relative_error), as interpolate's, is called with
+    (0, 0.0) through the build (seconds for a scan of millions of
+    triangles) and once at its end; True cancels (native.PiaCancelled)."""
     _require_library()
     positions, face_sizes, face_vertices = scan_arrays(target, cage_obj, context)
-    return native.Scan(native.Mesh(positions, face_sizes, face_vertices))
+    building = None if progress is None else (lambda _phase, _fraction: progress(0, 0.0))
+    return native.Scan(native.Mesh(positions, face_sizes, face_vertices), progress=building)
 
 
 def machine_memory():
@@ -1238,7 +1242,7 @@ def interpolate(obj, *, context=None, name=None, progress=None, live=False, **se
     loop = s["scheme"] == 'LOOP'
     separate_limit = s["scheme"] in LIMIT_SCHEMES
     target = find_target(obj, s)
-    scan = make_scan(target, obj, context) if target is not None else None
+    scan = make_scan(target, obj, context, progress) if target is not None else None
     mesh = None
     made = []  # meshes made here: removed again on failure
     stats = None
