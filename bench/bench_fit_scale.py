@@ -31,6 +31,8 @@ scan (api.scan_arrays), spia_scan_create (native.Scan), the library's fit
 compute_cage: reading the cage, the library's own set-up) and writing the
 object (the rest of the call).  Memory: the process's peak resident size
 during the call (VmHWM) and its growth over the resident size before it.
+Progress: the longest time between the call and the progress calls (how
+long a cancel could wait), and when it began.
 
 --grid cross (the default) sweeps the cage sizes on the largest scan and
 the scans under the 50k cage; full runs every pair; target the 50k cage on
@@ -291,10 +293,21 @@ def run_case(cage_size, scan_name):
     bpy.context.view_layer.update()
     rss = proc_status("VmRSS")
     peak_reset = reset_peak()
+    calls = []
+
+    def progress(round_, mean):
+        calls.append(time.perf_counter())
+        return False
     with RssSampler() as sampler:
         t0 = time.perf_counter()
-        new_obj, report = api.interpolate(cage, target=scan, fit='SURFACE', levels=LEVELS)
+        new_obj, report = api.interpolate(cage, target=scan, fit='SURFACE', levels=LEVELS, progress=progress)
         total = time.perf_counter() - t0
+    # How long a cancel could wait: the longest time without a progress
+    # call, from the call to the last progress call (writing the object
+    # after it cannot be cancelled).
+    marks = [t0] + calls
+    gaps = np.diff(marks) if len(marks) > 1 else np.array([total])
+    longest = int(np.argmax(gaps))
     hwm = proc_status("VmHWM")
     # Where the sampled peak fell: after the scan was made (so in the fit),
     # and within the fit's first stencil_seconds (the stencils) or later.
@@ -318,6 +331,8 @@ def run_case(cage_size, scan_name):
         "rss_before": rss, "peak": hwm if peak_reset else None,
         "peak_growth": (hwm - rss) if (peak_reset and hwm and rss) else None,
         "new_object": new_obj.name,
+        "progress_calls": len(calls), "longest_gap": float(gaps[longest]),
+        "longest_gap_at": float(marks[longest] - t0),
         "sampled_peak": peak_rss, "sampled_peak_after_fit_start": peak_t - fit_start,
         "peak_in_scan_build": bool(peak_t <= scan_end), "rss_peak_before_fit": rss_after_scan,
     }
@@ -361,12 +376,13 @@ def gb(x):
 
 def table(rows):
     head = ("| cage v | scan tris | samples | rounds | " + " | ".join(c[1] for c in COLUMNS)
-            + " | peak GB | growth GB |")
+            + " | peak GB | growth GB | longest progress gap s (at s) |")
     lines = [head, "|" + "---:|" * (head.count("|") - 1)]
     for r in rows:
-        lines.append("| %d | %.2fM | %dk | %d | %s | %s | %s |"
+        gap = "%.2f (%.1f)" % (r["longest_gap"], r["longest_gap_at"]) if "longest_gap" in r else "-"
+        lines.append("| %d | %.2fM | %dk | %d | %s | %s | %s | %s |"
                      % (r["cage_vertices"], r["scan_triangles"] / 1e6, r["samples"] // 1000, r["rounds"],
-                        " | ".join("%.2f" % r[c[0]] for c in COLUMNS), gb(r["peak"]), gb(r["peak_growth"])))
+                        " | ".join("%.2f" % r[c[0]] for c in COLUMNS), gb(r["peak"]), gb(r["peak_growth"]), gap))
     return lines
 
 
