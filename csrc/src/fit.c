@@ -106,14 +106,14 @@ spia_result spia_surface_stencils_create(const spia_mesh *mesh, const spia_optio
     return r;
 }
 
-/* ---- the samples as dense blocks ---------------------------------------- */
-
 /* ---- progress ------------------------------------------------------------- */
 
-/* Within a round the progress callback is called at least every
- * PROGRESS_INTERVAL seconds from the long steps (closest points in chunks
- * of QUERY_CHUNK, each conjugate-gradient step), so that a cancel is
- * answered promptly at every scale.  These calls repeat the last call's
+/* Besides after every round, the progress callback is called from the long steps once
+ * PROGRESS_INTERVAL seconds have passed since the last call (the sample
+ * stencils every BLOCK_TICK faces, closest points in chunks of QUERY_CHUNK,
+ * each conjugate-gradient step, the surface's grid: its creation,
+ * evaluation and build as a scan), so that a cancel is answered promptly
+ * at every scale.  These calls repeat the last call's
  * figures (the rounds done and their mean distance, or the VERTICES
  * solve's last iteration and error; 0 and the cage given's mean before
  * any). */
@@ -150,6 +150,8 @@ static int clock_forward(void *user, int32_t iteration, double value) {
     if (c->fn(c->user, iteration, value)) c->cancelled = 1;
     return c->cancelled;
 }
+
+/* ---- the samples as dense blocks ---------------------------------------- */
 
 /* The samples of one ptex face combine the same cage vertices (the face's
  * patch points), so each ptex face's rows are kept as one dense block over
@@ -412,7 +414,6 @@ static float select_kth(float *a, int64_t n, int64_t k) {
     }
     return a[k];
 }
-
 
 /* Mean, 95th percentile and max of the distances within the cut-off,
  * relative to the diagonal; `scratch` holds count floats. */
