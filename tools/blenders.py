@@ -248,6 +248,11 @@ def test(package, jobs, only, extra, discard):
     rows = {}
     slots = threading.BoundedSemaphore(jobs + 1)
 
+    def discard_venv(b):
+        if discard and b.prepare:
+            shutil.rmtree(b.prepare[1], ignore_errors=True)
+            slots.release()
+
     def prepare(b):
         """Installs b's Blender (venv or chroot); None when it is ready."""
         try:
@@ -274,9 +279,7 @@ def test(package, jobs, only, extra, discard):
                       flush=True)
             rows[id(b)] = (b, c, problems, seconds)
         finally:
-            if discard and b.prepare:
-                shutil.rmtree(b.prepare[1], ignore_errors=True)
-                slots.release()
+            discard_venv(b)
 
     # Installing (mostly downloading) goes on in this thread while the
     # suites of the Blenders already installed run in the pool.
@@ -286,9 +289,7 @@ def test(package, jobs, only, extra, discard):
             problem = prepare(b)
             if problem:
                 rows[id(b)] = (b, None, [problem], 0.0)
-                if discard and b.prepare:
-                    shutil.rmtree(b.prepare[1], ignore_errors=True)
-                    slots.release()
+                discard_venv(b)
             else:
                 running.append(pool.submit(one, i, b))
         for future in running:
