@@ -37,7 +37,7 @@ BOUNDARY_SMOOTH = ("ALL", "PRESERVE_CORNERS")
 METHODS = ("AUTO", "PIA", "GS_PIA", "CHEBYSHEV", "WPIA", "CG", "GS_PIA_FAST")
 # spia_options.solve_flags, by name (see the header): parts of the
 # Gauss-Seidel solvers to switch on.
-SOLVE_FLAGS = {"FIRST_STEP": 1, "MULTICOLOUR": 2, "DOUBLE_SWEEPS": 4}
+SOLVE_FLAGS = {"FIRST_STEP": 1, "MULTICOLOUR": 2, "DOUBLE_SWEEPS": 4, "NO_AVX": 8}
 
 _RESULT_NAMES = {
     0: "OK", 1: "MAX_ITERATIONS", 2: "STAGNATED",

@@ -50,7 +50,7 @@ spia_result spia__resolve_options(const spia_options *in, spia_options *out, spi
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "unknown solver method %d", (int)o.method);
     if ((int)o.boundary_rule != SPIA_BOUNDARY_RULE_SMOOTH && (int)o.boundary_rule != SPIA_BOUNDARY_RULE_HOPPE)
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "unknown boundary_rule value %d", (int)o.boundary_rule);
-    if (o.solve_flags & ~(SPIA_SOLVE_FIRST_STEP | SPIA_SOLVE_MULTICOLOUR | SPIA_SOLVE_DOUBLE_SWEEPS))
+    if (o.solve_flags & ~(SPIA_SOLVE_FIRST_STEP | SPIA_SOLVE_MULTICOLOUR | SPIA_SOLVE_DOUBLE_SWEEPS | SPIA_SOLVE_NO_AVX))
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "unknown solve_flags 0x%x", (unsigned)o.solve_flags);
     if (o.shape_parameter == 0.0) o.shape_parameter = 0.5;
     if (o.quality == 0) o.quality = 3;

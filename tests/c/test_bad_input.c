@@ -147,7 +147,7 @@ int main(void) {
     bad.method = (spia_method)(SPIA_METHOD_GS_PIA_FAST + 1);
     expect_code(&m, &bad, SPIA_ERROR_INVALID_ARGUMENT, "the method after the last");
     bad = o;
-    bad.solve_flags = 8;
+    bad.solve_flags = 16;
     expect_code(&m, &bad, SPIA_ERROR_INVALID_ARGUMENT, "unknown solve flag");
     bad.solve_flags = -1;
     expect_code(&m, &bad, SPIA_ERROR_INVALID_ARGUMENT, "negative solve flags");

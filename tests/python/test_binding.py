@@ -204,9 +204,10 @@ def test_fast_gauss_seidel_and_the_solve_flags(native):
     """GS_PIA_FAST and the SPIA_SOLVE_* flags by name: every combination
     reaches the tolerance (measured here with the stencils), and on a table
     large enough for the level layout and pipelined sweeps (a rough torus
-    of 54,000 vertices) the cage is the same for 1, 2 and 3 threads."""
+    of 54,000 vertices) the cage is the same for 1, 2 and 3 threads, and
+    the same to the bit with the residual passes kept from AVX (NO_AVX)."""
     assert native.METHODS[6] == "GS_PIA_FAST" and native.SOLVE_FLAGS == dict(FIRST_STEP=1, MULTICOLOUR=2,
-                                                                             DOUBLE_SWEEPS=4)
+                                                                             DOUBLE_SWEEPS=4, NO_AVX=8)
     P, faces, _ = load("double-torus")
     mesh = native.Mesh.from_faces(P, faces)
     L = native.limit_stencils(mesh).to_scipy()
@@ -228,6 +229,12 @@ def test_fast_gauss_seidel_and_the_solve_flags(native):
     assert all(report.converged and report.method == "GS_PIA_FAST" for _cage, report in cages)
     assert all(np.array_equal(cage, cages[0][0]) for cage, _report in cages[1:])
     assert all(np.array_equal(report.history, cages[0][1].history) for _cage, report in cages[1:])
+    for flags in (("FIRST_STEP",), ("DOUBLE_SWEEPS",)):
+        with_avx, without = (stencils.solve(P, method="GS_PIA_FAST", threads=2, solve_flags=flags + extra)
+                             for extra in ((), ("NO_AVX",)))
+        assert np.array_equal(with_avx[0], without[0]), flags
+        assert np.array_equal(with_avx[1].history, without[1].history), flags
+        assert (with_avx[1].max_error, with_avx[1].mean_error) == (without[1].max_error, without[1].mean_error)
     cage, report = stencils.solve(P)
     assert report.method == "GS_PIA_FAST", report.method  # what AUTO takes on a rough target
 
