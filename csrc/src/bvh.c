@@ -846,6 +846,12 @@ spia_result spia__bvh_build_progress(spia__bvh *bvh, const float *positions, int
         total += subtrees[i].nodes.n;
         level = subtrees[i].level > level ? subtrees[i].level : level;
     }
+    /* The join and the leaf order take a few tenths of a second on scans
+     * of millions of triangles: a poll before and after each. */
+    if (spia__build_poll(progress, 0, 0.1 + SUBTREE_SHARE)) {
+        result = cancelled(status);
+        goto done;
+    }
 
     /* Join: the top nodes, then each subtree's with its indices moved. */
     bvh->node_memory = malloc(sizeof(spia__bvh_node) * (size_t)total + 64);
@@ -871,12 +877,20 @@ spia_result spia__bvh_build_progress(spia__bvh *bvh, const float *positions, int
     }
     bvh->node_count = (int64_t)total;
     bvh->depth = level;
+    if (spia__build_poll(progress, 0, 0.1 + SUBTREE_SHARE + 0.03)) {
+        result = cancelled(status);
+        goto done;
+    }
 
     /* Leaf order: the triangles sorted as the refs, through the refs'
      * memory (28 bytes a triangle, more than the 12 needed). */
     {
         order_job job = {b.refs, order, triangles, NULL};
         spia__parallel_for(threads, n, 65536, order_range, &job);
+        if (spia__build_poll(progress, 0, 0.1 + SUBTREE_SHARE + 0.05)) {
+            result = cancelled(status);
+            goto done;
+        }
         int32_t *copy = (int32_t *)(void *)b.refs;
         memcpy(copy, triangles, sizeof(int32_t) * 3 * (size_t)n);
         job.from = copy;

@@ -372,7 +372,14 @@ spia_result spia_scan_create_progress(const spia_mesh *mesh, spia_progress_fn pr
             scan_release(s);
             return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the scan");
         }
-        for (int64_t i = 0; i < tris; ++i) polygon_of[i] = s->polygon_of[s->bvh.order[i]];
+        for (int64_t i = 0; i < tris; ++i) {
+            if (POLL_EVERY(i) && spia__build_poll(p, 0, 1.0)) {
+                free(polygon_of);
+                scan_release(s);
+                return cancelled(status, "ordering the scan's triangles");
+            }
+            polygon_of[i] = s->polygon_of[s->bvh.order[i]];
+        }
         free(s->polygon_of);
         s->polygon_of = polygon_of;
     }
