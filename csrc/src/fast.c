@@ -179,9 +179,8 @@ static inline void sum3_get(sum3 a, sum3 b, double out[3]) {
 /* The same sums in one AVX register, for the residual passes where the
  * processor and the system have AVX: the lanes take the same operations in
  * the same order as sum3's two SSE2 registers (no fused multiply-add), so the
- * sums are the same to the bit, in fewer instructions. */
-/* Not on Windows, where GCC does not align the stack for spilled AVX
- * registers (GCC bug 54412). */
+ * sums are the same to the bit, in fewer instructions.  Not on Windows, where
+ * GCC does not align the stack for spilled AVX registers (GCC bug 54412). */
 #if (defined(__GNUC__) || defined(__clang__)) && (defined(__x86_64__) || defined(__i386__)) && !defined(_WIN32)
 #define SPIA_AVX_RESIDUALS 1
 #include <cpuid.h>
@@ -409,7 +408,7 @@ typedef void (*residual_fn)(fast *f, int64_t b0, int64_t b1);
 /* The residual passes, for each width of codes and offsets and each way of
  * summing in double (S3: sum3, or sumv with AVX). */
 #define DEFINE_RESIDUALS(SUFFIX, CODE, DELTA, S3, ATTR)                                                          \
-    ATTR static void residual_first_##SUFFIX##S3(fast *f, int64_t b0, int64_t b1) {                                       \
+    ATTR static void residual_first_##SUFFIX##S3(fast *f, int64_t b0, int64_t b1) {                              \
         const spia_plan *p = f->p;                                                                               \
         const int32_t n = f->n;                                                                                  \
         for (int64_t b = b0; b < b1; ++b) {                                                                      \
@@ -420,7 +419,7 @@ typedef void (*residual_fn)(fast *f, int64_t b0, int64_t b1);
             for (int32_t i = i0; i < i1; ++i) {                                                                  \
                 const int32_t e = p->length[i];                                                                  \
                 const float *S = f->S + 3 * (int64_t)i;                                                          \
-                S3 a0 = S3##_zero(), a1 = S3##_zero();                                                         \
+                S3 a0 = S3##_zero(), a1 = S3##_zero();                                                           \
                 int32_t q = 0;                                                                                   \
                 for (; q + 1 < e; q += 2, k += 2) {                                                              \
                     S3##_add(&a0, p->weight[CODE[k]], S + 3 * (int64_t)DELTA[k], NULL);                          \
@@ -462,7 +461,7 @@ typedef void (*residual_fn)(fast *f, int64_t b0, int64_t b1);
             q4[3] = norm2;                                                                                       \
         }                                                                                                        \
     }                                                                                                            \
-    ATTR static void residual_cage_##SUFFIX##S3(fast *f, int64_t b0, int64_t b1) {                                        \
+    ATTR static void residual_cage_##SUFFIX##S3(fast *f, int64_t b0, int64_t b1) {                               \
         const spia_plan *p = f->p;                                                                               \
         const int32_t n = f->n;                                                                                  \
         for (int64_t b = b0; b < b1; ++b) {                                                                      \
@@ -472,7 +471,7 @@ typedef void (*residual_fn)(fast *f, int64_t b0, int64_t b1);
             int64_t k = f->block_entry[b];                                                                       \
             for (int32_t i = i0; i < i1; ++i) {                                                                  \
                 const int32_t e = p->length[i];                                                                  \
-                S3 a0 = S3##_zero(), a1 = S3##_zero();                                                         \
+                S3 a0 = S3##_zero(), a1 = S3##_zero();                                                           \
                 if (f->wide) {                                                                                   \
                     for (int32_t q = 0; q < e; ++q, ++k) {                                                       \
                         const int32_t j = i + DELTA[k];                                                          \
