@@ -308,20 +308,21 @@ static int32_t dictionary_code(dictionary *d, double w) {
 }
 
 /* The codes of the table's weights, on the threads and the same as one pass
- * in table order would give: each range of rows codes its entries with a
+ * in table order would give.  Each range of rows codes its entries with a
  * dictionary of its own (most rows repeat the weights of the row before in
- * the same places: those are looked up there first); the ranges' new
- * weights, in range order, then make the plan's dictionary, so that its
- * codes come in the order the weights first appear in the table; and each
- * range's codes are mapped to those. */
+ * the same places: those are looked up there first); the first range's is
+ * the plan's.  The other ranges' new weights are then added to it, range
+ * after range, so that its codes come in the order the weights first
+ * appear in the table, and those ranges' codes are mapped to its. */
 enum { CODING_RANGES = 8 };
 
 typedef struct coding {
     const spia_stencils *s;
     uint16_t *codes;
     int32_t ranges;
-    dictionary local[CODING_RANGES];
-    int32_t *map[CODING_RANGES];   /* a range's codes to the plan's */
+    dictionary *plan;                    /* the first range's */
+    dictionary local[CODING_RANGES];     /* the others' ([0] unused) */
+    int32_t *map[CODING_RANGES];         /* their codes to the plan's */
     unsigned char own[CODING_RANGES];    /* every row of the range has a positive own weight */
     unsigned char failed[CODING_RANGES]; /* too many distinct weights */
 } coding;
@@ -333,10 +334,9 @@ static void code_ranges(void *context, int64_t t0, int64_t t1, int thread) {
     coding *c = (coding *)context;
     const spia_stencils *s = c->s;
     for (int64_t t = t0; t < t1; ++t) {
-        dictionary *d = &c->local[t];
+        dictionary *d = t == 0 ? c->plan : &c->local[t];
         const int32_t first = range_row(c, (int32_t)t), end = range_row(c, (int32_t)t + 1);
         c->own[t] = 1;
-        c->failed[t] = 0;
         for (int32_t r = first; r < end; ++r) {
             const int64_t b = s->offsets[r], e = s->offsets[r + 1];
             const int64_t before = r > first ? s->offsets[r - 1] : b;
@@ -364,7 +364,7 @@ static void code_ranges(void *context, int64_t t0, int64_t t1, int thread) {
 static void map_ranges(void *context, int64_t t0, int64_t t1, int thread) {
     (void)thread;
     coding *c = (coding *)context;
-    for (int64_t t = t0; t < t1; ++t) {
+    for (int64_t t = t0 > 1 ? t0 : 1; t < t1; ++t) {
         const int32_t *map = c->map[t];
         for (int64_t k = c->s->offsets[range_row(c, (int32_t)t)]; k < c->s->offsets[range_row(c, (int32_t)t + 1)]; ++k)
             c->codes[k] = (uint16_t)map[c->codes[k]];
@@ -372,7 +372,7 @@ static void map_ranges(void *context, int64_t t0, int64_t t1, int thread) {
 }
 
 static void coding_free(coding *c) {
-    for (int t = 0; t < CODING_RANGES; ++t) {
+    for (int t = 1; t < CODING_RANGES; ++t) {
         free(c->local[t].keys);
         free(c->local[t].codes);
         free(c->local[t].weight);
@@ -380,54 +380,41 @@ static void coding_free(coding *c) {
     }
 }
 
-/* Fills codes (per table entry) and d, the plan's dictionary (its arrays
- * allocated by the caller); *diagonal_first: every row has a positive own
- * weight.  Returns 1, 0 when out of memory, -1 past DICTIONARY_LIMIT
- * weights. */
+/* Fills codes (per table entry) and d, the plan's dictionary (empty, its
+ * arrays allocated by the caller); *diagonal_first: every row has a
+ * positive own weight.  Returns 1, 0 when out of memory, -1 past
+ * DICTIONARY_LIMIT weights. */
 static int code_weights(const spia_stencils *s, int threads, uint16_t *codes, dictionary *d, int *diagonal_first) {
     coding c;
     memset(&c, 0, sizeof c);
     c.s = s;
     c.codes = codes;
+    c.plan = d;
     c.ranges = threads < CODING_RANGES ? threads : CODING_RANGES;
     if (c.ranges < 1) c.ranges = 1;
-    int ok = 1;
-    for (int32_t t = 0; t < c.ranges && ok; ++t) {
+    int result = 1;
+    for (int32_t t = 1; t < c.ranges && result == 1; ++t) {
         c.local[t].keys = (uint64_t *)calloc((size_t)1 << DICTIONARY_BITS, sizeof(uint64_t));
         c.local[t].codes = (int32_t *)malloc(sizeof(int32_t) * ((size_t)1 << DICTIONARY_BITS));
         c.local[t].weight = (double *)malloc(sizeof(double) * DICTIONARY_LIMIT);
-        ok = c.local[t].keys && c.local[t].codes && c.local[t].weight;
+        if (!c.local[t].keys || !c.local[t].codes || !c.local[t].weight) result = 0;
     }
-    if (!ok) {
-        coding_free(&c);
-        return 0;
-    }
-    spia__parallel_for(c.ranges, c.ranges, 1, code_ranges, &c);
+    if (result == 1) spia__parallel_for(c.ranges, c.ranges, 1, code_ranges, &c);
     *diagonal_first = 1;
-    for (int32_t t = 0; t < c.ranges; ++t) {
-        if (c.failed[t]) {
-            coding_free(&c);
-            return -1;
-        }
+    for (int32_t t = 0; t < c.ranges && result == 1; ++t) {
+        if (c.failed[t]) result = -1;
         if (!c.own[t]) *diagonal_first = 0;
     }
-    for (int32_t t = 0; t < c.ranges; ++t) {
+    for (int32_t t = 1; t < c.ranges && result == 1; ++t) {
         const dictionary *local = &c.local[t];
         c.map[t] = (int32_t *)malloc(sizeof(int32_t) * (size_t)(local->count > 0 ? local->count : 1));
-        if (!c.map[t]) {
-            coding_free(&c);
-            return 0;
-        }
-        for (int32_t j = 0; j < local->count; ++j)
-            if ((c.map[t][j] = dictionary_code(d, local->weight[j])) < 0) {
-                coding_free(&c);
-                return -1;
-            }
+        if (!c.map[t]) result = 0;
+        for (int32_t j = 0; j < local->count && result == 1; ++j)
+            if ((c.map[t][j] = dictionary_code(d, local->weight[j])) < 0) result = -1;
     }
-    /* One range's codes are already the plan's (its weights went in first, in order). */
-    if (c.ranges > 1) spia__parallel_for(c.ranges, c.ranges, 1, map_ranges, &c);
+    if (result == 1 && c.ranges > 1) spia__parallel_for(c.ranges, c.ranges, 1, map_ranges, &c);
     coding_free(&c);
-    return 1;
+    return result;
 }
 
 /* ------------------------------------------------------------------------ */

@@ -229,6 +229,13 @@ def test_fast_gauss_seidel_and_the_solve_flags(native):
     assert all(report.converged and report.method == "GS_PIA_FAST" for _cage, report in cages)
     assert all(np.array_equal(cage, cages[0][0]) for cage, _report in cages[1:])
     assert all(np.array_equal(report.history, cages[0][1].history) for _cage, report in cages[1:])
+    # The layout is built on the table's threads (the weights coded range by
+    # range): built on 1 and on 3, it solves to the same cage.
+    mesh = native.Mesh(P, np.full(nu * nv, 4, np.int32), quads.reshape(-1))
+    for threads in (1, 3):
+        other = native.limit_stencils(mesh, threads=threads).solve(P, method="GS_PIA_FAST", threads=2,
+                                                                   solve_flags=("FIRST_STEP",))
+        assert np.array_equal(other[0], cages[0][0]) and np.array_equal(other[1].history, cages[0][1].history)
     for flags in (("FIRST_STEP",), ("DOUBLE_SWEEPS",)):
         with_avx, without = (stencils.solve(P, method="GS_PIA_FAST", threads=2, solve_flags=flags + extra)
                              for extra in ((), ("NO_AVX",)))
