@@ -179,13 +179,16 @@ def test_fit_quality_options_are_checked(native, bunny):
 
 
 def test_progress_within_rounds_and_cancel(native):
-    """The dragon's cage (9.5k vertices, 150k samples, a 100k-vertex scan):
-    before the first round ends the callback has been called already
-    (with round 0: closest points are queried in chunks between which it
-    is called every 0.2 s), and a cancel there stops the fit.  Without the
-    scan-to-surface measure the first call comes within round 1 (or, on a
-    slow machine, while the sample stencils are built); with it, it may
-    come while the scan's distances are measured first."""
+    """The dragon's cage (9.5k vertices, 8 samples per edge: 600k samples,
+    a 100k-vertex scan), on one thread: before the first round ends the
+    callback has been called already (with round 0: closest points are
+    queried in chunks between which it is called every 0.2 s), and a
+    cancel there stops the fit.  Without the scan-to-surface measure the
+    first call comes within round 1 (or, on a slow machine, while the
+    sample stencils are built); with it, it may come while the scan's
+    distances are measured first.  With 4 samples per edge on every thread
+    a fast machine ended round 1 in under 0.2 s, before any tick was due;
+    this size takes about 1 s to end it on the 2-core test machine."""
     scan = native.Scan(_obj_mesh(native, "dragon_res2.obj"))
     cage = _obj_mesh(native, "dragon_res2_quadriflow_cage.obj")
     stencils = "cancelled computing the sample stencils"
@@ -198,6 +201,6 @@ def test_progress_within_rounds_and_cancel(native):
             calls.append(round_)
             return True
         with pytest.raises(native.PiaCancelled) as e:
-            native.fit(cage, scan, progress=progress, measure_scan=measure_scan)
+            native.fit(cage, scan, progress=progress, measure_scan=measure_scan, samples_per_edge=8, threads=1)
         assert calls == [0]
         assert any(p in str(e.value) for p in phases), str(e.value)
