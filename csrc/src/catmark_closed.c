@@ -93,6 +93,7 @@ static int32_t finish_row(spia_row_entry *e, int32_t count) {
 int32_t spia__catmark_closed_row(const spia_mesh *m, const spia_adjacency *adj, const spia_catmark_sharpness *sh,
                                  int32_t v, spia_row_scratch *scratch) {
     const int64_t first = adj->first[v], k64 = adj->first[v + 1] - first;
+    scratch->on_boundary = -1;
     if (k64 <= 0) return SPIA__ROW_NOT_CLOSED;
     const int32_t k = (int32_t)k64;
     const float vs = sh->vertex[v];
@@ -150,6 +151,9 @@ int32_t spia__catmark_closed_row(const spia_mesh *m, const spia_adjacency *adj, 
         }
         if (steps != k) return SPIA__ROW_NOT_CLOSED;
     }
+    /* One fan: v is on the boundary exactly when it has two ends (an edge
+     * of one face each), as spia__boundary_vertices would find. */
+    scratch->on_boundary = boundary;
 
     /* Infinitely sharp edges, up to SHARP_EDGE_LIMIT of them. */
     int32_t sharp[SHARP_EDGE_LIMIT];

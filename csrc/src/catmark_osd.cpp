@@ -1471,7 +1471,7 @@ spia_result bfr_rows(const spia_mesh *m, const int64_t *corner_start, const spia
 // The closed-form rows (catmark_closed.c), on the threads, written into
 // the table; the vertices they do not cover (no closed form) get length -1.
 void closed_rows(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, const Prepared &p,
-                 TableWriter &table) {
+                 TableWriter &table, unsigned char *on_boundary) {
     spia_catmark_sharpness sh;
     sh.vertex = p.vertex_sharpness.data();
     sh.crease_first = p.crease_first.empty() ? nullptr : p.crease_first.data();
@@ -1488,6 +1488,7 @@ void closed_rows(const spia_mesh *m, const spia_adjacency *adj, const spia_optio
         for (int32_t v = (int32_t)v0; v < (int32_t)v1 && !out_of_memory; ++v) {
             if (p.osd_of[v] < 0) continue;
             const int32_t len = spia__catmark_closed_row(m, adj, &sh, v, &scratch);
+            if (on_boundary && scratch.on_boundary >= 0) on_boundary[v] = (unsigned char)scratch.on_boundary;
             if (len == SPIA__ROW_OUT_OF_MEMORY) {
                 out_of_memory = true;
             } else if (len < 0 || len > s->offsets[v + 1] - s->offsets[v]) {
@@ -1548,8 +1549,8 @@ std::vector<int32_t> row_room(const spia_mesh *m, const spia_adjacency *adj, con
     return room;
 }
 
-spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_options *opt, spia_stencils **out,
-                  spia_status *status) {
+spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_options *opt,
+                  unsigned char *on_boundary, spia_stencils **out, spia_status *status) {
     const spia_adjacency *adj = adj_lists;
     Prepared p;
     spia_result r = prepare_sharpness(m, adj, opt, p);
@@ -1586,7 +1587,7 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
 
     // The closed-form rows (Catmull-Clark), and the vertices left for
     // OpenSubdiv (all, for Loop).
-    if (p.blender) closed_rows(m, adj, opt, p, table);
+    if (p.blender) closed_rows(m, adj, opt, p, table, on_boundary);
     std::vector<int32_t> wanted;
     for (int32_t o = 0; o < p.osd_n; ++o)
         if (!p.blender || table.length[(size_t)p.vertex_of[o]] < 0) wanted.push_back(o);
@@ -1629,7 +1630,11 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
         std::vector<int32_t>().swap(held.indices);
         std::vector<double>().swap(held.weights);
     }
-    // From here on only corner_start is needed: the vertex lists make room.
+    // The boundary vertices the closed rows did not learn, then (only
+    // corner_start is needed from here on) the vertex lists make room.
+    if (on_boundary && spia__boundary_vertices_unknown(m, adj, on_boundary, opt->threads > 0 ? opt->threads : 1) !=
+                           SPIA_OK)
+        throw std::bad_alloc();
     spia__adjacency_release_vertex_lists(adj_lists);
     adj = nullptr;
     if (part.refiner) {
@@ -2070,11 +2075,11 @@ spia_result surface(const spia_mesh *m, const spia_adjacency *adj, const spia_op
 }  // namespace
 
 extern "C" spia_result spia__osd_limit_stencils(const spia_mesh *mesh, spia_adjacency *adj,
-                                                    const spia_options *options, spia_stencils **out,
-                                                    spia_status *status) {
+                                                    const spia_options *options, unsigned char *on_boundary,
+                                                    spia_stencils **out, spia_status *status) {
     *out = nullptr;
     try {
-        return build(mesh, adj, options, out, status);
+        return build(mesh, adj, options, on_boundary, out, status);
     } catch (const std::bad_alloc &) {
         return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory computing limit stencils");
     } catch (...) {

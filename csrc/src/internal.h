@@ -145,10 +145,15 @@ static inline int32_t spia__corner_next(const spia_mesh *m, const spia_adjacency
     return m->face_vertices[c + 1 == e ? a->corner_start[f] : c + 1];
 }
 
-/* boundary[v] = 1 for vertices on an edge that only one face uses (threads
- * as spia_options.threads, resolved). */
+/* boundary[v] = 1 for vertices on an edge that only one face uses, else 0
+ * (threads as spia_options.threads, resolved).  The _unknown form fills only
+ * the entries that are SPIA__BOUNDARY_UNKNOWN, leaving those a builder has
+ * already learnt. */
+enum { SPIA__BOUNDARY_UNKNOWN = 0xff };
 spia_result spia__boundary_vertices(const spia_mesh *mesh, const spia_adjacency *adj, unsigned char *boundary,
                                     int threads);
+spia_result spia__boundary_vertices_unknown(const spia_mesh *mesh, const spia_adjacency *adj,
+                                            unsigned char *boundary, int threads);
 
 /* The most corners any vertex has (its valence bound: neighbours <= 2x). */
 int32_t spia__max_corners_per_vertex(const spia_adjacency *adj);
@@ -185,9 +190,12 @@ void spia__stencils_mark_boundary(spia_stencils *s, const unsigned char *on_boun
 
 /* Limit stencils through OpenSubdiv (catmark_osd.cpp): Catmull-Clark exactly
  * as Blender's modifier, and Loop with OpenSubdiv's boundary rules.  Frees
- * the adjacency's vertex lists once it no longer needs them. */
+ * the adjacency's vertex lists once it no longer needs them.  on_boundary
+ * (vertex_count entries, SPIA__BOUNDARY_UNKNOWN, or NULL) receives the
+ * boundary vertices as spia__boundary_vertices finds them: the closed-form
+ * rows learn most of them on the way. */
 spia_result spia__osd_limit_stencils(const spia_mesh *mesh, spia_adjacency *adj, const spia_options *options,
-                                     spia_stencils **out, spia_status *status);
+                                     unsigned char *on_boundary, spia_stencils **out, spia_status *status);
 
 /* Catmull-Clark rows with a closed form (catmark_closed.c).  Sharpness as
  * OpenSubdiv is given it, in the mesh's vertex numbering: vertex[v] after
@@ -220,6 +228,7 @@ typedef struct spia_row_scratch {
     spia_fan_corner *fan;
     int64_t capacity;
     int build;
+    int on_boundary; /* set by each call: 1 or 0 once v's fan is known to be one, else -1 */
 } spia_row_scratch;
 void spia__row_scratch_free(spia_row_scratch *s);
 

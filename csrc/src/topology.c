@@ -196,6 +196,7 @@ typedef struct boundary_job {
     const spia_adjacency *a;
     unsigned char *boundary;
     int32_t cap;
+    int only_unknown;
     int failed;
 } boundary_job;
 
@@ -209,6 +210,7 @@ static void boundary_range(void *context, int64_t v0, int64_t v1, int thread) {
     }
     int32_t *fe = nb + job->cap;
     for (int64_t v = v0; v < v1; ++v) {
+        if (job->only_unknown && job->boundary[v] != SPIA__BOUNDARY_UNKNOWN) continue;
         int32_t n = spia__vertex_neighbours(job->m, job->a, (int32_t)v, nb, fe, job->cap);
         job->boundary[v] = 0;
         for (int32_t k = 0; k < n; ++k)
@@ -217,11 +219,21 @@ static void boundary_range(void *context, int64_t v0, int64_t v1, int thread) {
     free(nb);
 }
 
-spia_result spia__boundary_vertices(const spia_mesh *m, const spia_adjacency *a, unsigned char *boundary,
-                                    int threads) {
-    boundary_job job = {m, a, boundary, 2 * spia__max_corners_per_vertex(a) + 2, 0};
+static spia_result boundary_vertices(const spia_mesh *m, const spia_adjacency *a, unsigned char *boundary,
+                                     int threads, int only_unknown) {
+    boundary_job job = {m, a, boundary, 2 * spia__max_corners_per_vertex(a) + 2, only_unknown, 0};
     spia__parallel_for(threads, m->vertex_count, 16384, boundary_range, &job);
     return job.failed ? SPIA_ERROR_OUT_OF_MEMORY : SPIA_OK;
+}
+
+spia_result spia__boundary_vertices(const spia_mesh *m, const spia_adjacency *a, unsigned char *boundary,
+                                    int threads) {
+    return boundary_vertices(m, a, boundary, threads, 0);
+}
+
+spia_result spia__boundary_vertices_unknown(const spia_mesh *m, const spia_adjacency *a, unsigned char *boundary,
+                                            int threads) {
+    return boundary_vertices(m, a, boundary, threads, 1);
 }
 
 spia_result spia__require_triangles(const spia_mesh *m, spia_status *status) {

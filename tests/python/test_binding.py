@@ -261,6 +261,42 @@ def test_thread_count_changes_nothing(native):
     assert opts.threads == 2
 
 
+def test_staged_catmull_clark_moves_exactly_the_boundary(native):
+    """A staged solve sweeps the boundary vertices first, with the interior
+    held: stopped at the end of that stage, the vertices that moved are
+    exactly those on an edge of one face (found here from the faces), also
+    where vertex creases (0.3) send some of them, and some interior ones,
+    to OpenSubdiv before their fan is read, and where semi-sharp edges do so
+    after.  Run to the end it reaches the unstaged cage."""
+    nu, nv = 14, 11
+    i, j = np.meshgrid(np.arange(nu + 1), np.arange(nv + 1))
+    rng = np.random.default_rng(3)
+    P = np.stack([i, j, 0.3 * np.sin(i / 3.0) * np.cos(j / 2.0)], -1).reshape(-1, 3)
+    P = (P + rng.normal(0, 0.05, P.shape)).astype(np.float32)
+    a = (j[:-1, :-1] * (nu + 1) + i[:-1, :-1]).ravel()
+    quads = np.stack([a, a + 1, a + nu + 2, a + nu + 1], -1).astype(np.int32)
+    sides = np.sort(np.stack([quads, np.roll(quads, -1, axis=1)], -1).reshape(-1, 2), axis=1)
+    edges, uses = np.unique(sides, axis=0, return_counts=True)
+    boundary = np.zeros(len(P), bool)
+    boundary[edges[uses == 1].ravel()] = True
+    vertex_creases = np.zeros(len(P), np.float32)
+    vertex_creases[rng.choice(np.flatnonzero(boundary), 6, replace=False)] = 0.3
+    vertex_creases[rng.choice(np.flatnonzero(~boundary), 6, replace=False)] = 0.3
+    edge_creases = np.where(rng.random(len(edges)) < 0.1, 0.5, 0.0).astype(np.float32)
+    mesh = native.Mesh(P, np.full(len(quads), 4, np.int32), quads.ravel(), edges.astype(np.int32), edge_creases,
+                       vertex_creases)
+    together, r1 = native.interpolate(mesh, method="GS_PIA", tolerance=1e-8)
+    staged, r2 = native.interpolate(mesh, method="GS_PIA", tolerance=1e-8, staged=True)
+    assert r2.stage_iterations[0] > 0 and r2.stage_iterations[1] > 0
+    assert sum(r2.stage_iterations) == r2.iterations
+    assert np.abs(together - staged).max() < 1e-5 * np.abs(P).max()
+    part, r3 = native.interpolate(mesh, method="GS_PIA", tolerance=1e-8, staged=True,
+                                  max_iterations=r2.stage_iterations[0])
+    assert r3.status == "MAX_ITERATIONS" and tuple(r3.stage_iterations) == (r2.stage_iterations[0], 0)
+    moved = np.any(part != P, axis=1)
+    assert np.array_equal(moved, boundary), (np.flatnonzero(moved != boundary), boundary.sum())
+
+
 def test_opensubdiv_version(native):
     """Versions as Blender gives them (a tuple), as strings or as the number;
     after 3.6.0 the centre of two double-sided fins is infinitely sharp (its
