@@ -582,14 +582,35 @@ class Stencils:
     def __init__(self, handle, lib, columns=None):
         self._handle = ctypes.c_void_p(handle)
         self._lib = lib
-        rows = lib.spia_stencils_row_count(self._handle)
-        self.column_count = rows if columns is None else int(columns)
-        nnz = lib.spia_stencils_weight_count(self._handle)
-        self.offsets = np.empty(rows + 1, dtype=np.int64)
-        self.indices = np.empty(nnz, dtype=np.int32)
-        self.weights = np.empty(nnz, dtype=np.float64)
-        lib.spia_stencils_copy_csr(self._handle, _ptr(self.offsets, ctypes.c_int64),
-                                   _ptr(self.indices, ctypes.c_int32), _ptr(self.weights, ctypes.c_double))
+        self._rows = lib.spia_stencils_row_count(self._handle)
+        self.column_count = self._rows if columns is None else int(columns)
+        self._arrays = None
+
+    def _csr(self):
+        """The CSR arrays, copied from the library the first time they are
+        asked for: a table that is only solved with (an operator, a live
+        cage) never holds a second copy (12 bytes per weight)."""
+        if self._arrays is None:
+            nnz = self._lib.spia_stencils_weight_count(self._handle)
+            offsets = np.empty(self._rows + 1, dtype=np.int64)
+            indices = np.empty(nnz, dtype=np.int32)
+            weights = np.empty(nnz, dtype=np.float64)
+            self._lib.spia_stencils_copy_csr(self._handle, _ptr(offsets, ctypes.c_int64),
+                                             _ptr(indices, ctypes.c_int32), _ptr(weights, ctypes.c_double))
+            self._arrays = offsets, indices, weights
+        return self._arrays
+
+    @property
+    def offsets(self):
+        return self._csr()[0]
+
+    @property
+    def indices(self):
+        return self._csr()[1]
+
+    @property
+    def weights(self):
+        return self._csr()[2]
 
     def __del__(self):
         handle, self._handle = getattr(self, "_handle", None), None
@@ -598,7 +619,7 @@ class Stencils:
 
     @property
     def row_count(self):
-        return len(self.offsets) - 1
+        return self._rows
 
     def to_scipy(self):
         """The table as a scipy.sparse.csr_matrix (needs scipy)."""

@@ -384,6 +384,22 @@ def test_mesh_arrays_are_not_copied(native):
     assert mesh._c().positions[0] == P[0, 0]  # the C struct points at the same floats
 
 
+def test_stencil_arrays_are_copied_only_when_asked(native):
+    """A table that is only solved with holds no numpy copy of itself; the
+    arrays, once asked for, are one copy, the same each time, and agree
+    with the library's own solve."""
+    P, faces = grid()
+    mesh = native.Mesh(P, np.full(len(faces), 4, np.int32), np.asarray(faces, np.int32).ravel())
+    stencils = native.limit_stencils(mesh)
+    cage, report = stencils.solve(P, tolerance=1e-7)
+    assert stencils._arrays is None and stencils.row_count == len(P)
+    weights = stencils.weights
+    assert stencils.weights is weights and len(stencils.offsets) == len(P) + 1
+    assert stencils.offsets[-1] == len(weights) == len(stencils.indices)
+    limit = stencils.apply(cage)
+    assert np.abs(limit - P).max() <= 2e-7 * np.abs(P).max()
+
+
 def test_binding_runs_without_blender():
     code = ("import sys; sys.path.insert(0, %r); from subdiv_pia import native; "
             "assert native.available(); assert 'bpy' not in sys.modules; print(native.version())" % ADDON_DIR)
