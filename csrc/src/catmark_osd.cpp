@@ -1488,7 +1488,7 @@ void closed_rows(const spia_mesh *m, const spia_adjacency *adj, const spia_optio
         for (int32_t v = (int32_t)v0; v < (int32_t)v1 && !out_of_memory; ++v) {
             if (p.osd_of[v] < 0) continue;
             const int32_t len = spia__catmark_closed_row(m, adj, &sh, v, &scratch);
-            if (on_boundary && scratch.on_boundary >= 0) on_boundary[v] = (unsigned char)scratch.on_boundary;
+            if (scratch.on_boundary >= 0) on_boundary[v] = (unsigned char)scratch.on_boundary;
             if (len == SPIA__ROW_OUT_OF_MEMORY) {
                 out_of_memory = true;
             } else if (len < 0 || len > s->offsets[v + 1] - s->offsets[v]) {
@@ -1632,8 +1632,7 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
     }
     // The boundary vertices the closed rows did not learn, then (only
     // corner_start is needed from here on) the vertex lists make room.
-    if (on_boundary && spia__boundary_vertices_unknown(m, adj, on_boundary, opt->threads > 0 ? opt->threads : 1) !=
-                           SPIA_OK)
+    if (spia__boundary_vertices_unknown(m, adj, on_boundary, opt->threads > 0 ? opt->threads : 1) != SPIA_OK)
         throw std::bad_alloc();
     spia__adjacency_release_vertex_lists(adj_lists);
     adj = nullptr;

@@ -191,9 +191,9 @@ void spia__stencils_mark_boundary(spia_stencils *s, const unsigned char *on_boun
 /* Limit stencils through OpenSubdiv (catmark_osd.cpp): Catmull-Clark exactly
  * as Blender's modifier, and Loop with OpenSubdiv's boundary rules.  Frees
  * the adjacency's vertex lists once it no longer needs them.  on_boundary
- * (vertex_count entries, SPIA__BOUNDARY_UNKNOWN, or NULL) receives the
- * boundary vertices as spia__boundary_vertices finds them: the closed-form
- * rows learn most of them on the way. */
+ * (vertex_count entries, SPIA__BOUNDARY_UNKNOWN) receives the boundary
+ * vertices as spia__boundary_vertices finds them: the closed-form rows
+ * learn most of them on the way. */
 spia_result spia__osd_limit_stencils(const spia_mesh *mesh, spia_adjacency *adj, const spia_options *options,
                                      unsigned char *on_boundary, spia_stencils **out, spia_status *status);
 

@@ -5,19 +5,25 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* Scheme dispatch: one line per scheme and boundary rule.  Builders other
- * than OpenSubdiv's leave on_boundary to the caller. */
+/* Scheme dispatch: one line per scheme and boundary rule.  Every builder
+ * fills on_boundary (vertex_count entries, SPIA__BOUNDARY_UNKNOWN on entry):
+ * OpenSubdiv's on the way, the others first. */
 typedef spia_result (*stencil_builder)(const spia_mesh *, spia_adjacency *, const spia_options *, unsigned char *,
                                        spia_stencils **, spia_status *);
+static spia_result classified(const spia_mesh *m, spia_adjacency *a, const spia_options *o, unsigned char *on_boundary,
+                              spia_status *status) {
+    if (spia__boundary_vertices(m, a, on_boundary, o->threads) == SPIA_OK) return SPIA_OK;
+    return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory classifying boundary vertices");
+}
 static spia_result loop_hoppe(const spia_mesh *m, spia_adjacency *a, const spia_options *o, unsigned char *on_boundary,
                               spia_stencils **out, spia_status *status) {
-    (void)on_boundary;
-    return spia__loop_hoppe_limit_stencils(m, a, o, out, status);
+    const spia_result r = classified(m, a, o, on_boundary, status);
+    return r != SPIA_OK ? r : spia__loop_hoppe_limit_stencils(m, a, o, out, status);
 }
 static spia_result doo_sabin(const spia_mesh *m, spia_adjacency *a, const spia_options *o, unsigned char *on_boundary,
                              spia_stencils **out, spia_status *status) {
-    (void)on_boundary;
-    return spia__doosabin_limit_stencils(m, a, o, out, status);
+    const spia_result r = classified(m, a, o, on_boundary, status);
+    return r != SPIA_OK ? r : spia__doosabin_limit_stencils(m, a, o, out, status);
 }
 static stencil_builder builder_for(const spia_options *o) {
     switch (o->scheme) {
@@ -46,19 +52,13 @@ spia_result spia_limit_stencils_create(const spia_mesh *mesh, const spia_options
     spia_adjacency adj;
     r = spia__adjacency_build(mesh, &adj, status);
     if (r != SPIA_OK) return r;
-    /* The boundary vertices: OpenSubdiv's builder finds them on the way
-     * (before it frees the adjacency's vertex lists to make room for the
-     * table); for the others, first. */
-    const stencil_builder builder = builder_for(&opt);
     unsigned char *on_boundary = (unsigned char *)malloc((size_t)mesh->vertex_count + 1);
-    if (on_boundary) memset(on_boundary, SPIA__BOUNDARY_UNKNOWN, (size_t)mesh->vertex_count + 1);
-    if (!on_boundary ||
-        (builder != spia__osd_limit_stencils && spia__boundary_vertices(mesh, &adj, on_boundary, opt.threads) != SPIA_OK)) {
-        free(on_boundary);
+    if (!on_boundary) {
         spia__adjacency_free(&adj);
         return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory classifying boundary vertices");
     }
-    r = builder(mesh, &adj, &opt, on_boundary, out, status);
+    memset(on_boundary, SPIA__BOUNDARY_UNKNOWN, (size_t)mesh->vertex_count + 1);
+    r = builder_for(&opt)(mesh, &adj, &opt, on_boundary, out, status);
     if (r == SPIA_OK) spia__stencils_mark_boundary(*out, on_boundary);
     free(on_boundary);
     spia__adjacency_free(&adj);
