@@ -647,13 +647,250 @@ struct Evaluation {
     std::vector<char> adaptive;       // per osd vertex: step 7
     std::vector<int32_t> bfr_corner;  // per osd vertex: the corner Bfr evaluates it at (step 10), or -1
     std::vector<char> level_face;     // per mesh face: Bfr at the isolation level (empty if none)
-    std::vector<int32_t> decaying;    // osd vertices whose sharpness decays within the isolation level
-    std::vector<int32_t> depth;       // and the levels it takes
+    std::vector<int32_t> ring;        // osd vertices evaluated on their one ring (step 6b)
+    std::vector<int32_t> levels;      // and how many levels deep
     int32_t adaptive_count = 0;
 };
 
 // Whether a vertex of one of the faces around vertex v has more than 12
 // faces.
+// 6b. Semi-sharp vertices (their own sharpness or their edges') of manifold
+//     fans, darts excepted.  Blender's patch corner there is the limit mask
+//     of the vertex at level min(depth, quality), depth = ceil(its
+//     sharpest semi-sharp feature), with whatever semi-sharpness is left at
+//     that level taken as smooth (infinitely sharp edges stay sharp): where
+//     the features have decayed within the isolation level this is the
+//     exact limit point; where they have not, it is what the patches at the
+//     isolation level give (tests/c/test_reference.cpp holds both to 1e-12
+//     against the full adaptive table, at qualities 1 to 10).  A vertex's
+//     one ring at the next level (itself, its edges' midpoints, its faces'
+//     centres) depends on its one ring alone, and so does the sharpness of
+//     its edges there: the row is the limit mask carried back through the
+//     ring-to-ring steps, each step's masks from OpenSubdiv's own rules
+//     (Sdc), with no mesh refined.  O(levels x valence) per vertex.
+
+// The one ring of a manifold vertex of the base level: face j lies between
+// its edges a[j] and b[j]; edge i has one face (boundary) or two.
+struct Ring {
+    int32_t centre = -1;
+    std::vector<int32_t> far_end;        // per edge: its other vertex
+    std::vector<float> sharpness;        // per edge (boundary: infinite)
+    std::vector<int32_t> a, b;           // per face: its two edges at the centre
+    std::vector<int32_t> edge_face;      // per edge: two faces, the second -1 on the boundary
+    std::vector<Far::Index> faces;       // per face: the base level's face
+};
+
+bool one_ring(const Far::TopologyLevel &base, Far::Index v, Ring &ring) {
+    Far::ConstIndexArray ve = base.GetVertexEdges(v), vf = base.GetVertexFaces(v);
+    Far::ConstLocalIndexArray where = base.GetVertexFaceLocalIndices(v);
+    const int n = ve.size(), nf = vf.size();
+    ring.centre = v;
+    ring.far_end.resize((size_t)n);
+    ring.sharpness.resize((size_t)n);
+    ring.edge_face.assign(2 * (size_t)n, -1);
+    ring.a.resize((size_t)nf);
+    ring.b.resize((size_t)nf);
+    ring.faces.assign(vf.begin(), vf.end());
+    for (int i = 0; i < n; ++i) {
+        Far::ConstIndexArray ends = base.GetEdgeVertices(ve[i]);
+        ring.far_end[(size_t)i] = ends[0] == v ? ends[1] : ends[0];
+        const int faces = base.GetEdgeFaces(ve[i]).size();
+        if (faces < 1 || faces > 2 || ends[0] == ends[1]) return false;
+        ring.sharpness[(size_t)i] = faces == 1 ? kInfiniteSharpness : base.GetEdgeSharpness(ve[i]);
+    }
+    auto edge_index = [&](Far::Index e) {
+        for (int i = 0; i < n; ++i)
+            if (ve[i] == e) return i;
+        return -1;
+    };
+    for (int j = 0; j < nf; ++j) {
+        Far::ConstIndexArray fe = base.GetFaceEdges(vf[j]), fv = base.GetFaceVertices(vf[j]);
+        const int k = fe.size();
+        for (int c = 0; c < k; ++c)  // the centre once in each face
+            if (fv[c] == v && c != where[j]) return false;
+        const int ea = edge_index(fe[(where[j] + k - 1) % k]), eb = edge_index(fe[where[j]]);
+        if (ea < 0 || eb < 0 || ea == eb) return false;
+        ring.a[(size_t)j] = ea;
+        ring.b[(size_t)j] = eb;
+        for (int e : {ea, eb}) {
+            int32_t *slot = &ring.edge_face[2 * (size_t)e];
+            if (slot[0] < 0) slot[0] = j;
+            else if (slot[1] < 0) slot[1] = j;
+            else return false;
+        }
+    }
+    for (int i = 0; i < n; ++i) {  // every edge in as many faces as Far has it in
+        const int faces = base.GetEdgeFaces(ve[i]).size();
+        if ((ring.edge_face[2 * (size_t)i + 1] >= 0 ? 2 : 1) != faces || ring.edge_face[2 * (size_t)i] < 0) return false;
+    }
+    return true;
+}
+
+// Sdc's neighbourhood and mask interfaces over a ring's sharpness.
+struct RingVertex {
+    int n_edges, n_faces;
+    float vertex_sharpness;
+    const float *edge_sharpness;
+    int GetNumEdges() const { return n_edges; }
+    int GetNumFaces() const { return n_faces; }
+    float GetSharpness() const { return vertex_sharpness; }
+    float *GetSharpnessPerEdge(float *out) const {
+        std::copy(edge_sharpness, edge_sharpness + n_edges, out);
+        return out;
+    }
+    float GetChildSharpness(const Sdc::Crease &crease) const { return crease.SubdivideVertexSharpness(vertex_sharpness); }
+    float *GetChildSharpnessPerEdge(const Sdc::Crease &crease, float *out) const {
+        crease.SubdivideEdgeSharpnessesAroundVertex(n_edges, edge_sharpness, out);
+        return out;
+    }
+};
+
+struct RingEdge {  // as Vtr's EdgeInterface
+    int n_faces;
+    float sharpness;
+    const int *face_sizes;
+    int GetNumFaces() const { return n_faces; }
+    float GetSharpness() const { return sharpness; }
+    void GetChildSharpnesses(const Sdc::Crease &, float s[2]) const { s[0] = s[1] = sharpness - 1.0f; }
+    void GetNumVerticesPerFace(int *sizes) const { std::copy(face_sizes, face_sizes + n_faces, sizes); }
+};
+
+struct RingMask {
+    typedef double Weight;
+    double *v, *e, *f;
+    int nv = 0, ne = 0, nf = 0;
+    bool centres = false;
+    RingMask(double *vw, double *ew, double *fw) : v(vw), e(ew), f(fw) {}
+    int GetNumVertexWeights() const { return nv; }
+    int GetNumEdgeWeights() const { return ne; }
+    int GetNumFaceWeights() const { return nf; }
+    void SetNumVertexWeights(int c) { nv = c; }
+    void SetNumEdgeWeights(int c) { ne = c; }
+    void SetNumFaceWeights(int c) { nf = c; }
+    const double &VertexWeight(int i) const { return v[i]; }
+    const double &EdgeWeight(int i) const { return e[i]; }
+    const double &FaceWeight(int i) const { return f[i]; }
+    double &VertexWeight(int i) { return v[i]; }
+    double &EdgeWeight(int i) { return e[i]; }
+    double &FaceWeight(int i) { return f[i]; }
+    bool AreFaceWeightsForFaceCenters() const { return centres; }
+    void SetFaceWeightsForFaceCenters(bool on) { centres = on; }
+};
+
+struct RingScratch {
+    std::vector<float> sharpness;
+    std::vector<double> vertex_masks, edge_masks, g, next;
+};
+
+// The row of the ring's centre at `levels` levels, over the base level's
+// vertices; false where a mask is not of the kind expected.
+
+bool ring_row(const Far::TopologyLevel &base, const Ring &ring, float vertex_sharpness, int levels,
+              const Sdc::Options &sdc, RingScratch &s, std::vector<Entry> &row) {
+    const Sdc::Scheme<Sdc::SCHEME_CATMARK> scheme(sdc);
+    const Sdc::Crease crease(sdc);
+    const int n = (int)ring.far_end.size(), nf = (int)ring.a.size();
+    const size_t vm = 1 + (size_t)n + (size_t)nf, em = 4;  // a vertex mask; an edge mask (2 ends, 2 faces)
+    s.sharpness.assign(ring.sharpness.begin(), ring.sharpness.end());
+    s.vertex_masks.assign(vm * (size_t)levels, 0.0);
+    s.edge_masks.assign(em * (size_t)n * (size_t)levels, 0.0);
+    std::vector<float> &es = s.sharpness;
+    std::vector<float> child((size_t)n);
+    int sizes[2];
+    float vs = vertex_sharpness;
+    for (int level = 0; level < levels; ++level) {
+        double *w = s.vertex_masks.data() + vm * (size_t)level;
+        RingVertex vertex{n, nf, vs, es.data()};
+        RingMask mask(w, w + 1, w + 1 + n);
+        crease.SubdivideEdgeSharpnessesAroundVertex(n, es.data(), child.data());
+        const float child_vs = crease.SubdivideVertexSharpness(vs);
+        const Sdc::Crease::Rule parent_rule = crease.DetermineVertexVertexRule(vs, n, es.data());
+        const Sdc::Crease::Rule child_rule = crease.DetermineVertexVertexRule(child_vs, n, child.data());
+        scheme.ComputeVertexVertexMask(vertex, mask, parent_rule, child_rule);
+        if (mask.nv != 1 || (mask.ne != 0 && mask.ne != n) || (mask.nf != 0 && (mask.nf != nf || !mask.centres)))
+            return false;
+        if (mask.ne == 0) std::fill(w + 1, w + 1 + n, 0.0);
+        if (mask.nf == 0) std::fill(w + 1 + n, w + vm, 0.0);
+        for (int i = 0; i < n; ++i) {
+            double *ew = s.edge_masks.data() + em * ((size_t)level * n + i);
+            const int faces = ring.edge_face[2 * (size_t)i + 1] >= 0 ? 2 : 1;
+            for (int k = 0; k < faces; ++k)
+                sizes[k] = level == 0 ? base.GetFaceVertices(ring.faces[(size_t)ring.edge_face[2 * (size_t)i + k]]).size() : 4;
+            RingEdge edge{faces, es[(size_t)i], sizes};
+            RingMask emask(ew, nullptr, ew + 2);
+            const Sdc::Crease::Rule ep = es[(size_t)i] > 0.0f ? Sdc::Crease::RULE_CREASE : Sdc::Crease::RULE_SMOOTH;
+            const Sdc::Crease::Rule ec = child[(size_t)i] > 0.0f ? Sdc::Crease::RULE_CREASE : Sdc::Crease::RULE_SMOOTH;
+            scheme.ComputeEdgeVertexMask(edge, emask, ep, ec);
+            if (emask.nv != 2 || emask.ne != 0 || (emask.nf != 0 && (emask.nf != faces || !emask.centres)))
+                return false;
+            if (emask.nf == 0) ew[2] = ew[3] = 0.0;
+        }
+        es.swap(child);
+        vs = child_vs;
+    }
+    // The limit mask at the last level, semi-sharpness left taken as
+    // smooth: weights on the centre, the far ends of its edges and the far
+    // corners of its faces (quads there).
+    s.g.assign(vm, 0.0);
+    {
+        for (float &x : es)
+            if (x < kInfiniteSharpness) x = 0.0f;
+        if (vs < kInfiniteSharpness) vs = 0.0f;
+        RingVertex vertex{n, nf, vs, es.data()};
+        RingMask mask(s.g.data(), s.g.data() + 1, s.g.data() + 1 + n);
+        const Sdc::Crease::Rule rule = crease.DetermineVertexVertexRule(vs, n, es.data());
+        if (rule == Sdc::Crease::RULE_DART || levels == 0) return false;
+        scheme.ComputeVertexLimitMask(vertex, mask, rule);
+        if (mask.nv != 1 || (mask.ne != 0 && mask.ne != n) || (mask.nf != 0 && (mask.nf != nf || mask.centres)))
+            return false;
+        if (mask.ne == 0) std::fill(s.g.begin() + 1, s.g.begin() + 1 + n, 0.0);
+        if (mask.nf == 0) std::fill(s.g.begin() + 1 + n, s.g.end(), 0.0);
+    }
+    // Carried back level by level: g holds the weights on the level's
+    // ring (centre, edge ends, far corners), `face` those on its new face
+    // centres.
+    std::vector<double> &g = s.g, &next = s.next;
+    std::vector<double> centre_of_face((size_t)nf);
+    for (int level = levels - 1; level >= 0; --level) {
+        const double *w = s.vertex_masks.data() + vm * (size_t)level;
+        const double gc = g[0];
+        for (int j = 0; j < nf; ++j) centre_of_face[(size_t)j] = g[1 + (size_t)n + j] + w[1 + n + j] * gc;
+        next.assign(vm, 0.0);
+        next[0] = w[0] * gc;
+        for (int i = 0; i < n; ++i) {
+            const double *ew = s.edge_masks.data() + em * ((size_t)level * n + i);
+            const double ge = g[1 + (size_t)i];
+            next[0] += ew[0] * ge;
+            next[1 + (size_t)i] = w[1 + i] * gc + ew[1] * ge;
+            for (int k = 0; k < 2; ++k) {
+                const int32_t j = ring.edge_face[2 * (size_t)i + k];
+                if (j >= 0) centre_of_face[(size_t)j] += ew[2 + k] * ge;
+            }
+        }
+        if (level > 0) {  // a face's centre is the mean of its four corners
+            for (int j = 0; j < nf; ++j) {
+                const double q = 0.25 * centre_of_face[(size_t)j];
+                next[0] += q;
+                next[1 + (size_t)ring.a[(size_t)j]] += q;
+                next[1 + (size_t)ring.b[(size_t)j]] += q;
+                next[1 + (size_t)n + j] = q;
+            }
+            g.swap(next);
+            continue;
+        }
+        row.clear();
+        row.emplace_back(ring.centre, next[0]);
+        for (int i = 0; i < n; ++i) row.emplace_back(ring.far_end[(size_t)i], next[1 + (size_t)i]);
+        for (int j = 0; j < nf; ++j) {  // the base level's faces, of any size
+            Far::ConstIndexArray fv = base.GetFaceVertices(ring.faces[(size_t)j]);
+            const double q = centre_of_face[(size_t)j] * (1.0 / (double)fv.size());
+            for (int c = 0; c < fv.size(); ++c) row.emplace_back(fv[c], q);
+        }
+    }
+    merge_entries(row, true);
+    return true;
+}
+
 bool next_to_high_valence(const Far::TopologyLevel &base, Far::Index v) {
     Far::ConstIndexArray vf = base.GetVertexFaces(v);
     for (int k = 0; k < vf.size(); ++k) {
@@ -666,7 +903,9 @@ bool next_to_high_valence(const Far::TopologyLevel &base, Far::Index v) {
 
 // 5. How each vertex of `wanted` (osd numbering) is evaluated.  At
 //    semi-sharp features and darts of manifold meshes Blender's surface
-//    depends on the isolation level; there Bfr with its approximation
+//    depends on the isolation level.  Semi-sharp vertices of manifold fans
+//    take their row from their one ring (step 6b).  At darts and the other
+//    semi-sharp vertices Bfr with its approximation
 //    levels (sharp and smooth) set to `quality` builds the same patches as
 //    Blender's adaptive refinement at that level, evaluated at the vertex's
 //    corner of its first face as Blender does.  Non-manifold vertices and
@@ -697,6 +936,7 @@ void choose_evaluation(const spia_mesh *m, const spia_adjacency *adj, const spia
     ev.bfr_corner.assign((size_t)p.osd_n, -1);
     std::vector<char> approx((size_t)p.osd_n, 0);
     bool any_approx = false;
+    Ring ring;
     for (int32_t o : wanted) {
         const int32_t lo = part.vertex(o);
         const float vs = base.GetVertexSharpness(lo);
@@ -727,20 +967,14 @@ void choose_evaluation(const spia_mesh *m, const spia_adjacency *adj, const spia
                                    base.IsVertexBoundary(lo) && ve.size() == 2;
         bool adaptive = base.IsVertexNonManifold(lo) || smooth_corner;  // Blender is not at the limit there
         if (!adaptive && (semi_sharp || dart)) {
-            // Sharpness falls by one a level: where the vertex's own
-            // features are gone by the isolation level and it is no dart,
-            // Blender's patches give the exact limit point (decayed_rows).
+            // Semi-sharp vertices of a fan that is no dart: from their one
+            // ring (ring_rows), at most `quality` levels deep.
             const int depth = (int)std::ceil(sharpest);
             const int faces = base.GetVertexFaces(lo).size();
             const bool fan = base.IsVertexBoundary(lo) ? faces >= 2 : faces >= 3 && faces == ve.size();
-            // Only for deep ones: below 4 levels Bfr's patches cost less,
-            // and where most vertices are semi-sharp the neighbourhoods of
-            // the decayed path cover the whole mesh at every level (a 1M
-            // sphere with 10% of its edges creased 0.5: 1.9 s with Bfr,
-            // over 60 s decayed).
-            if (blender && !dart && fan && depth >= 4 && depth <= opt->quality) {
-                ev.decaying.push_back(o);
-                ev.depth.push_back(depth);
+            if (blender && !dart && fan && one_ring(base, lo, ring)) {
+                ev.ring.push_back(o);
+                ev.levels.push_back(std::min(depth, opt->quality));
                 continue;
             }
             // Bfr is the faster of the two where the faces around are of
@@ -852,224 +1086,29 @@ void spatial_order(const spia_mesh *m, const Prepared &p, std::vector<int32_t> &
 }
 
 
-// The limit point of vertex c of a refined level (all faces quads) as
-// OpenSubdiv's limit masks give it, for a vertex with no semi-sharp
-// feature left: itself at a corner (sharp vertex, or three or more sharp or
-// boundary edges), (a + 4 c + b) / 6 on a crease or boundary, else
-// (n^2 c + 4 sum e + sum d) / (n (n + 5)) over its edge neighbours e and
-// the opposite corners d of its faces.  Rows of the points' stencils.
-bool limit_mask(const Far::TopologyLevel &level, Far::Index c, const std::vector<SparseStencil> &points,
-                std::vector<std::pair<int32_t, double>> &row) {
-    std::vector<std::pair<Far::Index, double>> mask;
-    Far::ConstIndexArray ve = level.GetVertexEdges(c);
-    Far::Index sharp[2];
-    int n_sharp = 0;
-    for (int k = 0; k < ve.size(); ++k) {
-        const Far::Index e = ve[k];
-        const float es = level.GetEdgeSharpness(e);
-        if (level.GetEdgeFaces(e).size() != 1 && es < kInfiniteSharpness) {
-            if (es > 0.0f) return false;
-            continue;
-        }
-        Far::ConstIndexArray ends = level.GetEdgeVertices(e);
-        if (n_sharp < 2) sharp[n_sharp] = ends[0] == c ? ends[1] : ends[0];
-        ++n_sharp;
-    }
-    const float vs = level.GetVertexSharpness(c);
-    if (vs > 0.0f && vs < kInfiniteSharpness) return false;
-    if (vs >= kInfiniteSharpness || n_sharp >= 3) {
-        mask.emplace_back(c, 1.0);
-    } else if (n_sharp == 2) {
-        mask.emplace_back(sharp[0], 1.0 / 6.0);
-        mask.emplace_back(c, 4.0 / 6.0);
-        mask.emplace_back(sharp[1], 1.0 / 6.0);
-    } else if (n_sharp == 0) {
-        Far::ConstIndexArray vf = level.GetVertexFaces(c);
-        Far::ConstLocalIndexArray where = level.GetVertexFaceLocalIndices(c);
-        const double n = (double)ve.size(), scale = 1.0 / (n * (n + 5.0));
-        if (vf.size() != ve.size() || ve.size() < 3) return false;
-        mask.emplace_back(c, n * n * scale);
-        for (int k = 0; k < ve.size(); ++k) {
-            Far::ConstIndexArray ends = level.GetEdgeVertices(ve[k]);
-            mask.emplace_back(ends[0] == c ? ends[1] : ends[0], 4.0 * scale);
-        }
-        for (int k = 0; k < vf.size(); ++k) {
-            Far::ConstIndexArray fv = level.GetFaceVertices(vf[k]);
-            if (fv.size() != 4) return false;
-            mask.emplace_back(fv[(where[k] + 2) % 4], scale);
-        }
-    } else {
-        return false;  // a dart
-    }
-    row.clear();
-    for (const auto &m : mask)
-        for (const auto &e : points[(size_t)m.first].w) row.emplace_back(e.first, m.second * e.second);
-    merge_entries(row, true);
-    return true;
-}
-
-// 6b. Vertices whose semi-sharp features (their own sharpness and their
-//     edges') have decayed within the isolation level: Blender's patches
-//     give the exact limit point there, which is the limit mask of the
-//     vertex after `depth` levels of refinement.  Each level is refined
-//     only on the faces within two rings of the vertices' children (what
-//     the next level's points near them depend on), so the cost grows with
-//     the depth, not with 4^depth; the points carry sparse stencils over the
-//     control vertices.  Batches of consecutive vertices, on the threads.
-spia_result decayed_rows(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, Prepared &p,
-                         const Evaluation &ev, HeldRows &held, spia_status *status) {
-    const int32_t count = (int32_t)ev.decaying.size();
+// 6b, on the threads: each such vertex's row from its ring.
+spia_result ring_rows(const spia_options *opt, const Prepared &p, const Part &part, const Evaluation &ev,
+                      HeldRows &held, spia_status *status) {
+    const int32_t count = (int32_t)ev.ring.size();
     if (count == 0) return SPIA_OK;
-    std::vector<int32_t> depth_of((size_t)p.osd_n, 0), order(ev.decaying);
-    for (int32_t i = 0; i < count; ++i) depth_of[(size_t)ev.decaying[(size_t)i]] = ev.depth[(size_t)i];
-    spatial_order(m, p, order);
-    // Batches of at least 64 vertices, and at most kMaxFeatureBatches of
-    // them: each costs a pass over the whole mesh to find its faces.
-    const int32_t batch_size = std::max<int32_t>(64, (count + kMaxFeatureBatches - 1) / kMaxFeatureBatches);
-    const int32_t batches = (count + batch_size - 1) / batch_size;
-    struct BatchRows {
-        std::vector<int32_t> vertex;
-        std::vector<std::vector<std::pair<int32_t, double>>> rows;  // osd numbering
-        bool failed = false;
-    };
-    std::vector<BatchRows> results((size_t)batches);
-    auto run_batch = [&](int32_t b, BatchRows &out) {
-        const int32_t first = b * batch_size, n_batch = std::min(count - first, batch_size);
-        std::vector<int32_t> marked(order.begin() + first, order.begin() + first + n_batch), depth;
-        for (int32_t o : marked) depth.push_back(depth_of[(size_t)o]);
-        Part sub;
-        spia_status local_status;
-        if (make_part(m, adj, opt, p, two_ring_faces(m, adj, p, marked), false, sub, &local_status) != SPIA_OK) {
-            out.failed = true;
-            return;
+    const Far::TopologyLevel &base = part.refiner->GetLevel(0);
+    const int32_t batch = 1024, batches = (count + batch - 1) / batch;
+    std::vector<std::vector<Entry>> rows((size_t)count);
+    std::atomic<bool> failed(false);
+    run_batches(opt->threads, batches, [&](int32_t b) {
+        Ring ring;
+        RingScratch scratch;
+        for (int32_t i = b * batch; i < std::min(count, (b + 1) * batch); ++i) {
+            const int32_t lo = part.vertex(ev.ring[(size_t)i]);
+            std::vector<Entry> &row = rows[(size_t)i];
+            if (!one_ring(base, lo, ring) ||
+                !ring_row(base, ring, base.GetVertexSharpness(lo), ev.levels[(size_t)i], p.sdc, scratch, row))
+                failed = true;
+            for (Entry &e : row) e.first = part.osd(e.first);
         }
-        // The current level's mesh: topology, sharpness, and stencils.
-        int32_t nv = (int32_t)sub.osd_of_local.size();
-        std::vector<int32_t> sizes(sub.sizes), fv(sub.fv), pairs(sub.crease_pairs), corners(sub.corner_indices);
-        std::vector<float> pair_w(sub.crease_weights), corner_w(sub.corner_weights);
-        // Each level's kept points as stencils over the previous level's
-        // points (a few weights each); a finished vertex's row is carried
-        // back through them to the control vertices.
-        std::vector<std::vector<SparseStencil>> steps;
-        std::vector<SparseStencil> identity;
-        std::vector<std::pair<int32_t, double>> scratch;
-        auto back = [&](std::vector<std::pair<int32_t, double>> &row) {
-            for (size_t l = steps.size(); l-- > 0;)
-                carry_down<int32_t>(row, steps[l], 0, INT32_MAX, 0, scratch);
-        };
-        std::vector<int32_t> at((size_t)n_batch);  // each vertex's point in the current mesh
-        for (int32_t i = 0; i < n_batch; ++i) at[(size_t)i] = sub.local_of[(size_t)marked[(size_t)i]];
-        std::vector<char> done((size_t)n_batch, 0);
-        int32_t left = n_batch;
-        for (int level = 1; left > 0; ++level) {
-            std::unique_ptr<Far::TopologyRefiner> r(create_refiner(nv, (int32_t)sizes.size(), sizes.data(), fv.data(),
-                                                                   pairs, pair_w, corners, corner_w, p.scheme, p.sdc));
-            if (!r) {
-                out.failed = true;
-                return;
-            }
-            Far::TopologyRefiner::UniformOptions uniform(1);
-            uniform.fullTopologyInLastLevel = true;
-            r->RefineUniform(uniform);
-            const Far::TopologyLevel &l0 = r->GetLevel(0), &l1 = r->GetLevel(1);
-            std::vector<SparseStencil> next((size_t)l1.GetNumVertices());
-            Far::PrimvarRefinerReal<double> primvar(*r);
-            identity.resize((size_t)nv);
-            for (int32_t i = 0; i < nv; ++i) {
-                identity[(size_t)i].w.assign(1, std::make_pair(i, 1.0));
-            }
-            SparseStencil *src = identity.data(), *dst = next.data();
-            primvar.Interpolate(1, src, dst);
-            for (SparseStencil &st : next) st.Compact();
-            std::vector<int32_t> child((size_t)n_batch, -1);
-            for (int32_t i = 0; i < n_batch; ++i) {
-                if (done[(size_t)i]) continue;
-                child[(size_t)i] = l0.GetVertexChildVertex(at[(size_t)i]);
-                if (depth[(size_t)i] != level) continue;
-                std::vector<std::pair<int32_t, double>> row;
-                if (!limit_mask(l1, child[(size_t)i], next, row)) {
-                    out.failed = true;
-                    return;
-                }
-                back(row);
-                for (auto &e : row) e.first = sub.osd_of_local[(size_t)e.first];
-                out.vertex.push_back(marked[(size_t)i]);
-                out.rows.push_back(std::move(row));
-                done[(size_t)i] = 1;
-                --left;
-            }
-            if (left == 0) break;
-            // The next mesh: the faces of level 1 within two rings of the
-            // children of the vertices not done.
-            std::vector<char> near((size_t)l1.GetNumVertices(), 0), keep((size_t)l1.GetNumFaces(), 0);
-            for (int32_t i = 0; i < n_batch; ++i) {
-                if (done[(size_t)i]) continue;
-                Far::ConstIndexArray vf = l1.GetVertexFaces(child[(size_t)i]);
-                for (int k = 0; k < vf.size(); ++k) {
-                    Far::ConstIndexArray fvs = l1.GetFaceVertices(vf[k]);
-                    for (int j = 0; j < fvs.size(); ++j) near[(size_t)fvs[j]] = 1;
-                }
-            }
-            for (int32_t u = 0; u < l1.GetNumVertices(); ++u) {
-                if (!near[(size_t)u]) continue;
-                Far::ConstIndexArray uf = l1.GetVertexFaces(u);
-                for (int k = 0; k < uf.size(); ++k) keep[(size_t)uf[k]] = 1;
-            }
-            std::vector<int32_t> local((size_t)l1.GetNumVertices(), -1);
-            std::vector<SparseStencil> kept;
-            sizes.clear();
-            fv.clear();
-            for (int32_t f = 0; f < l1.GetNumFaces(); ++f) {
-                if (!keep[(size_t)f]) continue;
-                Far::ConstIndexArray fvs = l1.GetFaceVertices(f);
-                sizes.push_back(fvs.size());
-                for (int j = 0; j < fvs.size(); ++j) {
-                    int32_t &lv = local[(size_t)fvs[j]];
-                    if (lv < 0) {
-                        lv = (int32_t)kept.size();
-                        kept.push_back(std::move(next[(size_t)fvs[j]]));
-                    }
-                    fv.push_back(lv);
-                }
-            }
-            pairs.clear();
-            pair_w.clear();
-            corners.clear();
-            corner_w.clear();
-            for (int32_t e = 0; e < l1.GetNumEdges(); ++e) {
-                const float es = l1.GetEdgeSharpness(e);
-                if (es <= 0.0f) continue;
-                Far::ConstIndexArray ev2 = l1.GetEdgeVertices(e);
-                const int32_t a = local[(size_t)ev2[0]], c = local[(size_t)ev2[1]];
-                if (a < 0 || c < 0) continue;
-                bool present = false;  // only edges of the kept faces
-                Far::ConstIndexArray ef = l1.GetEdgeFaces(e);
-                for (int k = 0; k < ef.size() && !present; ++k) present = keep[(size_t)ef[k]] != 0;
-                if (!present) continue;
-                pairs.push_back(a);
-                pairs.push_back(c);
-                pair_w.push_back(es);
-            }
-            for (int32_t u = 0; u < l1.GetNumVertices(); ++u) {
-                const float us = l1.GetVertexSharpness(u);
-                if (us > 0.0f && local[(size_t)u] >= 0) {
-                    corners.push_back(local[(size_t)u]);
-                    corner_w.push_back(us);
-                }
-            }
-            for (int32_t i = 0; i < n_batch; ++i)
-                if (!done[(size_t)i]) at[(size_t)i] = local[(size_t)child[(size_t)i]];
-            nv = (int32_t)kept.size();
-            steps.push_back(std::move(kept));
-        }
-    };
-    run_batches(opt->threads, batches, [&](int32_t b) { run_batch(b, results[(size_t)b]); },
-                [&](int32_t b) { results[(size_t)b].failed = true; });
-    for (BatchRows &out : results)
-        if (out.failed)
-            return spia__fail(status, SPIA_ERROR_TOPOLOGY, -1, "OpenSubdiv rejected the topology around semi-sharp creases");
-    for (BatchRows &out : results)
-        for (size_t r = 0; r < out.vertex.size(); ++r) held.hold(p, out.vertex[r], out.rows[r]);
+    }, [&](int32_t) { failed = true; });
+    if (failed) return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "a semi-sharp vertex's ring masks failed");
+    for (int32_t i = 0; i < count; ++i) held.hold(p, ev.ring[(size_t)i], rows[(size_t)i]);
     return SPIA_OK;
 }
 
@@ -1605,7 +1644,7 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
         choose_evaluation(m, adj, opt, p, part, wanted, ev);
         r = adaptive_rows(m, adj, opt, p, ev, held, status);
         if (r != SPIA_OK) return r;
-        r = decayed_rows(m, adj, opt, p, ev, held, status);
+        r = ring_rows(opt, p, part, ev, held, status);
         if (r != SPIA_OK) return r;
     }
     // Vertices no face uses, and the adaptive rows.
