@@ -652,8 +652,6 @@ struct Evaluation {
     int32_t adaptive_count = 0;
 };
 
-// Whether a vertex of one of the faces around vertex v has more than 12
-// faces.
 // 6b. Semi-sharp vertices (their own sharpness or their edges') of manifold
 //     fans, darts excepted.  Blender's patch corner there is the limit mask
 //     of the vertex at level min(depth, quality), depth = ceil(its
@@ -778,13 +776,12 @@ struct RingMask {
 };
 
 struct RingScratch {
-    std::vector<float> sharpness;
-    std::vector<double> vertex_masks, edge_masks, g, next;
+    std::vector<float> sharpness, child;
+    std::vector<double> vertex_masks, edge_masks, g, next, centre_of_face;
 };
 
 // The row of the ring's centre at `levels` levels, over the base level's
 // vertices; false where a mask is not of the kind expected.
-
 bool ring_row(const Far::TopologyLevel &base, const Ring &ring, float vertex_sharpness, int levels,
               const Sdc::Options &sdc, RingScratch &s, std::vector<Entry> &row) {
     const Sdc::Scheme<Sdc::SCHEME_CATMARK> scheme(sdc);
@@ -794,8 +791,8 @@ bool ring_row(const Far::TopologyLevel &base, const Ring &ring, float vertex_sha
     s.sharpness.assign(ring.sharpness.begin(), ring.sharpness.end());
     s.vertex_masks.assign(vm * (size_t)levels, 0.0);
     s.edge_masks.assign(em * (size_t)n * (size_t)levels, 0.0);
-    std::vector<float> &es = s.sharpness;
-    std::vector<float> child((size_t)n);
+    std::vector<float> &es = s.sharpness, &child = s.child;
+    child.resize((size_t)n);
     int sizes[2];
     float vs = vertex_sharpness;
     for (int level = 0; level < levels; ++level) {
@@ -847,10 +844,10 @@ bool ring_row(const Far::TopologyLevel &base, const Ring &ring, float vertex_sha
         if (mask.nf == 0) std::fill(s.g.begin() + 1 + n, s.g.end(), 0.0);
     }
     // Carried back level by level: g holds the weights on the level's
-    // ring (centre, edge ends, far corners), `face` those on its new face
-    // centres.
-    std::vector<double> &g = s.g, &next = s.next;
-    std::vector<double> centre_of_face((size_t)nf);
+    // ring (centre, edge ends, far corners), centre_of_face those on the
+    // centres of its faces, the next level's far corners.
+    std::vector<double> &g = s.g, &next = s.next, &centre_of_face = s.centre_of_face;
+    centre_of_face.resize((size_t)nf);
     for (int level = levels - 1; level >= 0; --level) {
         const double *w = s.vertex_masks.data() + vm * (size_t)level;
         const double gc = g[0];
@@ -891,6 +888,8 @@ bool ring_row(const Far::TopologyLevel &base, const Ring &ring, float vertex_sha
     return true;
 }
 
+// Whether a vertex of one of the faces around vertex v has more than 12
+// faces.
 bool next_to_high_valence(const Far::TopologyLevel &base, Far::Index v) {
     Far::ConstIndexArray vf = base.GetVertexFaces(v);
     for (int k = 0; k < vf.size(); ++k) {
