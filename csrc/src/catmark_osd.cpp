@@ -888,6 +888,103 @@ bool ring_row(const Far::TopologyLevel &base, const Ring &ring, float vertex_sha
     return true;
 }
 
+// 6c. Non-manifold vertices.  Far makes every one infinitely sharp but a
+//     vertex on a non-manifold crease (see on_nonmanifold_crease); Blender's
+//     patch corner there is built from the face's span of faces between
+//     two singular edges, sharp when the vertex is.  An infinitely sharp
+//     vertex stays where it is at every level and is its own patch corner:
+//     the identity.  A vertex on a crease whose every fan runs from one of
+//     its two non-manifold edges to the other (and no other edge of which
+//     is infinitely sharp) has a span bounded by those two edges: its
+//     points at the next level (itself and the two edges' midpoints) depend
+//     on those three alone, with Sdc's corner, crease and transitional
+//     masks while semi-sharp features decay, and the patch corner is the
+//     crease's limit mask at level min(depth, quality), semi-sharpness left
+//     there taken as smooth, as for the rings of step 6b.
+bool nonmanifold_crease_eligible(const Far::TopologyLevel &base, Far::Index v) {
+    Far::ConstIndexArray ve = base.GetVertexEdges(v);
+    for (int i = 0; i < ve.size(); ++i)
+        if (!base.IsEdgeNonManifold(ve[i]) && base.GetEdgeSharpness(ve[i]) >= kInfiniteSharpness) return false;
+    return on_nonmanifold_crease(base, v);
+}
+
+bool nonmanifold_row(const Far::TopologyLevel &base, Far::Index v, int levels, const Sdc::Options &sdc,
+                     RingScratch &s, std::vector<Entry> &row) {
+    row.clear();
+    float vs = base.GetVertexSharpness(v);
+    if (vs >= kInfiniteSharpness) {
+        row.emplace_back(v, 1.0);
+        return true;
+    }
+    const Sdc::Scheme<Sdc::SCHEME_CATMARK> scheme(sdc);
+    const Sdc::Crease crease(sdc);
+    Far::ConstIndexArray ve = base.GetVertexEdges(v);
+    const int n = ve.size(), nf = base.GetVertexFaces(v).size();
+    int side[2] = {-1, -1};  // the two non-manifold edges' positions in ve
+    Far::Index far_end[2] = {-1, -1};
+    s.sharpness.resize((size_t)n);
+    s.child.resize((size_t)n);
+    for (int i = 0; i < n; ++i) {
+        s.sharpness[(size_t)i] = base.GetEdgeSharpness(ve[i]);
+        if (!base.IsEdgeNonManifold(ve[i])) continue;
+        if (side[1] >= 0 || s.sharpness[(size_t)i] < kInfiniteSharpness) return false;
+        const int k = side[0] >= 0;
+        side[k] = i;
+        Far::ConstIndexArray ends = base.GetEdgeVertices(ve[i]);
+        far_end[k] = ends[0] == v ? ends[1] : ends[0];
+    }
+    if (side[1] < 0) return false;
+    // Level points (the vertex, then its neighbours along the two edges)
+    // as weights on the base level's three.
+    double point[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}}, next[3][3];
+    s.vertex_masks.resize(1 + (size_t)n + (size_t)nf);
+    double *w = s.vertex_masks.data();
+    std::vector<float> &es = s.sharpness, &child = s.child;
+    // The vertex's mask as weights on the three points; false where it
+    // weighs anything else.
+    auto on_three = [&](const RingMask &mask, double out[3]) {
+        if (mask.nv != 1 || mask.nf != 0 || (mask.ne != 0 && mask.ne != n)) return false;
+        out[0] = w[0];
+        out[1] = out[2] = 0.0;
+        for (int i = 0; i < mask.ne; ++i) {
+            if (i == side[0]) out[1] = w[1 + i];
+            else if (i == side[1]) out[2] = w[1 + i];
+            else if (w[1 + i] != 0.0) return false;
+        }
+        return true;
+    };
+    double m3[3];
+    for (int level = 0; level < levels; ++level) {
+        RingVertex vertex{n, nf, vs, es.data()};
+        RingMask mask(w, w + 1, w + 1 + n);
+        crease.SubdivideEdgeSharpnessesAroundVertex(n, es.data(), child.data());
+        const float child_vs = crease.SubdivideVertexSharpness(vs);
+        scheme.ComputeVertexVertexMask(vertex, mask, crease.DetermineVertexVertexRule(vs, n, es.data()),
+                                       crease.DetermineVertexVertexRule(child_vs, n, child.data()));
+        if (!on_three(mask, m3)) return false;
+        for (int c = 0; c < 3; ++c) {
+            next[0][c] = m3[0] * point[0][c] + m3[1] * point[1][c] + m3[2] * point[2][c];
+            for (int k = 1; k < 3; ++k) next[k][c] = 0.5 * (point[0][c] + point[k][c]);  // sharp edges' midpoints
+        }
+        std::memcpy(point, next, sizeof point);
+        es.swap(child);
+        vs = child_vs;
+    }
+    for (float &x : es)
+        if (x < kInfiniteSharpness) x = 0.0f;
+    RingVertex vertex{n, nf, 0.0f, es.data()};
+    RingMask mask(w, w + 1, w + 1 + n);
+    const Sdc::Crease::Rule rule = crease.DetermineVertexVertexRule(0.0f, n, es.data());
+    if (rule != Sdc::Crease::RULE_CREASE) return false;
+    scheme.ComputeVertexLimitMask(vertex, mask, rule);
+    if (!on_three(mask, m3)) return false;
+    const Far::Index column[3] = {v, far_end[0], far_end[1]};
+    for (int c = 0; c < 3; ++c)
+        row.emplace_back(column[c], m3[0] * point[0][c] + m3[1] * point[1][c] + m3[2] * point[2][c]);
+    merge_entries(row, true);
+    return true;
+}
+
 // Whether a vertex of one of the faces around vertex v has more than 12
 // faces.
 bool next_to_high_valence(const Far::TopologyLevel &base, Far::Index v) {
@@ -907,7 +1004,9 @@ bool next_to_high_valence(const Far::TopologyLevel &base, Far::Index v) {
 //    semi-sharp vertices Bfr with its approximation
 //    levels (sharp and smooth) set to `quality` builds the same patches as
 //    Blender's adaptive refinement at that level, evaluated at the vertex's
-//    corner of its first face as Blender does.  Non-manifold vertices and
+//    corner of its first face as Blender does.  Non-manifold vertices that
+//    are infinitely sharp or on a crease between sheets take their row
+//    from the crease (step 6c).  The other non-manifold vertices and
 //    smooth valence-2 boundary corners go through the adaptive
 //    LimitStencilTableFactory, on their neighbourhood only, as Blender
 //    builds it (Bfr does not reproduce those).  Where the limit point has a
@@ -955,16 +1054,29 @@ void choose_evaluation(const spia_mesh *m, const spia_adjacency *adj, const spia
                 sharpest = std::max(sharpest, es);
             }
         }
-        // Darts (one infinitely sharp edge at a manifold vertex) and every
-        // non-manifold vertex: Blender's patches there do not reproduce the
-        // closed-form corner or crease masks (measured on the dragon scan,
-        // up to 1.3e-4 of the diagonal at vertices with 7 to 12 faces).
+        // Darts (one infinitely sharp edge at a manifold vertex) and the
+        // non-manifold vertices that are neither infinitely sharp nor on a
+        // crease whose fans all run between its two edges (OpenSubdiv 3.6.0
+        // leaves a fin hanging from one edge smooth): Blender's patches
+        // there do not reproduce the closed-form corner or crease masks
+        // (measured on the dragon scan, up to 1.3e-4 of the diagonal at
+        // vertices with 7 to 12 faces).
         // Darts and semi-sharp vertices take Bfr at the isolation level
         // (Catmull-Clark only: Loop is taken at its exact limit).
         const bool dart = infinitely_sharp == 1;
         const bool smooth_corner = blender && opt->boundary_smooth == SPIA_BOUNDARY_SMOOTH_ALL &&
                                    base.IsVertexBoundary(lo) && ve.size() == 2;
-        bool adaptive = base.IsVertexNonManifold(lo) || smooth_corner;  // Blender is not at the limit there
+        bool adaptive = smooth_corner;  // Blender is not at the limit there
+        if (!adaptive && base.IsVertexNonManifold(lo)) {
+            // Infinitely sharp ones, and those on a crease between two
+            // sheets: from the crease (step 6c); the others adaptive.
+            if (blender && (vs >= kInfiniteSharpness || (infinitely_sharp == 2 && nonmanifold_crease_eligible(base, lo)))) {
+                ev.ring.push_back(o);
+                ev.levels.push_back(vs >= kInfiniteSharpness ? 0 : std::min((int)std::ceil(sharpest), opt->quality));
+                continue;
+            }
+            adaptive = true;
+        }
         if (!adaptive && (semi_sharp || dart)) {
             // Semi-sharp vertices of a fan that is no dart: from their one
             // ring (ring_rows), at most `quality` levels deep.
@@ -1085,7 +1197,8 @@ void spatial_order(const spia_mesh *m, const Prepared &p, std::vector<int32_t> &
 }
 
 
-// 6b, on the threads: each such vertex's row from its ring.
+// 6b and 6c, on the threads: each such vertex's row from its ring, or
+// from its crease where it is non-manifold.
 spia_result ring_rows(const spia_options *opt, const Prepared &p, const Part &part, const Evaluation &ev,
                       HeldRows &held, spia_status *status) {
     const int32_t count = (int32_t)ev.ring.size();
@@ -1100,13 +1213,15 @@ spia_result ring_rows(const spia_options *opt, const Prepared &p, const Part &pa
         for (int32_t i = b * batch; i < std::min(count, (b + 1) * batch); ++i) {
             const int32_t lo = part.vertex(ev.ring[(size_t)i]);
             std::vector<Entry> &row = rows[(size_t)i];
-            if (!one_ring(base, lo, ring) ||
-                !ring_row(base, ring, base.GetVertexSharpness(lo), ev.levels[(size_t)i], p.sdc, scratch, row))
+            if (base.IsVertexNonManifold(lo)
+                    ? !nonmanifold_row(base, lo, ev.levels[(size_t)i], p.sdc, scratch, row)
+                    : !one_ring(base, lo, ring) ||
+                          !ring_row(base, ring, base.GetVertexSharpness(lo), ev.levels[(size_t)i], p.sdc, scratch, row))
                 failed = true;
             for (Entry &e : row) e.first = part.osd(e.first);
         }
     }, [&](int32_t) { failed = true; });
-    if (failed) return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "a semi-sharp vertex's ring masks failed");
+    if (failed) return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "a sharp feature's ring masks failed");
     for (int32_t i = 0; i < count; ++i) held.hold(p, ev.ring[(size_t)i], rows[(size_t)i]);
     return SPIA_OK;
 }

@@ -468,6 +468,16 @@ int main(int argc, char **argv) {
         CHECK(std::count(sharpen.begin(), sharpen.end(), true) == 0, "book: nothing is sharpened");
     }
     compare_all(book, "three sheets along a spine", {1, 3}, {0, 30700});
+    // Semi-sharp features at the spine's vertices: a crease across the
+    // spine on each sheet, vertex creases on two spine vertices (one at an
+    // end, one inside), so that the crease vertices' rules go from corner
+    // to crease through the levels, decayed within the isolation level
+    // (10) and not (1, 2, 3).
+    for (int sheet = 0; sheet < 3; ++sheet) tmesh_edge(&book, 1, 4 + 8 * sheet + 1, 0.3f + 0.3f * sheet);
+    tmesh_edge(&book, 2, 4 + 2, 0.9f);
+    tmesh_vertex_crease(&book, 2, 0.55f);
+    tmesh_vertex_crease(&book, 3, 0.8f);
+    compare_all(book, "three sheets along a spine, creased", {1, 2, 3, 10}, {0, 30700});
     tmesh_free(&book);
 
     // Strips of two quads apart from each other: four smooth corners each,
@@ -617,6 +627,11 @@ int main(int argc, char **argv) {
         // quality the Blender tests use, and 1.
         compare(cut, "dragon around its non-manifold edges", 3, false, true, 0);
         for (int q : {1, 3}) compare(cut, "dragon around its non-manifold edges", q, false, true, 30700);
+        // Random creases there: semi-sharp features at vertices on
+        // non-manifold creases, taken from the crease (step 6c).
+        add_random_creases(&cut, 0.3, 11);
+        for (int q : {2, 6}) compare(cut, "dragon around its non-manifold edges, creased", q, false, true, 0);
+        compare(cut, "dragon around its non-manifold edges, creased", 2, false, true, 30700);
         printf("%-40s matches OpenSubdiv's full adaptive stencils\n", "dragon around its non-manifold edges");
         tmesh_free(&cut);
         tmesh_free(&d);
