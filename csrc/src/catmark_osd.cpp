@@ -889,23 +889,70 @@ bool ring_row(const Far::TopologyLevel &base, const Ring &ring, float vertex_sha
 }
 
 // 6c. Non-manifold vertices.  Far makes every one infinitely sharp but a
-//     vertex on a non-manifold crease (see on_nonmanifold_crease); Blender's
-//     patch corner there is built from the face's span of faces between
-//     two singular edges, sharp when the vertex is.  An infinitely sharp
-//     vertex stays where it is at every level and is its own patch corner:
-//     the identity.  A vertex on a crease whose every fan runs from one of
-//     its two non-manifold edges to the other (and no other edge of which
-//     is infinitely sharp) has a span bounded by those two edges: its
-//     points at the next level (itself and the two edges' midpoints) depend
-//     on those three alone, with Sdc's corner, crease and transitional
-//     masks while semi-sharp features decay, and the patch corner is the
-//     crease's limit mask at level min(depth, quality), semi-sharpness left
-//     there taken as smooth, as for the rings of step 6b.
-bool nonmanifold_crease_eligible(const Far::TopologyLevel &base, Far::Index v) {
+//     vertex on a non-manifold crease (two non-manifold edges, no boundary,
+//     more faces than edges; see on_nonmanifold_crease).  Blender's patch
+//     corner is built from the span of faces, joined across manifold edges,
+//     around the vertex's first face, between two singular edges; it is
+//     sharp when the vertex is.  An infinitely sharp vertex stays where it
+//     is at every level and is its own patch corner: the identity.  On a
+//     crease (where no other edge is infinitely sharp), the vertex's points
+//     at the next level (itself and its two non-manifold edges' midpoints)
+//     depend on those three alone, with Sdc's corner, crease and
+//     transitional masks while semi-sharp features decay; the span is
+//     bounded by the two edges, or twice by one of them (a fin hanging from
+//     it), and the patch corner is the boundary limit mask over the span's
+//     ends at the isolation level, semi-sharpness left there taken as
+//     smooth, as for the rings of step 6b.  Where the ends are the two
+//     edges, that mask is the crease's own limit mask, and the same at
+//     every level once the features have decayed.
+
+// The edges that bound the span around v's first face: ends[0] reached
+// from its edge leaving v, ends[1] from its edge arriving; false where a
+// walk meets an edge with other than two faces or never ends.
+bool span_ends(const Far::TopologyLevel &base, Far::Index v, Far::Index ends[2]) {
+    Far::ConstIndexArray vf = base.GetVertexFaces(v);
+    Far::ConstLocalIndexArray where = base.GetVertexFaceLocalIndices(v);
+    int first = 0;
+    for (int j = 1; j < vf.size(); ++j)
+        if (vf[j] < vf[first]) first = j;
+    Far::ConstIndexArray fe = base.GetFaceEdges(vf[first]);
+    const int k = fe.size(), c = where[first];
+    const Far::Index start[2] = {fe[c], fe[(c + k - 1) % k]};
+    for (int side = 0; side < 2; ++side) {
+        Far::Index e = start[side], f = vf[first];
+        for (int steps = 0; !base.IsEdgeNonManifold(e); ++steps) {
+            Far::ConstIndexArray ef = base.GetEdgeFaces(e);
+            if (steps > vf.size() || ef.size() != 2) return false;
+            f = ef[0] == f ? ef[1] : ef[0];
+            Far::ConstIndexArray ge = base.GetFaceEdges(f), gv = base.GetFaceVertices(f);
+            const int n = ge.size();
+            int j = 0;
+            while (j < n && ge[j] != e) ++j;
+            if (j == n) return false;
+            e = gv[j] == v ? ge[(j + n - 1) % n] : ge[(j + 1) % n];  // f's other edge at v
+        }
+        ends[side] = e;
+    }
+    return true;
+}
+
+// Whether step 6c takes v (Catmull-Clark as Blender sets it up), and how
+// many levels deep: `depth` levels for an infinitely sharp vertex (none)
+// or a span between the two edges, the isolation level for a span at one.
+bool nonmanifold_levels(const Far::TopologyLevel &base, Far::Index v, int depth, int quality, int &levels) {
+    levels = 0;
+    if (base.GetVertexSharpness(v) >= kInfiniteSharpness) return true;
     Far::ConstIndexArray ve = base.GetVertexEdges(v);
-    for (int i = 0; i < ve.size(); ++i)
-        if (!base.IsEdgeNonManifold(ve[i]) && base.GetEdgeSharpness(ve[i]) >= kInfiniteSharpness) return false;
-    return on_nonmanifold_crease(base, v);
+    int crease = 0;
+    for (int i = 0; i < ve.size(); ++i) {
+        if (base.IsEdgeNonManifold(ve[i])) ++crease;
+        else if (base.GetEdgeFaces(ve[i]).size() != 2 || base.GetEdgeSharpness(ve[i]) >= kInfiniteSharpness)
+            return false;
+    }
+    Far::Index ends[2];
+    if (crease != 2 || !span_ends(base, v, ends)) return false;
+    levels = ends[0] != ends[1] ? std::min(depth, quality) : quality;
+    return true;
 }
 
 bool nonmanifold_row(const Far::TopologyLevel &base, Far::Index v, int levels, const Sdc::Options &sdc,
@@ -933,27 +980,14 @@ bool nonmanifold_row(const Far::TopologyLevel &base, Far::Index v, int levels, c
         Far::ConstIndexArray ends = base.GetEdgeVertices(ve[i]);
         far_end[k] = ends[0] == v ? ends[1] : ends[0];
     }
-    if (side[1] < 0) return false;
+    Far::Index ends[2];
+    if (side[1] < 0 || !span_ends(base, v, ends)) return false;
     // Level points (the vertex, then its neighbours along the two edges)
     // as weights on the base level's three.
     double point[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}}, next[3][3];
     s.vertex_masks.resize(1 + (size_t)n + (size_t)nf);
     double *w = s.vertex_masks.data();
     std::vector<float> &es = s.sharpness, &child = s.child;
-    // The vertex's mask as weights on the three points; false where it
-    // weighs anything else.
-    auto on_three = [&](const RingMask &mask, double out[3]) {
-        if (mask.nv != 1 || mask.nf != 0 || (mask.ne != 0 && mask.ne != n)) return false;
-        out[0] = w[0];
-        out[1] = out[2] = 0.0;
-        for (int i = 0; i < mask.ne; ++i) {
-            if (i == side[0]) out[1] = w[1 + i];
-            else if (i == side[1]) out[2] = w[1 + i];
-            else if (w[1 + i] != 0.0) return false;
-        }
-        return true;
-    };
-    double m3[3];
     for (int level = 0; level < levels; ++level) {
         RingVertex vertex{n, nf, vs, es.data()};
         RingMask mask(w, w + 1, w + 1 + n);
@@ -961,7 +995,14 @@ bool nonmanifold_row(const Far::TopologyLevel &base, Far::Index v, int levels, c
         const float child_vs = crease.SubdivideVertexSharpness(vs);
         scheme.ComputeVertexVertexMask(vertex, mask, crease.DetermineVertexVertexRule(vs, n, es.data()),
                                        crease.DetermineVertexVertexRule(child_vs, n, child.data()));
-        if (!on_three(mask, m3)) return false;
+        // The vertex's mask weighs only itself and the two edges' ends.
+        if (mask.nv != 1 || mask.nf != 0 || (mask.ne != 0 && mask.ne != n)) return false;
+        double m3[3] = {w[0], 0.0, 0.0};
+        for (int i = 0; i < mask.ne; ++i) {
+            if (i == side[0]) m3[1] = w[1 + i];
+            else if (i == side[1]) m3[2] = w[1 + i];
+            else if (w[1 + i] != 0.0) return false;
+        }
         for (int c = 0; c < 3; ++c) {
             next[0][c] = m3[0] * point[0][c] + m3[1] * point[1][c] + m3[2] * point[2][c];
             for (int k = 1; k < 3; ++k) next[k][c] = 0.5 * (point[0][c] + point[k][c]);  // sharp edges' midpoints
@@ -970,17 +1011,13 @@ bool nonmanifold_row(const Far::TopologyLevel &base, Far::Index v, int levels, c
         es.swap(child);
         vs = child_vs;
     }
-    for (float &x : es)
-        if (x < kInfiniteSharpness) x = 0.0f;
-    RingVertex vertex{n, nf, 0.0f, es.data()};
-    RingMask mask(w, w + 1, w + 1 + n);
-    const Sdc::Crease::Rule rule = crease.DetermineVertexVertexRule(0.0f, n, es.data());
-    if (rule != Sdc::Crease::RULE_CREASE) return false;
-    scheme.ComputeVertexLimitMask(vertex, mask, rule);
-    if (!on_three(mask, m3)) return false;
+    // The boundary limit mask over the span: 4/6 on the vertex, 1/6 on
+    // each end's point.
+    double limit[3] = {4.0 / 6.0, 0.0, 0.0};
+    for (Far::Index e : ends) limit[e == ve[side[0]] ? 1 : 2] += 1.0 / 6.0;
     const Far::Index column[3] = {v, far_end[0], far_end[1]};
     for (int c = 0; c < 3; ++c)
-        row.emplace_back(column[c], m3[0] * point[0][c] + m3[1] * point[1][c] + m3[2] * point[2][c]);
+        row.emplace_back(column[c], limit[0] * point[0][c] + limit[1] * point[1][c] + limit[2] * point[2][c]);
     merge_entries(row, true);
     return true;
 }
@@ -1005,8 +1042,8 @@ bool next_to_high_valence(const Far::TopologyLevel &base, Far::Index v) {
 //    levels (sharp and smooth) set to `quality` builds the same patches as
 //    Blender's adaptive refinement at that level, evaluated at the vertex's
 //    corner of its first face as Blender does.  Non-manifold vertices that
-//    are infinitely sharp or on a crease between sheets take their row
-//    from the crease (step 6c).  The other non-manifold vertices and
+//    are infinitely sharp or on a non-manifold crease take their row from
+//    the crease (step 6c).  The other non-manifold vertices and
 //    smooth valence-2 boundary corners go through the adaptive
 //    LimitStencilTableFactory, on their neighbourhood only, as Blender
 //    builds it (Bfr does not reproduce those).  Where the limit point has a
@@ -1054,13 +1091,11 @@ void choose_evaluation(const spia_mesh *m, const spia_adjacency *adj, const spia
                 sharpest = std::max(sharpest, es);
             }
         }
-        // Darts (one infinitely sharp edge at a manifold vertex) and the
-        // non-manifold vertices that are neither infinitely sharp nor on a
-        // crease whose fans all run between its two edges (OpenSubdiv 3.6.0
-        // leaves a fin hanging from one edge smooth): Blender's patches
-        // there do not reproduce the closed-form corner or crease masks
-        // (measured on the dragon scan, up to 1.3e-4 of the diagonal at
-        // vertices with 7 to 12 faces).
+        // Darts (one infinitely sharp edge at a manifold vertex) and
+        // non-manifold vertices: Blender's patches there do not reproduce
+        // the closed-form corner or crease masks (measured on the dragon
+        // scan, up to 1.3e-4 of the diagonal at vertices with 7 to 12 faces,
+        // fins hanging from one edge; step 6c).
         // Darts and semi-sharp vertices take Bfr at the isolation level
         // (Catmull-Clark only: Loop is taken at its exact limit).
         const bool dart = infinitely_sharp == 1;
@@ -1068,11 +1103,12 @@ void choose_evaluation(const spia_mesh *m, const spia_adjacency *adj, const spia
                                    base.IsVertexBoundary(lo) && ve.size() == 2;
         bool adaptive = smooth_corner;  // Blender is not at the limit there
         if (!adaptive && base.IsVertexNonManifold(lo)) {
-            // Infinitely sharp ones, and those on a crease between two
-            // sheets: from the crease (step 6c); the others adaptive.
-            if (blender && (vs >= kInfiniteSharpness || (infinitely_sharp == 2 && nonmanifold_crease_eligible(base, lo)))) {
+            // Infinitely sharp ones and those on a non-manifold crease
+            // from the crease (step 6c); the others adaptive.
+            int levels = 0;
+            if (blender && nonmanifold_levels(base, lo, (int)std::ceil(sharpest), opt->quality, levels)) {
                 ev.ring.push_back(o);
-                ev.levels.push_back(vs >= kInfiniteSharpness ? 0 : std::min((int)std::ceil(sharpest), opt->quality));
+                ev.levels.push_back(levels);
                 continue;
             }
             adaptive = true;
