@@ -644,7 +644,7 @@ struct HeldRows {
 
 // How each vertex that needs OpenSubdiv is evaluated (step 5).
 struct Evaluation {
-    std::vector<char> adaptive;       // per osd vertex: step 7
+    std::vector<char> adaptive;       // per osd vertex: step 7 at the isolation level (1) or at the limit (2)
     std::vector<int32_t> bfr_corner;  // per osd vertex: the corner Bfr evaluates it at (step 10), or -1
     std::vector<char> level_face;     // per mesh face: Bfr at the isolation level (empty if none)
     std::vector<int32_t> ring;        // osd vertices evaluated on their one ring (step 6b)
@@ -1137,6 +1137,13 @@ void choose_evaluation(const spia_mesh *m, const spia_adjacency *adj, const spia
                 int64_t c = adj->corner_of[i];
                 if (clean_face(adj->face_of_corner[c])) ev.bfr_corner[o] = (int32_t)c;
             }
+            // No clean face: Far's patches instead, which at a vertex with
+            // a closed form give it at any level (step 7 takes the first).
+            if (ev.bfr_corner[o] < 0 && blender && !approx[o]) {
+                ev.adaptive[o] = 2;
+                ++ev.adaptive_count;
+                continue;
+            }
             adaptive = ev.bfr_corner[o] < 0;
         }
         if (adaptive) {
@@ -1270,21 +1277,37 @@ spia_result ring_rows(const spia_options *opt, const Prepared &p, const Part &pa
 //    vertices, each with its own sub-mesh, so that OpenSubdiv's tables
 //    (which hold every refined vertex) stay small, and batches run on the
 //    threads.  The batches (consecutive along a Morton curve, spatial_order)
-//    do not depend on the thread count.
+//    do not depend on the thread count.  Vertices whose limit point Far's
+//    patches give at any level (ev.adaptive 2: smooth ones Bfr cannot take)
+//    are isolated one level deep only, in batches of their own: next to
+//    non-manifold vertices, which are isolated as deep as asked, ten levels
+//    cost seconds.
 spia_result adaptive_rows(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, Prepared &p,
                           const Evaluation &ev, HeldRows &held, spia_status *status) {
     const int32_t osd_n = p.osd_n;
     const bool blender = p.blender;
-    std::vector<int32_t> features;
-    features.reserve((size_t)ev.adaptive_count);
-    for (int32_t o = 0; o < osd_n; ++o)
-        if (ev.adaptive[o]) features.push_back(o);
-    const int32_t feature_count = (int32_t)features.size();
+    const int32_t feature_count = ev.adaptive_count;
     if (feature_count == 0) return SPIA_OK;
-    spatial_order(m, p, features);
     const int32_t batch_size =
         std::max<int32_t>(kFeatureBatch, (feature_count + kMaxFeatureBatches - 1) / kMaxFeatureBatches);
-    const int32_t batches = (feature_count + batch_size - 1) / batch_size;
+    struct Batch {
+        int32_t first, count, level;
+    };
+    std::vector<int32_t> features, group;  // each group spatially ordered, in batches of its own
+    std::vector<Batch> batch_list;
+    features.reserve((size_t)feature_count);
+    for (int kind = 1; kind <= 2; ++kind) {
+        group.clear();
+        for (int32_t o = 0; o < osd_n; ++o)
+            if (ev.adaptive[o] == kind) group.push_back(o);
+        spatial_order(m, p, group);
+        for (size_t i = 0; i < group.size(); i += (size_t)batch_size)
+            batch_list.push_back(Batch{(int32_t)(features.size() + i),
+                                       (int32_t)std::min(group.size() - i, (size_t)batch_size),
+                                       kind == 1 ? opt->quality : 1});
+        features.insert(features.end(), group.begin(), group.end());
+    }
+    const int32_t batches = (int32_t)batch_list.size();
     struct BatchRows {
         std::vector<int32_t> vertex;  // osd numbering, one per row
         std::vector<int64_t> start;   // rows' first entries, plus the end
@@ -1296,8 +1319,8 @@ spia_result adaptive_rows(const spia_mesh *m, const spia_adjacency *adj, const s
     };
     std::vector<BatchRows> results((size_t)batches);
     auto run_batch = [&](int32_t b, BatchRows &out) {
-        const int32_t first_feature = b * batch_size;
-        const int32_t batch_count = std::min(feature_count - first_feature, batch_size);
+        const int32_t first_feature = batch_list[(size_t)b].first;
+        const int32_t batch_count = batch_list[(size_t)b].count;
         const int32_t *batch = features.data() + first_feature;
         auto failed = [&](spia_result code, int64_t index, const char *text, int value, int value2) {
             out.code = code;
@@ -1347,7 +1370,7 @@ spia_result adaptive_rows(const spia_mesh *m, const spia_adjacency *adj, const s
         }
         std::sort(feature_faces.begin(), feature_faces.end());
         feature_faces.erase(std::unique(feature_faces.begin(), feature_faces.end()), feature_faces.end());
-        Far::TopologyRefiner::AdaptiveOptions adaptive(opt->quality);
+        Far::TopologyRefiner::AdaptiveOptions adaptive(batch_list[(size_t)b].level);
         adaptive.useInfSharpPatch = true;
         adaptive.considerFVarChannels = false;
         sub.refiner->RefineAdaptive(adaptive, Far::ConstIndexArray(feature_faces.data(), (int)feature_faces.size()));
