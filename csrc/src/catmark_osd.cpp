@@ -644,7 +644,7 @@ struct HeldRows {
 
 // How each vertex that needs OpenSubdiv is evaluated (step 5).
 struct Evaluation {
-    std::vector<char> adaptive;       // per osd vertex: step 7 at the isolation level (1) or at the limit (2)
+    std::vector<char> adaptive;       // per osd vertex: step 7's level for it, 0 for none
     std::vector<int32_t> bfr_corner;  // per osd vertex: the corner Bfr evaluates it at (step 10), or -1
     std::vector<char> level_face;     // per mesh face: Bfr at the isolation level (empty if none)
     std::vector<int32_t> ring;        // osd vertices evaluated on their one ring (step 6b)
@@ -1102,11 +1102,21 @@ void choose_evaluation(const spia_mesh *m, const spia_adjacency *adj, const spia
         const bool smooth_corner = blender && opt->boundary_smooth == SPIA_BOUNDARY_SMOOTH_ALL &&
                                    base.IsVertexBoundary(lo) && ve.size() == 2;
         bool adaptive = smooth_corner;  // Blender is not at the limit there
+        // Where step 7 takes it, the level that gives Blender's patch
+        // corner: the isolation level where that depends on it (smooth
+        // corners, darts, non-manifold vertices), else the level by which
+        // the semi-sharp features have decayed (and at least 1), from
+        // which on the vertex is smooth and its patch corner is its limit
+        // point at any level; next to non-manifold vertices, which are
+        // isolated as deep as asked, ten levels cost seconds.
+        const int depth = (int)std::ceil(sharpest);
+        const bool at_quality = !blender || smooth_corner || dart || base.IsVertexNonManifold(lo);
+        const int adaptive_level = at_quality ? opt->quality : std::max(1, std::min(depth, opt->quality));
         if (!adaptive && base.IsVertexNonManifold(lo)) {
             // Infinitely sharp ones and those on a non-manifold crease
             // from the crease (step 6c); the others adaptive.
             int levels = 0;
-            if (blender && nonmanifold_levels(base, lo, (int)std::ceil(sharpest), opt->quality, levels)) {
+            if (blender && nonmanifold_levels(base, lo, depth, opt->quality, levels)) {
                 ev.ring.push_back(o);
                 ev.levels.push_back(levels);
                 continue;
@@ -1116,7 +1126,6 @@ void choose_evaluation(const spia_mesh *m, const spia_adjacency *adj, const spia
         if (!adaptive && (semi_sharp || dart)) {
             // Semi-sharp vertices of a fan that is no dart: from their one
             // ring (ring_rows), at most `quality` levels deep.
-            const int depth = (int)std::ceil(sharpest);
             const int faces = base.GetVertexFaces(lo).size();
             const bool fan = base.IsVertexBoundary(lo) ? faces >= 2 : faces >= 3 && faces == ve.size();
             if (blender && !dart && fan && one_ring(base, lo, ring)) {
@@ -1137,18 +1146,11 @@ void choose_evaluation(const spia_mesh *m, const spia_adjacency *adj, const spia
                 int64_t c = adj->corner_of[i];
                 if (clean_face(adj->face_of_corner[c])) ev.bfr_corner[o] = (int32_t)c;
             }
-            // No clean face: Far's patches instead, which at a vertex with
-            // a closed form give it at any level (step 7 takes the first).
-            if (ev.bfr_corner[o] < 0 && blender && !approx[o]) {
-                ev.adaptive[o] = 2;
-                ++ev.adaptive_count;
-                continue;
-            }
             adaptive = ev.bfr_corner[o] < 0;
         }
         if (adaptive) {
             approx[o] = 0;
-            ev.adaptive[o] = 1;
+            ev.adaptive[o] = (char)adaptive_level;
             ++ev.adaptive_count;
         }
         any_approx = any_approx || approx[o];
@@ -1277,11 +1279,9 @@ spia_result ring_rows(const spia_options *opt, const Prepared &p, const Part &pa
 //    vertices, each with its own sub-mesh, so that OpenSubdiv's tables
 //    (which hold every refined vertex) stay small, and batches run on the
 //    threads.  The batches (consecutive along a Morton curve, spatial_order)
-//    do not depend on the thread count.  Vertices whose limit point Far's
-//    patches give at any level (ev.adaptive 2: smooth ones Bfr cannot take)
-//    are isolated one level deep only, in batches of their own: next to
-//    non-manifold vertices, which are isolated as deep as asked, ten levels
-//    cost seconds.
+//    do not depend on the thread count.  Each batch holds vertices of one
+//    level (ev.adaptive: the isolation level, or less where the patch
+//    corner is the same from a lower one, step 5).
 spia_result adaptive_rows(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, Prepared &p,
                           const Evaluation &ev, HeldRows &held, spia_status *status) {
     const int32_t osd_n = p.osd_n;
@@ -1293,19 +1293,20 @@ spia_result adaptive_rows(const spia_mesh *m, const spia_adjacency *adj, const s
     struct Batch {
         int32_t first, count, level;
     };
-    std::vector<int32_t> features, group;  // each group spatially ordered, in batches of its own
-    std::vector<Batch> batch_list;
+    std::vector<int32_t> features;  // by level, spatially ordered within one
     features.reserve((size_t)feature_count);
-    for (int kind = 1; kind <= 2; ++kind) {
-        group.clear();
-        for (int32_t o = 0; o < osd_n; ++o)
-            if (ev.adaptive[o] == kind) group.push_back(o);
-        spatial_order(m, p, group);
-        for (size_t i = 0; i < group.size(); i += (size_t)batch_size)
-            batch_list.push_back(Batch{(int32_t)(features.size() + i),
-                                       (int32_t)std::min(group.size() - i, (size_t)batch_size),
-                                       kind == 1 ? opt->quality : 1});
-        features.insert(features.end(), group.begin(), group.end());
+    for (int32_t o = 0; o < osd_n; ++o)
+        if (ev.adaptive[o]) features.push_back(o);
+    spatial_order(m, p, features);
+    std::stable_sort(features.begin(), features.end(),
+                     [&](int32_t a, int32_t b) { return ev.adaptive[a] < ev.adaptive[b]; });
+    std::vector<Batch> batch_list;
+    for (int32_t i = 0; i < feature_count;) {
+        const int level = ev.adaptive[features[(size_t)i]];
+        int32_t end = i;
+        while (end < feature_count && end - i < batch_size && ev.adaptive[features[(size_t)end]] == level) ++end;
+        batch_list.push_back(Batch{i, end - i, level});
+        i = end;
     }
     const int32_t batches = (int32_t)batch_list.size();
     struct BatchRows {
