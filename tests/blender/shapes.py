@@ -151,6 +151,44 @@ def double_sided_fins():
     return jitter(object_from_pydata("DoubleSidedFins", verts, faces, validate=False))
 
 
+def creased_pages():
+    """Non-manifold creases with semi-sharp features: three sheets meeting
+    along a spine of four vertices, a double-sided triangle fin hanging
+    from the spine's middle edge (listed first, so that the two middle
+    spine vertices are evaluated on it), edge creases across the spine and
+    a vertex crease on it. The middle spine vertices are on a non-manifold
+    crease for OpenSubdiv 3.6.0 and older, with the fin's span ending twice
+    at one edge; 3.7.0 (Blender 5.1 and later) makes them infinitely sharp."""
+    verts = [(0.2 * z * z, 0.1 * z, z) for z in range(4)]
+    faces = [(1, 2, 4), (2, 1, 4)]
+    verts.append((0.7, -0.6, 1.5))  # the fin's tip, vertex 4
+    for sheet in range(3):
+        a = 2.1 * sheet
+        first = len(verts)
+        for w in (1, 2):
+            for z in range(4):
+                verts.append((0.2 * z * z + w * np.cos(a), 0.1 * z + w * np.sin(a), z + 0.1 * w * sheet))
+
+        def at(w, z):
+            return z if w == 0 else first + (w - 1) * 4 + z
+        for w in range(2):
+            for z in range(3):
+                quad = (at(w, z), at(w + 1, z), at(w + 1, z + 1), at(w, z + 1))
+                faces.append(quad[::-1] if sheet == 1 else quad)
+    # Not validated: that would take the fin's twin for a duplicate.
+    obj = jitter(object_from_pydata("CreasedPages", verts, faces, validate=False), 0.03)
+    mesh = obj.data
+    # Sharpness 0.9 to 2.5 (10 c^2), gone within three levels: at quality 6
+    # the fin's span is taken at the isolation level, below it.
+    across = {frozenset((1, 5 + 8 * s + 1)): 0.3 + 0.1 * s for s in range(3)}
+    across[frozenset((2, 5 + 2))] = 0.3
+    set_edge_creases(mesh, [across.get(frozenset(e.vertices), 0.0) for e in mesh.edges])
+    vertex = np.zeros(len(mesh.vertices), np.float32)
+    vertex[2] = 0.5
+    set_vertex_creases(mesh, vertex)
+    return obj
+
+
 def mixed():
     """Triangles, quads and an n-gon in one open surface."""
     verts = [(0, 0, 0), (1, 0, 0), (2, 0, 0), (0, 1, 0), (1, 1, 0.3), (2, 1, 0),
@@ -161,4 +199,4 @@ def mixed():
 
 
 ALL = (cube, uv_sphere, ico_sphere, ngon_cylinder, open_grid, edge_creases,
-       vertex_creases, loose_parts, fin, double_sided_fins, mixed)
+       vertex_creases, loose_parts, fin, double_sided_fins, creased_pages, mixed)
