@@ -937,8 +937,9 @@ bool span_ends(const Far::TopologyLevel &base, Far::Index v, Far::Index ends[2])
 }
 
 // Whether step 6c takes v (Catmull-Clark as Blender sets it up), and how
-// many levels deep: `depth` levels for an infinitely sharp vertex (none)
-// or a span between the two edges, the isolation level for a span at one.
+// many levels deep: none for an infinitely sharp vertex, `depth` (at most
+// the isolation level) for a span between the two edges, the isolation
+// level for a span ending twice at one.
 bool nonmanifold_levels(const Far::TopologyLevel &base, Far::Index v, int depth, int quality, int &levels) {
     levels = 0;
     if (base.GetVertexSharpness(v) >= kInfiniteSharpness) return true;
@@ -1288,6 +1289,7 @@ spia_result adaptive_rows(const spia_mesh *m, const spia_adjacency *adj, const s
     const bool blender = p.blender;
     const int32_t feature_count = ev.adaptive_count;
     if (feature_count == 0) return SPIA_OK;
+    // (a level's last batch may be short: at most one more sub-mesh per level)
     const int32_t batch_size =
         std::max<int32_t>(kFeatureBatch, (feature_count + kMaxFeatureBatches - 1) / kMaxFeatureBatches);
     struct Batch {
