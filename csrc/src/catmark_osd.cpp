@@ -1095,8 +1095,8 @@ void choose_evaluation(const spia_mesh *m, const spia_adjacency *adj, const spia
         // Darts (one infinitely sharp edge at a manifold vertex) and
         // non-manifold vertices: Blender's patches there do not reproduce
         // the closed-form corner or crease masks (measured on the dragon
-        // scan, up to 1.3e-4 of the diagonal at vertices with 7 to 12 faces,
-        // fins hanging from one edge; step 6c).
+        // scan, up to 1.3e-4 of the diagonal at vertices with 7 to 12
+        // faces); most non-manifold ones have rows of their own (step 6c).
         // Darts and semi-sharp vertices take Bfr at the isolation level
         // (Catmull-Clark only: Loop is taken at its exact limit).
         const bool dart = infinitely_sharp == 1;

@@ -160,8 +160,8 @@ def creased_pages():
     crease for OpenSubdiv 3.6.0 and older, with the fin's span ending twice
     at one edge; 3.7.0 (Blender 5.1 and later) makes them infinitely sharp."""
     verts = [(0.2 * z * z, 0.1 * z, z) for z in range(4)]
-    faces = [(1, 2, 4), (2, 1, 4)]
     verts.append((0.7, -0.6, 1.5))  # the fin's tip, vertex 4
+    faces = [(1, 2, 4), (2, 1, 4)]
     for sheet in range(3):
         a = 2.1 * sheet
         first = len(verts)
@@ -179,7 +179,8 @@ def creased_pages():
     obj = jitter(object_from_pydata("CreasedPages", verts, faces, validate=False), 0.03)
     mesh = obj.data
     # Sharpness 0.9 to 2.5 (10 c^2), gone within three levels: at quality 6
-    # the fin's span is taken at the isolation level, below it.
+    # Blender still takes the fin's span at the isolation level, three
+    # levels below where the creases have gone.
     across = {frozenset((1, 5 + 8 * s + 1)): 0.3 + 0.1 * s for s in range(3)}
     across[frozenset((2, 5 + 2))] = 0.3
     set_edge_creases(mesh, [across.get(frozenset(e.vertices), 0.0) for e in mesh.edges])
