@@ -531,6 +531,28 @@ static void place_rows(void *context, int64_t i0, int64_t i1, int thread) {
     }
 }
 
+/* The first level order and the codes of the weights, each on a thread
+ * of its own (items 0 and 1): the two read the table and write apart. */
+typedef struct order_coding {
+    const spia_stencils *s;
+    spia_plan *p;
+    scratch *x;
+    uint16_t *codes;
+    dictionary *d;
+    int coded, diagonal_first, ordered;
+} order_coding;
+
+static void order_and_code(void *context, int64_t i0, int64_t i1, int thread) {
+    (void)thread;
+    order_coding *oc = (order_coding *)context;
+    for (int64_t i = i0; i < i1; ++i) {
+        if (i == 0)
+            oc->ordered = level_order(oc->s, oc->p, oc->x, 0);
+        else
+            oc->coded = code_weights(oc->s, 1, oc->codes, oc->d, &oc->diagonal_first);
+    }
+}
+
 spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status) {
     const int32_t n = s->rows;
     s->plan = NULL;
@@ -556,9 +578,17 @@ spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status)
     d.weight = (double *)malloc(sizeof(double) * DICTIONARY_LIMIT);
     if (!d.keys || !d.codes || !d.weight) goto out_of_memory;
     {
-        int diagonal_first = 0;
-        const int coded = code_weights(s, threads, codes, &d, &diagonal_first);
-        if (coded == 0) goto out_of_memory;
+        /* With levels and threads, the first order is searched on one
+         * thread while another codes the weights. */
+        order_coding oc = {s, p, &x, codes, &d, 0, 0, 1};
+        if (levels && threads > 1) {
+            spia__parallel_for(2, 2, 1, order_and_code, &oc);
+        } else {
+            oc.coded = code_weights(s, threads, codes, &d, &oc.diagonal_first);
+            if (levels) oc.ordered = level_order(s, p, &x, 0);
+        }
+        const int coded = oc.coded, diagonal_first = oc.diagonal_first;
+        if (coded == 0 || !oc.ordered) goto out_of_memory;
         if (coded < 0) {
             /* Too many distinct weights (shape parameters per face, say):
              * no plan. */
@@ -576,11 +606,10 @@ spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status)
     d.keys = NULL;
     d.codes = NULL;
 
-    /* The order: searched along the rows' own columns, and again both ways
-     * (the transposed pattern built) where that leaves rows referring to
-     * chunks more than two away. */
+    /* The order, searched along the rows' own columns, is searched again
+     * both ways (the transposed pattern built) where it leaves rows
+     * referring to chunks more than two away. */
     if (levels) {
-        if (!level_order(s, p, &x, 0)) goto out_of_memory;
         placing reach;
         memset(&reach, 0, sizeof reach);
         reach.s = s;
