@@ -128,6 +128,8 @@ typedef struct spia_adjacency {
 } spia_adjacency;
 
 spia_result spia__adjacency_build(const spia_mesh *mesh, spia_adjacency *adj, spia_status *status);
+/* The same on up to `threads` threads (the lists are the same). */
+spia_result spia__adjacency_build_threads(const spia_mesh *mesh, spia_adjacency *adj, int threads, spia_status *status);
 void spia__adjacency_free(spia_adjacency *adj);
 /* Frees face_of_corner, first and corner_of (a builder that no longer needs
  * them makes room for the table); corner_start stays. */

@@ -50,7 +50,7 @@ spia_result spia_limit_stencils_create(const spia_mesh *mesh, const spia_options
     if (opt.scheme == SPIA_SCHEME_LOOP && (r = spia__require_triangles(mesh, status)) != SPIA_OK) return r;
     if (cancelled(&opt)) return spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled before computing stencils");
     spia_adjacency adj;
-    r = spia__adjacency_build(mesh, &adj, status);
+    r = spia__adjacency_build_threads(mesh, &adj, opt.threads, status);
     if (r != SPIA_OK) return r;
     unsigned char *on_boundary = (unsigned char *)malloc((size_t)mesh->vertex_count + 1);
     if (!on_boundary) {

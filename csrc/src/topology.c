@@ -119,13 +119,77 @@ void spia__adjacency_free(spia_adjacency *a) {
     memset(a, 0, sizeof *a);
 }
 
+/* The vertex lists are a counting sort of the corners by vertex, which
+ * keeps face order within a vertex.  On several threads each takes a
+ * contiguous range of corners with counts of its own, so that a vertex's
+ * corners from an earlier range come first, as on one thread. */
+enum { ADJACENCY_PARALLEL_CORNERS = 1 << 17, ADJACENCY_THREADS = 8 };
+
+typedef struct adjacency_job {
+    const spia_mesh *m;
+    spia_adjacency *a;
+    int32_t parts;
+    int32_t *count[ADJACENCY_THREADS]; /* per part: corners of each vertex, then where the next one goes */
+} adjacency_job;
+
+static int64_t part_corner(const adjacency_job *j, int64_t t) { return j->a->corner_count * t / j->parts; }
+
+static void corner_faces(void *context, int64_t f0, int64_t f1, int thread) {
+    (void)thread;
+    const adjacency_job *j = (const adjacency_job *)context;
+    for (int64_t f = f0; f < f1; ++f)
+        for (int64_t c = j->a->corner_start[f]; c < j->a->corner_start[f + 1]; ++c) j->a->face_of_corner[c] = (int32_t)f;
+}
+
+static void count_corners(void *context, int64_t t0, int64_t t1, int thread) {
+    (void)thread;
+    adjacency_job *j = (adjacency_job *)context;
+    for (int64_t t = t0; t < t1; ++t) {
+        int32_t *count = j->count[t];
+        memset(count, 0, sizeof(int32_t) * (size_t)j->a->vertex_count);
+        for (int64_t c = part_corner(j, t); c < part_corner(j, t + 1); ++c) count[j->m->face_vertices[c]]++;
+    }
+}
+
+/* Vertices [v0, v1): first[v + 1] from the parts' counts, which become
+ * each part's first place for the vertex (first[v] still to be added). */
+static void add_counts(void *context, int64_t v0, int64_t v1, int thread) {
+    (void)thread;
+    adjacency_job *j = (adjacency_job *)context;
+    for (int64_t v = v0; v < v1; ++v) {
+        int32_t before = 0;
+        for (int32_t t = 0; t < j->parts; ++t) {
+            const int32_t c = j->count[t][v];
+            j->count[t][v] = before;
+            before += c;
+        }
+        j->a->first[v + 1] = before;
+    }
+}
+
+static void place_corners(void *context, int64_t t0, int64_t t1, int thread) {
+    (void)thread;
+    adjacency_job *j = (adjacency_job *)context;
+    for (int64_t t = t0; t < t1; ++t) {
+        int32_t *next = j->count[t];
+        for (int64_t c = part_corner(j, t); c < part_corner(j, t + 1); ++c) {
+            const int32_t v = j->m->face_vertices[c];
+            j->a->corner_of[j->a->first[v] + next[v]++] = (int32_t)c;
+        }
+    }
+}
+
 /* Assumes a validated mesh. */
 spia_result spia__adjacency_build(const spia_mesh *m, spia_adjacency *a, spia_status *status) {
+    return spia__adjacency_build_threads(m, a, 1, status);
+}
+
+spia_result spia__adjacency_build_threads(const spia_mesh *m, spia_adjacency *a, int threads, spia_status *status) {
     memset(a, 0, sizeof *a);
     a->vertex_count = m->vertex_count;
     a->face_count = m->face_count;
     a->corner_start = (int64_t *)malloc(sizeof(int64_t) * ((size_t)m->face_count + 1));
-    a->first = (int64_t *)calloc((size_t)m->vertex_count + 1, sizeof(int64_t));
+    a->first = (int64_t *)malloc(sizeof(int64_t) * ((size_t)m->vertex_count + 1));
     if (!a->corner_start || !a->first) goto oom;
     int64_t cc = 0;
     for (int32_t f = 0; f < m->face_count; ++f) {
@@ -134,25 +198,34 @@ spia_result spia__adjacency_build(const spia_mesh *m, spia_adjacency *a, spia_st
     }
     a->corner_start[m->face_count] = cc;
     a->corner_count = cc;
-    a->face_of_corner = (int32_t *)malloc(sizeof(int32_t) * (size_t)cc);
     if (cc > INT32_MAX) {
         spia__adjacency_free(a);
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1,
                           "the faces have %lld corners; at most 2147483647 are supported", (long long)cc);
     }
-    a->corner_of = (int32_t *)malloc(sizeof(int32_t) * (size_t)cc);
+    a->face_of_corner = (int32_t *)malloc(sizeof(int32_t) * (size_t)(cc > 0 ? cc : 1));
+    a->corner_of = (int32_t *)malloc(sizeof(int32_t) * (size_t)(cc > 0 ? cc : 1));
     if (!a->face_of_corner || !a->corner_of) goto oom;
-    for (int32_t f = 0; f < m->face_count; ++f)
-        for (int64_t c = a->corner_start[f]; c < a->corner_start[f + 1]; ++c) a->face_of_corner[c] = f;
-    /* Counting sort of corners by vertex keeps face order within a vertex. */
-    for (int64_t c = 0; c < cc; ++c) a->first[m->face_vertices[c] + 1]++;
-    for (int32_t v = 0; v < m->vertex_count; ++v) a->first[v + 1] += a->first[v];
     {
-        int64_t *fill = (int64_t *)malloc(sizeof(int64_t) * (size_t)m->vertex_count);
-        if (!fill) goto oom;
-        memcpy(fill, a->first, sizeof(int64_t) * (size_t)m->vertex_count);
-        for (int64_t c = 0; c < cc; ++c) a->corner_of[fill[m->face_vertices[c]]++] = (int32_t)c;
-        free(fill);
+        adjacency_job j;
+        memset(&j, 0, sizeof j);
+        j.m = m;
+        j.a = a;
+        j.parts = cc >= ADJACENCY_PARALLEL_CORNERS && threads > 1 ? threads : 1;
+        if (j.parts > ADJACENCY_THREADS) j.parts = ADJACENCY_THREADS;
+        int ok = 1;
+        for (int32_t t = 0; t < j.parts; ++t)
+            ok = ok && (j.count[t] = (int32_t *)malloc(sizeof(int32_t) * ((size_t)m->vertex_count + 1))) != NULL;
+        if (ok) {
+            spia__parallel_for(j.parts, m->face_count, 0, corner_faces, &j);
+            spia__parallel_for(j.parts, j.parts, 1, count_corners, &j);
+            spia__parallel_for(j.parts, m->vertex_count, 0, add_counts, &j);
+            a->first[0] = 0;
+            for (int32_t v = 0; v < m->vertex_count; ++v) a->first[v + 1] += a->first[v];
+            spia__parallel_for(j.parts, j.parts, 1, place_corners, &j);
+        }
+        for (int32_t t = 0; t < j.parts; ++t) free(j.count[t]);
+        if (!ok) goto oom;
     }
     spia__ok(status);
     return SPIA_OK;
