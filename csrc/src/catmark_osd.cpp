@@ -65,6 +65,11 @@ const float kInfiniteSharpness = Sdc::Crease::SHARPNESS_INFINITE;  // 10
 const int32_t kFeatureBatch = 250, kMaxFeatureBatches = 64;
 // Faces per Bfr factory (step 10): its cache of irregular patches lives that long.
 const int32_t kFaceBlock = 131072;
+// A part of at least this many faces is taken in spatial order when its
+// faces, in the mesh's order, are on average this far apart (against the
+// diagonal): part_face_order.
+const int32_t kScatteredPartFaces = 4096;
+const double kScatteredStep = 0.05;
 
 // spia__parallel_for with a lambda f(begin, end, thread), which must not throw.
 template <class F>
@@ -525,6 +530,40 @@ void restrict_sharpness(const spia_mesh *m, const spia_adjacency *adj, const Pre
     }
 }
 
+// Items 0 .. count-1 in the Morton order of their points (point(i): three
+// floats) within the points' box, ties in item order.
+template <class PointOf>
+std::vector<int32_t> morton_order(int32_t count, PointOf point) {
+    float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (int32_t i = 0; i < count; ++i)
+        for (int a = 0; a < 3; ++a) {
+            lo[a] = std::min(lo[a], point(i)[a]);
+            hi[a] = std::max(hi[a], point(i)[a]);
+        }
+    auto spread = [](uint64_t x) {  // 21 bits to every third of 63
+        x &= 0x1fffff;
+        x = (x | x << 32) & 0x1f00000000ffffULL;
+        x = (x | x << 16) & 0x1f0000ff0000ffULL;
+        x = (x | x << 8) & 0x100f00f00f00f00fULL;
+        x = (x | x << 4) & 0x10c30c30c30c30c3ULL;
+        x = (x | x << 2) & 0x1249249249249249ULL;
+        return x;
+    };
+    std::vector<std::pair<uint64_t, int32_t>> keyed((size_t)count);
+    for (int32_t i = 0; i < count; ++i) {
+        uint64_t key = 0;
+        for (int a = 0; a < 3; ++a) {
+            const double t = hi[a] > lo[a] ? ((double)point(i)[a] - lo[a]) / ((double)hi[a] - lo[a]) : 0.0;
+            key |= spread((uint64_t)std::min(2097151.0, std::max(0.0, t * 2097151.0))) << a;
+        }
+        keyed[(size_t)i] = std::make_pair(key, i);
+    }
+    std::sort(keyed.begin(), keyed.end());
+    std::vector<int32_t> order((size_t)count);
+    for (int32_t i = 0; i < count; ++i) order[(size_t)i] = keyed[(size_t)i].second;
+    return order;
+}
+
 // The faces within two rings of the marked osd vertices: their limit points
 // depend on their own faces alone, and the second ring gives those faces'
 // vertices complete neighbourhoods (so their rules are the whole mesh's).
@@ -547,9 +586,59 @@ std::vector<char> two_ring_faces(const spia_mesh *m, const spia_adjacency *adj, 
     return in_part;
 }
 
+// The order in which a part's refiner takes its faces: the mesh's (empty
+// result), except where that order scatters a large part over the whole
+// mesh, as in files written in random order.  Building the refiner and
+// walking its rings then wait on memory at every face, about half the time
+// of the shuffled dragon scan with creases on 30% of its edges.  There the
+// faces go in the Morton order of their first vertices instead, except the
+// faces of vertices that are not one consistently oriented fan (one_fan[v]
+// neither 0 nor 1: non-manifold, or not classified): OpenSubdiv's rules at
+// those depend on the order of their faces (the first face's span, step
+// 6c), so those faces come first, in the mesh's order.  Around the other
+// vertices only the face a ring starts from changes, and with it the order
+// of the sums (1e-12 against the full adaptive table, as before).
+std::vector<int32_t> part_face_order(const spia_mesh *m, const spia_adjacency *adj, const std::vector<char> &in_part,
+                                     const unsigned char *one_fan) {
+    std::vector<int32_t> faces;
+    if (!one_fan) return faces;
+    for (int32_t f = 0; f < m->face_count; ++f)
+        if (in_part.empty() || in_part[(size_t)f]) faces.push_back(f);
+    if ((int32_t)faces.size() < kScatteredPartFaces) return std::vector<int32_t>();
+    auto first_point = [&](int32_t f) { return m->positions + 3 * (int64_t)m->face_vertices[adj->corner_start[f]]; };
+    // Mean step from face to face against the box's diagonal.
+    double step = 0.0, lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (size_t i = 0; i < faces.size(); ++i) {
+        const float *x = first_point(faces[i]);
+        for (int a = 0; a < 3; ++a) {
+            lo[a] = std::min(lo[a], (double)x[a]);
+            hi[a] = std::max(hi[a], (double)x[a]);
+        }
+        if (i > 0) {
+            const float *y = first_point(faces[i - 1]);
+            step += std::sqrt(((double)x[0] - y[0]) * ((double)x[0] - y[0]) + ((double)x[1] - y[1]) * ((double)x[1] - y[1]) +
+                              ((double)x[2] - y[2]) * ((double)x[2] - y[2]));
+        }
+    }
+    const double diagonal =
+        std::sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) + (hi[2] - lo[2]) * (hi[2] - lo[2]));
+    if (!(step > kScatteredStep * diagonal * (double)(faces.size() - 1))) return std::vector<int32_t>();
+    std::vector<int32_t> kept, free_faces;
+    for (int32_t f : faces) {
+        bool keep = false;
+        for (int64_t c = adj->corner_start[f]; c < adj->corner_start[f + 1] && !keep; ++c)
+            keep = one_fan[m->face_vertices[c]] > 1;
+        (keep ? kept : free_faces).push_back(f);
+    }
+    const std::vector<int32_t> order =
+        morton_order((int32_t)free_faces.size(), [&](int32_t i) { return first_point(free_faces[(size_t)i]); });
+    for (int32_t i : order) kept.push_back(free_faces[(size_t)i]);
+    return kept;
+}
+
 // A part of the mesh with an OpenSubdiv refiner of its own, and the maps
 // between its numbering and the osd numbering (identities, left empty, when
-// it is the whole mesh).
+// it is the whole mesh in the mesh's order).
 struct Part {
     std::unique_ptr<Far::TopologyRefiner> refiner;
     bool whole = true;
@@ -568,17 +657,21 @@ struct Part {
 // sharpened in p as well, so that the sub-meshes of step 7 see them.
 //    The sub-meshes of step 7 (`own` false) take p's sharpness as it is.
 spia_result make_part(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, Prepared &p,
-                      const std::vector<char> &in_part, bool own, Part &part, spia_status *status) {
+                      const std::vector<char> &in_part, bool own, const unsigned char *one_fan, Part &part,
+                      spia_status *status) {
     std::vector<int32_t> sharpened;
-    part.whole = in_part.empty();
+    const std::vector<int32_t> order = part_face_order(m, adj, in_part, one_fan);
+    part.whole = in_part.empty() && order.empty();
     if (part.whole) {
         part.refiner.reset(make_refiner(p, opt, p.osd_n, m->face_count, m->face_sizes,
                                         p.remapped.empty() ? m->face_vertices : p.remapped.data(), p.crease_pairs,
                                         p.crease_weights, p.corner_indices, p.corner_weights, nullptr));
     } else {
         part.local_of.assign((size_t)p.osd_n, -1);
-        for (int32_t f = 0; f < m->face_count; ++f) {
-            if (!in_part[f]) continue;
+        const int32_t listed = order.empty() ? m->face_count : (int32_t)order.size();
+        for (int32_t i = 0; i < listed; ++i) {
+            const int32_t f = order.empty() ? i : order[(size_t)i];
+            if (order.empty() && !in_part[f]) continue;
             part.mesh_face_of.push_back(f);
             part.sizes.push_back(m->face_sizes[f]);
             for (int64_t c = adj->corner_start[f]; c < adj->corner_start[f + 1]; ++c) {
@@ -590,8 +683,8 @@ spia_result make_part(const spia_mesh *m, const spia_adjacency *adj, const spia_
                 part.fv.push_back(part.local_of[o]);
             }
         }
-        restrict_sharpness(m, adj, p, part.local_of, in_part, part.crease_pairs, part.crease_weights,
-                           part.corner_indices, part.corner_weights);
+        restrict_sharpness(m, adj, p, part.local_of, in_part.empty() ? std::vector<char>((size_t)m->face_count, 1) : in_part,
+                           part.crease_pairs, part.crease_weights, part.corner_indices, part.corner_weights);
         const int32_t count = (int32_t)part.osd_of_local.size(), faces = (int32_t)part.sizes.size();
         if (own)
             part.refiner.reset(make_refiner(p, opt, count, faces, part.sizes.data(), part.fv.data(), part.crease_pairs,
@@ -652,6 +745,17 @@ struct Evaluation {
     int32_t adaptive_count = 0;
 };
 
+// The osd vertices of `list` in the order of the part's numbering (which
+// follows its faces, part_face_order): walking the part's refiner in that
+// order keeps its memory near.  For the loops whose results do not depend
+// on the order.
+std::vector<int32_t> in_part_order(const Part &part, const std::vector<int32_t> &list) {
+    std::vector<int32_t> sorted(list);
+    if (!part.whole)
+        std::sort(sorted.begin(), sorted.end(), [&](int32_t a, int32_t b) { return part.vertex(a) < part.vertex(b); });
+    return sorted;
+}
+
 // 6b. Semi-sharp vertices (their own sharpness or their edges') of manifold
 //     fans, darts excepted.  Blender's patch corner there is the limit mask
 //     of the vertex at level min(depth, quality), depth = ceil(its
@@ -678,35 +782,48 @@ struct Ring {
     std::vector<Far::Index> faces;       // per face: the base level's face
 };
 
-bool one_ring(const Far::TopologyLevel &base, Far::Index v, Ring &ring) {
-    Far::ConstIndexArray ve = base.GetVertexEdges(v), vf = base.GetVertexFaces(v);
-    Far::ConstLocalIndexArray where = base.GetVertexFaceLocalIndices(v);
-    const int n = ve.size(), nf = vf.size();
+bool one_ring(const Far::TopologyLevel &base, Far::Index v, Ring &ring, const Part *part = nullptr) {
+    Far::ConstIndexArray ve_far = base.GetVertexEdges(v), vf_far = base.GetVertexFaces(v);
+    Far::ConstLocalIndexArray where_far = base.GetVertexFaceLocalIndices(v);
+    const int n = ve_far.size(), nf = vf_far.size();
+    // Far starts an interior vertex's faces and edges at its first face in
+    // its refiner's order.  In a part in an order of its own that is
+    // another face; the ring starts at the face first in the mesh, as the
+    // whole mesh's refiner (and Blender's) has it: the crease masks add up
+    // the edges' sharpness (in float) in this order.
+    int start = 0;
+    if (part && !part->whole && n == nf && !base.IsVertexBoundary(v))
+        for (int j = 1; j < nf; ++j)
+            if (part->mesh_face(vf_far[j]) < part->mesh_face(vf_far[start])) start = j;
+    auto ve = [&](int i) { return ve_far[(i + start) % n]; };
+    auto vf = [&](int j) { return vf_far[(j + start) % nf]; };
+    auto where = [&](int j) { return where_far[(j + start) % nf]; };
     ring.centre = v;
     ring.far_end.resize((size_t)n);
     ring.sharpness.resize((size_t)n);
     ring.edge_face.assign(2 * (size_t)n, -1);
     ring.a.resize((size_t)nf);
     ring.b.resize((size_t)nf);
-    ring.faces.assign(vf.begin(), vf.end());
+    ring.faces.resize((size_t)nf);
+    for (int j = 0; j < nf; ++j) ring.faces[(size_t)j] = vf(j);
     for (int i = 0; i < n; ++i) {
-        Far::ConstIndexArray ends = base.GetEdgeVertices(ve[i]);
+        Far::ConstIndexArray ends = base.GetEdgeVertices(ve(i));
         ring.far_end[(size_t)i] = ends[0] == v ? ends[1] : ends[0];
-        const int faces = base.GetEdgeFaces(ve[i]).size();
+        const int faces = base.GetEdgeFaces(ve(i)).size();
         if (faces < 1 || faces > 2 || ends[0] == ends[1]) return false;
-        ring.sharpness[(size_t)i] = faces == 1 ? kInfiniteSharpness : base.GetEdgeSharpness(ve[i]);
+        ring.sharpness[(size_t)i] = faces == 1 ? kInfiniteSharpness : base.GetEdgeSharpness(ve(i));
     }
     auto edge_index = [&](Far::Index e) {
         for (int i = 0; i < n; ++i)
-            if (ve[i] == e) return i;
+            if (ve(i) == e) return i;
         return -1;
     };
     for (int j = 0; j < nf; ++j) {
-        Far::ConstIndexArray fe = base.GetFaceEdges(vf[j]), fv = base.GetFaceVertices(vf[j]);
+        Far::ConstIndexArray fe = base.GetFaceEdges(vf(j)), fv = base.GetFaceVertices(vf(j));
         const int k = fe.size();
         for (int c = 0; c < k; ++c)  // the centre once in each face
-            if (fv[c] == v && c != where[j]) return false;
-        const int ea = edge_index(fe[(where[j] + k - 1) % k]), eb = edge_index(fe[where[j]]);
+            if (fv[c] == v && c != where(j)) return false;
+        const int ea = edge_index(fe[(where(j) + k - 1) % k]), eb = edge_index(fe[where(j)]);
         if (ea < 0 || eb < 0 || ea == eb) return false;
         ring.a[(size_t)j] = ea;
         ring.b[(size_t)j] = eb;
@@ -718,7 +835,7 @@ bool one_ring(const Far::TopologyLevel &base, Far::Index v, Ring &ring) {
         }
     }
     for (int i = 0; i < n; ++i) {  // every edge in as many faces as Far has it in
-        const int faces = base.GetEdgeFaces(ve[i]).size();
+        const int faces = base.GetEdgeFaces(ve(i)).size();
         if ((ring.edge_face[2 * (size_t)i + 1] >= 0 ? 2 : 1) != faces || ring.edge_face[2 * (size_t)i] < 0) return false;
     }
     return true;
@@ -1073,7 +1190,7 @@ void choose_evaluation(const spia_mesh *m, const spia_adjacency *adj, const spia
     std::vector<char> approx((size_t)p.osd_n, 0);
     bool any_approx = false;
     Ring ring;
-    for (int32_t o : wanted) {
+    for (int32_t o : in_part_order(part, wanted)) {
         const int32_t lo = part.vertex(o);
         const float vs = base.GetVertexSharpness(lo);
         Far::ConstIndexArray ve = base.GetVertexEdges(lo);
@@ -1210,36 +1327,12 @@ void choose_evaluation(const spia_mesh *m, const spia_adjacency *adj, const spia
 // by index), so that batches of consecutive ones are close together and
 // share their sub-meshes whatever the mesh's vertex order.
 void spatial_order(const spia_mesh *m, const Prepared &p, std::vector<int32_t> &list) {
-    if (list.size() < 2) return;
-    float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-    for (int32_t o : list)
-        for (int a = 0; a < 3; ++a) {
-            const float x = m->positions[3 * (int64_t)p.vertex_of[o] + a];
-            lo[a] = std::min(lo[a], x);
-            hi[a] = std::max(hi[a], x);
-        }
-    auto spread = [](uint64_t x) {  // 21 bits to every third of 63
-        x &= 0x1fffff;
-        x = (x | x << 32) & 0x1f00000000ffffULL;
-        x = (x | x << 16) & 0x1f0000ff0000ffULL;
-        x = (x | x << 8) & 0x100f00f00f00f00fULL;
-        x = (x | x << 4) & 0x10c30c30c30c30c3ULL;
-        x = (x | x << 2) & 0x1249249249249249ULL;
-        return x;
-    };
-    std::vector<std::pair<uint64_t, int32_t>> keyed;
-    keyed.reserve(list.size());
-    for (int32_t o : list) {
-        uint64_t key = 0;
-        for (int a = 0; a < 3; ++a) {
-            const float x = m->positions[3 * (int64_t)p.vertex_of[o] + a];
-            const double t = hi[a] > lo[a] ? ((double)x - lo[a]) / ((double)hi[a] - lo[a]) : 0.0;
-            key |= spread((uint64_t)std::min(2097151.0, std::max(0.0, t * 2097151.0))) << a;
-        }
-        keyed.emplace_back(key, o);
-    }
-    std::sort(keyed.begin(), keyed.end());
-    for (size_t i = 0; i < list.size(); ++i) list[i] = keyed[i].second;
+    const std::vector<int32_t> order = morton_order((int32_t)list.size(), [&](int32_t i) {
+        return m->positions + 3 * (int64_t)p.vertex_of[(size_t)list[(size_t)i]];
+    });
+    std::vector<int32_t> sorted(list.size());
+    for (size_t i = 0; i < list.size(); ++i) sorted[i] = list[(size_t)order[i]];
+    list.swap(sorted);
 }
 
 
@@ -1252,16 +1345,22 @@ spia_result ring_rows(const spia_options *opt, const Prepared &p, const Part &pa
     const Far::TopologyLevel &base = part.refiner->GetLevel(0);
     const int32_t batch = 1024, batches = (count + batch - 1) / batch;
     std::vector<std::vector<Entry>> rows((size_t)count);
+    std::vector<int32_t> at((size_t)count);  // the ring vertices by their place in the part
+    for (int32_t i = 0; i < count; ++i) at[(size_t)i] = i;
+    if (!part.whole)
+        std::sort(at.begin(), at.end(),
+                  [&](int32_t a, int32_t b) { return part.vertex(ev.ring[(size_t)a]) < part.vertex(ev.ring[(size_t)b]); });
     std::atomic<bool> failed(false);
     run_batches(opt->threads, batches, [&](int32_t b) {
         Ring ring;
         RingScratch scratch;
-        for (int32_t i = b * batch; i < std::min(count, (b + 1) * batch); ++i) {
+        for (int32_t j = b * batch; j < std::min(count, (b + 1) * batch); ++j) {
+            const int32_t i = at[(size_t)j];
             const int32_t lo = part.vertex(ev.ring[(size_t)i]);
             std::vector<Entry> &row = rows[(size_t)i];
             if (base.IsVertexNonManifold(lo)
                     ? !nonmanifold_row(base, lo, ev.levels[(size_t)i], p.sdc, scratch, row)
-                    : !one_ring(base, lo, ring) ||
+                    : !one_ring(base, lo, ring, &part) ||
                           !ring_row(base, ring, base.GetVertexSharpness(lo), ev.levels[(size_t)i], p.sdc, scratch, row))
                 failed = true;
             for (Entry &e : row) e.first = part.osd(e.first);
@@ -1333,7 +1432,7 @@ spia_result adaptive_rows(const spia_mesh *m, const spia_adjacency *adj, const s
         std::vector<int32_t> marked(batch, batch + batch_count);
         Part sub;
         spia_status local_status;
-        if (make_part(m, adj, opt, p, two_ring_faces(m, adj, p, marked), false, sub, &local_status) != SPIA_OK) {
+        if (make_part(m, adj, opt, p, two_ring_faces(m, adj, p, marked), false, nullptr, sub, &local_status) != SPIA_OK) {
             failed(SPIA_ERROR_TOPOLOGY, -1, "OpenSubdiv rejected the topology around sharp features", 0, 0);
             return;
         }
@@ -1808,14 +1907,15 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
         if (!p.blender || table.length[(size_t)p.vertex_of[o]] < 0) wanted.push_back(o);
 
     // OpenSubdiv's refiner on the faces within two rings of those vertices
-    // (the whole mesh when that is all of it); the adaptive rows (step 7).
+    // (the whole mesh when that is all of it), in a spatial order where the
+    // mesh's scatters them (part_face_order); the adaptive rows (step 7).
     Part part;
     Evaluation ev;
     HeldRows held;
     if (!wanted.empty()) {
         std::vector<char> in_part = two_ring_faces(m, adj, p, wanted);
         if (std::find(in_part.begin(), in_part.end(), 0) == in_part.end()) in_part.clear();
-        r = make_part(m, adj, opt, p, in_part, true, part, status);
+        r = make_part(m, adj, opt, p, in_part, true, p.blender ? on_boundary : nullptr, part, status);
         if (r != SPIA_OK) return r;
         choose_evaluation(m, adj, opt, p, part, wanted, ev);
         r = adaptive_rows(m, adj, opt, p, ev, held, status);
@@ -2165,7 +2265,7 @@ spia_result surface_blocks(const spia_mesh *m, const spia_adjacency *adj, const 
                     marked.push_back(p.osd_of[m->face_vertices[c]]);
         std::sort(marked.begin(), marked.end());
         marked.erase(std::unique(marked.begin(), marked.end()), marked.end());
-        if ((r = make_part(m, adj, opt, p, two_ring_faces(m, adj, p, marked), false, part, status)) != SPIA_OK)
+        if ((r = make_part(m, adj, opt, p, two_ring_faces(m, adj, p, marked), false, nullptr, part, status)) != SPIA_OK)
             return r;
         const int32_t local_faces = part.refiner->GetLevel(0).GetNumFaces();
         std::vector<char> wanted((size_t)local_faces, 0);

@@ -294,6 +294,41 @@ static void add_random_creases(tmesh *m, double fraction, uint64_t seed) {
         if (next() < 0.02) tmesh_vertex_crease(m, v, 0.4f);
 }
 
+// The same mesh in random order: its vertices renumbered, its faces in
+// another order (each keeping its corners), its creases carried along.
+static tmesh shuffled(const tmesh &m, uint64_t seed) {
+    auto next = [&seed](uint64_t below) {
+        seed = seed * 6364136223846793005ULL + 1442695040888963407ULL;
+        return (int64_t)((seed >> 33) % below);
+    };
+    std::vector<int32_t> new_of((size_t)m.nv), face_order((size_t)m.nf);
+    for (int32_t i = 0; i < m.nv; ++i) new_of[(size_t)i] = i;
+    for (int32_t i = m.nv - 1; i > 0; --i) std::swap(new_of[(size_t)i], new_of[(size_t)next((uint64_t)i + 1)]);
+    for (int32_t f = 0; f < m.nf; ++f) face_order[(size_t)f] = f;
+    for (int32_t f = m.nf - 1; f > 0; --f) std::swap(face_order[(size_t)f], face_order[(size_t)next((uint64_t)f + 1)]);
+    std::vector<int64_t> start((size_t)m.nf + 1, 0);
+    for (int32_t f = 0; f < m.nf; ++f) start[(size_t)f + 1] = start[(size_t)f] + m.sizes[f];
+    std::vector<int32_t> old_of((size_t)m.nv);
+    for (int32_t i = 0; i < m.nv; ++i) old_of[(size_t)new_of[(size_t)i]] = i;
+    tmesh out;
+    memset(&out, 0, sizeof out);
+    for (int32_t i = 0; i < m.nv; ++i) {
+        const float *x = m.pos + 3 * (size_t)old_of[(size_t)i];
+        tmesh_vertex(&out, x[0], x[1], x[2]);
+    }
+    for (int32_t f : face_order) {
+        std::vector<int32_t> v;
+        for (int64_t c = start[(size_t)f]; c < start[(size_t)f + 1]; ++c) v.push_back(new_of[(size_t)m.fv[c]]);
+        tmesh_face(&out, (int)v.size(), v.data());
+    }
+    for (int32_t e = 0; e < m.ne; ++e)
+        tmesh_edge(&out, new_of[(size_t)m.edges[2 * e]], new_of[(size_t)m.edges[2 * e + 1]], m.edge_creases[e]);
+    if (m.vertex_creases)
+        for (int32_t i = 0; i < m.nv; ++i)
+            if (m.vertex_creases[old_of[(size_t)i]] != 0.0f) tmesh_vertex_crease(&out, i, m.vertex_creases[old_of[(size_t)i]]);
+    return out;
+}
+
 static spia_options options_for(int quality, bool preserve, bool creases, int osd_version) {
     spia_options o = spia_options_default();
     o.quality = quality;
@@ -632,8 +667,37 @@ int main(int argc, char **argv) {
         add_random_creases(&cut, 0.3, 11);
         for (int q : {2, 6}) compare(cut, "dragon around its non-manifold edges, creased", q, false, true, 0);
         compare(cut, "dragon around its non-manifold edges, creased", 2, false, true, 30700);
+        // The cut's faces, in the scan's order, are far apart: the library
+        // builds its refiner with them in a spatial order of its own
+        // (part_face_order), where every face here touches a non-manifold
+        // vertex and keeps its place.  In random order they do too.
+        tmesh mixed = shuffled(cut, 5);
+        compare(mixed, "dragon around its non-manifold edges, creased, shuffled", 2, false, true, 0);
+        tmesh_free(&mixed);
         printf("%-40s matches OpenSubdiv's full adaptive stencils\n", "dragon around its non-manifold edges");
         tmesh_free(&cut);
+        tmesh_free(&d);
+    }
+    // A manifold scan in random order, with random creases of any value on
+    // 30% of its edges: its faces go to the refiner in a spatial order
+    // (part_face_order) and each ring starts at the vertex's first face in
+    // the mesh, as OpenSubdiv's refiner of the mesh has it (Sdc adds up the
+    // edges' sharpness around a vertex in float, in that order).
+    if (!sanitized) {
+        tmesh d;
+        std::string path = std::string(SPIA_TEST_DATA_DIR) + "/elephant-with-holes.obj";
+        CHECK(read_obj(path.c_str(), &d), "cannot read %s", path.c_str());
+        drop_degenerate_faces(&d);
+        add_random_creases(&d, 0.3, 23);
+        uint64_t seed = 17;
+        for (int32_t e = 0; e < d.ne; ++e) {
+            seed = seed * 6364136223846793005ULL + 1442695040888963407ULL;
+            d.edge_creases[e] = (float)(0.05 + 0.9 * (double)(seed >> 11) / 9007199254740992.0);
+        }
+        tmesh mixed = shuffled(d, 9);
+        for (int q : {1, 3}) compare(mixed, "elephant-with-holes, creased, shuffled", q, false, true, 0);
+        printf("%-40s matches OpenSubdiv's full adaptive stencils\n", "elephant-with-holes, creased, shuffled");
+        tmesh_free(&mixed);
         tmesh_free(&d);
     }
     // Random semi-sharp and infinitely sharp creases (a tenth of the edges,
