@@ -596,8 +596,10 @@ std::vector<char> two_ring_faces(const spia_mesh *m, const spia_adjacency *adj, 
 // neither 0 nor 1: non-manifold, or not classified): OpenSubdiv's rules at
 // those depend on the order of their faces (the first face's span, step
 // 6c), so those faces come first, in the mesh's order.  Around the other
-// vertices only the face a ring starts from changes, and with it the order
-// of the sums (1e-12 against the full adaptive table, as before).
+// vertices only the face Far starts their rings from changes, and one_ring
+// starts them where the mesh's order does (the crease masks add up the
+// edges' sharpness in float, in ring order): the rows are those of the
+// mesh's order (test_reference, 1e-12; the hard set's tables to the bit).
 std::vector<int32_t> part_face_order(const spia_mesh *m, const spia_adjacency *adj, const std::vector<char> &in_part,
                                      const unsigned char *one_fan) {
     std::vector<int32_t> faces;
