@@ -97,7 +97,6 @@ int32_t spia__catmark_closed_row(const spia_mesh *m, const spia_adjacency *adj, 
     if (k64 <= 0) return SPIA__ROW_NOT_CLOSED;
     const int32_t k = (int32_t)k64;
     const float vs = sh->vertex[v];
-    if (vs > 0.0f && vs < SPIA__SHARPNESS_INFINITE) return SPIA__ROW_NOT_CLOSED;
     if (!grow(scratch, (int64_t)k + 1)) return SPIA__ROW_OUT_OF_MEMORY;
     /* The faces around v, read once: for the i-th, the neighbours after and
      * before v in it and where its corners are. */
@@ -154,6 +153,7 @@ int32_t spia__catmark_closed_row(const spia_mesh *m, const spia_adjacency *adj, 
     /* One fan: v is on the boundary exactly when it has two ends (an edge
      * of one face each), as spia__boundary_vertices would find. */
     scratch->on_boundary = boundary;
+    if (vs > 0.0f && vs < SPIA__SHARPNESS_INFINITE) return SPIA__ROW_NOT_CLOSED; /* a semi-sharp vertex */
 
     /* Infinitely sharp edges, up to SHARP_EDGE_LIMIT of them. */
     int32_t sharp[SHARP_EDGE_LIMIT];

@@ -771,7 +771,11 @@ std::vector<int32_t> in_part_order(const Part &part, const std::vector<int32_t> 
 //     centres) depends on its one ring alone, and so does the sharpness of
 //     its edges there: the row is the limit mask carried back through the
 //     ring-to-ring steps, each step's masks from OpenSubdiv's own rules
-//     (Sdc), with no mesh refined.  O(levels x valence) per vertex.
+//     (Sdc), with no mesh refined.  O(levels x valence) per vertex.  Where
+//     the faces around the vertex are one consistently oriented fan (the
+//     closed rows tell), its ring is read from the mesh and no refiner is
+//     built for it (6a, fan_ring_rows); the rings read from a refiner here
+//     are those of the vertices the closed rows could not classify.
 
 // The one ring of a manifold vertex of the base level: face j lies between
 // its edges a[j] and b[j]; edge i has one face (boundary) or two.
@@ -899,9 +903,17 @@ struct RingScratch {
     std::vector<double> vertex_masks, edge_masks, g, next, centre_of_face;
 };
 
-// The row of the ring's centre at `levels` levels, over the base level's
-// vertices; false where a mask is not of the kind expected.
-bool ring_row(const Far::TopologyLevel &base, const Ring &ring, float vertex_sharpness, int levels,
+// A face's vertices: where they start and how many.
+struct FaceVertices {
+    const int32_t *at;
+    int size;
+};
+
+// The row of the ring's centre at `levels` levels, over the vertices of
+// its faces (face_vertices(ring.faces[j]), in the numbering the ring's
+// far ends are in); false where a mask is not of the kind expected.
+template <class FaceVerticesOf>
+bool ring_row(FaceVerticesOf face_vertices, const Ring &ring, float vertex_sharpness, int levels,
               const Sdc::Options &sdc, RingScratch &s, std::vector<Entry> &row) {
     const Sdc::Scheme<Sdc::SCHEME_CATMARK> scheme(sdc);
     const Sdc::Crease crease(sdc);
@@ -931,7 +943,7 @@ bool ring_row(const Far::TopologyLevel &base, const Ring &ring, float vertex_sha
             double *ew = s.edge_masks.data() + em * ((size_t)level * n + i);
             const int faces = ring.edge_face[2 * (size_t)i + 1] >= 0 ? 2 : 1;
             for (int k = 0; k < faces; ++k)
-                sizes[k] = level == 0 ? base.GetFaceVertices(ring.faces[(size_t)ring.edge_face[2 * (size_t)i + k]]).size() : 4;
+                sizes[k] = level == 0 ? face_vertices(ring.faces[(size_t)ring.edge_face[2 * (size_t)i + k]]).size : 4;
             RingEdge edge{faces, es[(size_t)i], sizes};
             RingMask emask(ew, nullptr, ew + 2);
             const Sdc::Crease::Rule ep = es[(size_t)i] > 0.0f ? Sdc::Crease::RULE_CREASE : Sdc::Crease::RULE_SMOOTH;
@@ -998,9 +1010,9 @@ bool ring_row(const Far::TopologyLevel &base, const Ring &ring, float vertex_sha
         row.emplace_back(ring.centre, next[0]);
         for (int i = 0; i < n; ++i) row.emplace_back(ring.far_end[(size_t)i], next[1 + (size_t)i]);
         for (int j = 0; j < nf; ++j) {  // the base level's faces, of any size
-            Far::ConstIndexArray fv = base.GetFaceVertices(ring.faces[(size_t)j]);
-            const double q = centre_of_face[(size_t)j] * (1.0 / (double)fv.size());
-            for (int c = 0; c < fv.size(); ++c) row.emplace_back(fv[c], q);
+            const FaceVertices fv = face_vertices(ring.faces[(size_t)j]);
+            const double q = centre_of_face[(size_t)j] * (1.0 / (double)fv.size);
+            for (int c = 0; c < fv.size; ++c) row.emplace_back(fv.at[c], q);
         }
     }
     merge_entries(row, true);
@@ -1353,6 +1365,10 @@ spia_result ring_rows(const spia_options *opt, const Prepared &p, const Part &pa
         std::sort(at.begin(), at.end(),
                   [&](int32_t a, int32_t b) { return part.vertex(ev.ring[(size_t)a]) < part.vertex(ev.ring[(size_t)b]); });
     std::atomic<bool> failed(false);
+    auto far_face = [&](Far::Index f) {
+        Far::ConstIndexArray fv = base.GetFaceVertices(f);
+        return FaceVertices{&fv[0], fv.size()};
+    };
     run_batches(opt->threads, batches, [&](int32_t b) {
         Ring ring;
         RingScratch scratch;
@@ -1363,7 +1379,7 @@ spia_result ring_rows(const spia_options *opt, const Prepared &p, const Part &pa
             if (base.IsVertexNonManifold(lo)
                     ? !nonmanifold_row(base, lo, ev.levels[(size_t)i], p.sdc, scratch, row)
                     : !one_ring(base, lo, ring, &part) ||
-                          !ring_row(base, ring, base.GetVertexSharpness(lo), ev.levels[(size_t)i], p.sdc, scratch, row))
+                          !ring_row(far_face, ring, base.GetVertexSharpness(lo), ev.levels[(size_t)i], p.sdc, scratch, row))
                 failed = true;
             for (Entry &e : row) e.first = part.osd(e.first);
         }
@@ -1784,6 +1800,134 @@ spia_result bfr_rows(const spia_mesh *m, const int64_t *corner_start, const spia
     return SPIA_OK;
 }
 
+// 6a. Semi-sharp vertices of one consistently oriented fan (the closed
+//     rows found the fan: on_boundary 0 or 1), darts and smooth corners
+//     excepted: the ring of 6b read from the mesh itself, with no refiner.
+//     Its faces and edges go in the order Far's refiner of the mesh gives
+//     them (Vtr orders them from the vertex's first face in the mesh, or on
+//     the boundary from the face whose edge after the vertex is on the
+//     boundary, each next face the one whose edge after the vertex is the
+//     current face's edge before it), as Sdc adds up the edges' sharpness
+//     in float in that order.  Returns the levels of 6b, or 0 where the
+//     vertex is not such a vertex.
+int fan_ring(const spia_mesh *m, const spia_adjacency *adj, const Prepared &p, const spia_options *opt, int32_t v,
+             bool boundary, std::vector<int32_t> &next, std::vector<int32_t> &prev, Ring &ring) {
+    const int64_t first = adj->first[v];
+    const int k = (int)(adj->first[v + 1] - first);
+    if (k < (boundary ? 2 : 3)) return 0;  // smooth corners (adaptive), two faces (Bfr)
+    next.resize((size_t)k);
+    prev.resize((size_t)k);
+    ring.faces.resize((size_t)k);
+    for (int i = 0; i < k; ++i) {
+        const int64_t c = adj->corner_of[first + i];
+        ring.faces[(size_t)i] = adj->face_of_corner[c];
+        next[(size_t)i] = spia__corner_next(m, adj, c);
+        prev[(size_t)i] = spia__corner_prev(m, adj, c);
+    }
+    // The faces in Vtr's order, in place: face t + 1 is the one whose next
+    // is face t's prev.
+    int start = 0;
+    if (boundary) {
+        start = -1;
+        for (int i = 0; i < k && start < 0; ++i) {
+            bool led = false;
+            for (int j = 0; j < k && !led; ++j) led = prev[(size_t)j] == next[(size_t)i];
+            if (!led) start = i;
+        }
+        if (start < 0) return 0;
+    }
+    auto swap_faces = [&](int i, int j) {
+        std::swap(ring.faces[(size_t)i], ring.faces[(size_t)j]);
+        std::swap(next[(size_t)i], next[(size_t)j]);
+        std::swap(prev[(size_t)i], prev[(size_t)j]);
+    };
+    swap_faces(0, start);
+    for (int t = 1; t < k; ++t) {
+        int found = -1;
+        for (int j = t; j < k && found < 0; ++j)
+            if (next[(size_t)j] == prev[(size_t)t - 1]) found = j;
+        if (found < 0) return 0;
+        swap_faces(t, found);
+    }
+    const int n = boundary ? k + 1 : k;
+    ring.centre = v;
+    ring.far_end.resize((size_t)n);
+    ring.sharpness.resize((size_t)n);
+    ring.a.resize((size_t)k);
+    ring.b.resize((size_t)k);
+    ring.edge_face.assign(2 * (size_t)n, -1);
+    for (int t = 0; t < k; ++t) ring.far_end[(size_t)t] = next[(size_t)t];
+    if (boundary) ring.far_end[(size_t)k] = prev[(size_t)k - 1];
+    int infinitely_sharp = 0;
+    const float vs = p.vertex_sharpness[(size_t)v];
+    bool semi_sharp = vs > 0.0f && vs < kInfiniteSharpness;
+    float sharpest = semi_sharp ? vs : 0.0f;
+    for (int i = 0; i < n; ++i) {
+        if (boundary && (i == 0 || i == k)) {
+            ring.sharpness[(size_t)i] = kInfiniteSharpness;
+            continue;
+        }
+        float es = 0.0f;
+        if (!p.crease_first.empty())
+            for (int64_t e = p.crease_first[(size_t)v]; e < p.crease_first[(size_t)v + 1]; ++e)
+                if (p.crease_other[(size_t)e] == ring.far_end[(size_t)i]) {
+                    es = p.crease_sharpness[(size_t)e];
+                    break;
+                }
+        ring.sharpness[(size_t)i] = es;
+        if (es >= kInfiniteSharpness) {
+            ++infinitely_sharp;
+        } else if (es > 0.0f) {
+            semi_sharp = true;
+            sharpest = std::max(sharpest, es);
+        }
+    }
+    if (!semi_sharp || infinitely_sharp == 1) return 0;  // not semi-sharp, or a dart (Bfr)
+    for (int j = 0; j < k; ++j) {  // face j between edges j (after the vertex) and j + 1
+        ring.b[(size_t)j] = j;
+        ring.a[(size_t)j] = (j + 1) % n;
+        for (int e : {ring.a[(size_t)j], ring.b[(size_t)j]}) {
+            int32_t *slot = &ring.edge_face[2 * (size_t)e];
+            if (slot[0] < 0) slot[0] = j;
+            else slot[1] = j;
+        }
+    }
+    return std::max(1, std::min((int)std::ceil(sharpest), opt->quality));
+}
+
+// 6a on the threads, each row written into the table; the vertices it
+// takes no longer need OpenSubdiv.
+void fan_ring_rows(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, const Prepared &p,
+                   TableWriter &table, const unsigned char *on_boundary) {
+    const int threads = opt->threads > 0 ? opt->threads : 1;
+    std::vector<std::vector<std::pair<int32_t, std::vector<Entry>>>> spill_of((size_t)threads);
+    std::atomic<bool> out_of_memory(false);
+    auto mesh_face = [&](int32_t f) {
+        const int64_t c0 = adj->corner_start[f];
+        return FaceVertices{m->face_vertices + c0, (int)(adj->corner_start[f + 1] - c0)};
+    };
+    parallel_for(threads, m->vertex_count, 4096, [&](int64_t v0, int64_t v1, int thread) {
+        try {
+            Ring ring;
+            RingScratch scratch;
+            std::vector<int32_t> next, prev;
+            std::vector<Entry> row;
+            for (int32_t v = (int32_t)v0; v < (int32_t)v1; ++v) {
+                if (table.length[(size_t)v] >= 0 || on_boundary[v] > 1) continue;
+                const int levels = fan_ring(m, adj, p, opt, v, on_boundary[v] == 1, next, prev, ring);
+                if (levels == 0 || !ring_row(mesh_face, ring, p.vertex_sharpness[(size_t)v], levels, p.sdc, scratch, row))
+                    continue;
+                table.write(v, row, spill_of[(size_t)thread]);
+            }
+        } catch (const std::bad_alloc &) {
+            out_of_memory = true;
+        }
+    });
+    if (out_of_memory) throw std::bad_alloc();
+    for (auto &part_spill : spill_of)
+        for (auto &r : part_spill) table.spilled.push_back(std::move(r));
+}
+
 // The closed-form rows (catmark_closed.c), on the threads, written into
 // the table; the vertices they do not cover (no closed form) get length -1.
 void closed_rows(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, const Prepared &p,
@@ -1901,9 +2045,13 @@ spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_opti
     std::unique_ptr<spia_stencils, void (*)(spia_stencils *)> owner(table.s, spia_stencils_free);
     for (int32_t v = 0; v < n; ++v) table.s->offsets[v + 1] = table.s->offsets[v] + table.length[(size_t)v];
 
-    // The closed-form rows (Catmull-Clark), and the vertices left for
+    // The closed-form rows (Catmull-Clark) and the semi-sharp vertices of
+    // one fan from their ring in the mesh (6a), and the vertices left for
     // OpenSubdiv (all, for Loop).
-    if (p.blender) closed_rows(m, adj, opt, p, table, on_boundary);
+    if (p.blender) {
+        closed_rows(m, adj, opt, p, table, on_boundary);
+        fan_ring_rows(m, adj, opt, p, table, on_boundary);
+    }
     std::vector<int32_t> wanted;
     for (int32_t o = 0; o < p.osd_n; ++o)
         if (!p.blender || table.length[(size_t)p.vertex_of[o]] < 0) wanted.push_back(o);
