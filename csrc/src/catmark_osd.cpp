@@ -596,9 +596,9 @@ std::vector<char> two_ring_faces(const spia_mesh *m, const spia_adjacency *adj, 
 // neither 0 nor 1: non-manifold, or not classified): OpenSubdiv's rules at
 // those depend on the order of their faces (the first face's span, step
 // 6c), so those faces come first, in the mesh's order.  Around the other
-// vertices only the face Far starts their rings from changes, and one_ring
-// starts them where the mesh's order does (the crease masks add up the
-// edges' sharpness in float, in ring order): the rows are those of the
+// vertices only the face Far starts their rings from changes, which no row
+// taken from the refiner reads (the semi-sharp fans, whose crease masks
+// would, take their rings from the mesh, 6a): the rows are those of the
 // mesh's order (test_reference, 1e-12; the hard set's tables to the bit).
 std::vector<int32_t> part_face_order(const spia_mesh *m, const spia_adjacency *adj, const std::vector<char> &in_part,
                                      const unsigned char *one_fan) {
@@ -742,7 +742,7 @@ struct Evaluation {
     std::vector<char> adaptive;       // per osd vertex: step 7's level for it, 0 for none
     std::vector<int32_t> bfr_corner;  // per osd vertex: the corner Bfr evaluates it at (step 10), or -1
     std::vector<char> level_face;     // per mesh face: Bfr at the isolation level (empty if none)
-    std::vector<int32_t> ring;        // osd vertices evaluated on their one ring (step 6b)
+    std::vector<int32_t> ring;        // non-manifold osd vertices taken from their crease (step 6c)
     std::vector<int32_t> levels;      // and how many levels deep
     int32_t adaptive_count = 0;
 };
@@ -771,81 +771,21 @@ std::vector<int32_t> in_part_order(const Part &part, const std::vector<int32_t> 
 //     centres) depends on its one ring alone, and so does the sharpness of
 //     its edges there: the row is the limit mask carried back through the
 //     ring-to-ring steps, each step's masks from OpenSubdiv's own rules
-//     (Sdc), with no mesh refined.  O(levels x valence) per vertex.  Where
-//     the faces around the vertex are one consistently oriented fan (the
-//     closed rows tell), its ring is read from the mesh and no refiner is
-//     built for it (6a, fan_ring_rows); the rings read from a refiner here
-//     are those of the vertices the closed rows could not classify.
+//     (Sdc), with no mesh refined.  O(levels x valence) per vertex.  The
+//     ring is read from the mesh where the closed rows found one
+//     consistently oriented fan (6a, fan_ring_rows), which is every
+//     manifold fan OpenSubdiv takes; those vertices need no refiner.
 
-// The one ring of a manifold vertex of the base level: face j lies between
-// its edges a[j] and b[j]; edge i has one face (boundary) or two.
+// The one ring of a manifold vertex: face j lies between its edges a[j]
+// and b[j]; edge i has one face (boundary) or two.
 struct Ring {
     int32_t centre = -1;
     std::vector<int32_t> far_end;        // per edge: its other vertex
     std::vector<float> sharpness;        // per edge (boundary: infinite)
     std::vector<int32_t> a, b;           // per face: its two edges at the centre
     std::vector<int32_t> edge_face;      // per edge: two faces, the second -1 on the boundary
-    std::vector<Far::Index> faces;       // per face: the base level's face
+    std::vector<int32_t> faces;          // per face: the mesh's face
 };
-
-bool one_ring(const Far::TopologyLevel &base, Far::Index v, Ring &ring, const Part *part = nullptr) {
-    Far::ConstIndexArray ve_far = base.GetVertexEdges(v), vf_far = base.GetVertexFaces(v);
-    Far::ConstLocalIndexArray where_far = base.GetVertexFaceLocalIndices(v);
-    const int n = ve_far.size(), nf = vf_far.size();
-    // Far starts an interior vertex's faces and edges at its first face in
-    // its refiner's order.  In a part in an order of its own that is
-    // another face; the ring starts at the face first in the mesh, as the
-    // whole mesh's refiner (and Blender's) has it: the crease masks add up
-    // the edges' sharpness (in float) in this order.
-    int start = 0;
-    if (part && !part->whole && n == nf && !base.IsVertexBoundary(v))
-        for (int j = 1; j < nf; ++j)
-            if (part->mesh_face(vf_far[j]) < part->mesh_face(vf_far[start])) start = j;
-    auto ve = [&](int i) { return ve_far[(i + start) % n]; };
-    auto vf = [&](int j) { return vf_far[(j + start) % nf]; };
-    auto where = [&](int j) { return where_far[(j + start) % nf]; };
-    ring.centre = v;
-    ring.far_end.resize((size_t)n);
-    ring.sharpness.resize((size_t)n);
-    ring.edge_face.assign(2 * (size_t)n, -1);
-    ring.a.resize((size_t)nf);
-    ring.b.resize((size_t)nf);
-    ring.faces.resize((size_t)nf);
-    for (int j = 0; j < nf; ++j) ring.faces[(size_t)j] = vf(j);
-    for (int i = 0; i < n; ++i) {
-        Far::ConstIndexArray ends = base.GetEdgeVertices(ve(i));
-        ring.far_end[(size_t)i] = ends[0] == v ? ends[1] : ends[0];
-        const int faces = base.GetEdgeFaces(ve(i)).size();
-        if (faces < 1 || faces > 2 || ends[0] == ends[1]) return false;
-        ring.sharpness[(size_t)i] = faces == 1 ? kInfiniteSharpness : base.GetEdgeSharpness(ve(i));
-    }
-    auto edge_index = [&](Far::Index e) {
-        for (int i = 0; i < n; ++i)
-            if (ve(i) == e) return i;
-        return -1;
-    };
-    for (int j = 0; j < nf; ++j) {
-        Far::ConstIndexArray fe = base.GetFaceEdges(vf(j)), fv = base.GetFaceVertices(vf(j));
-        const int k = fe.size();
-        for (int c = 0; c < k; ++c)  // the centre once in each face
-            if (fv[c] == v && c != where(j)) return false;
-        const int ea = edge_index(fe[(where(j) + k - 1) % k]), eb = edge_index(fe[where(j)]);
-        if (ea < 0 || eb < 0 || ea == eb) return false;
-        ring.a[(size_t)j] = ea;
-        ring.b[(size_t)j] = eb;
-        for (int e : {ea, eb}) {
-            int32_t *slot = &ring.edge_face[2 * (size_t)e];
-            if (slot[0] < 0) slot[0] = j;
-            else if (slot[1] < 0) slot[1] = j;
-            else return false;
-        }
-    }
-    for (int i = 0; i < n; ++i) {  // every edge in as many faces as Far has it in
-        const int faces = base.GetEdgeFaces(ve(i)).size();
-        if ((ring.edge_face[2 * (size_t)i + 1] >= 0 ? 2 : 1) != faces || ring.edge_face[2 * (size_t)i] < 0) return false;
-    }
-    return true;
-}
 
 // Sdc's neighbourhood and mask interfaces over a ring's sharpness.
 struct RingVertex {
@@ -903,18 +843,11 @@ struct RingScratch {
     std::vector<double> vertex_masks, edge_masks, g, next, centre_of_face;
 };
 
-// A face's vertices: where they start and how many.
-struct FaceVertices {
-    const int32_t *at;
-    int size;
-};
-
-// The row of the ring's centre at `levels` levels, over the vertices of
-// its faces (face_vertices(ring.faces[j]), in the numbering the ring's
-// far ends are in); false where a mask is not of the kind expected.
-template <class FaceVerticesOf>
-bool ring_row(FaceVerticesOf face_vertices, const Ring &ring, float vertex_sharpness, int levels,
+// The row of the ring's centre at `levels` levels, over the mesh's
+// vertices; false where a mask is not of the kind expected.
+bool ring_row(const spia_mesh *m, const spia_adjacency *adj, const Ring &ring, float vertex_sharpness, int levels,
               const Sdc::Options &sdc, RingScratch &s, std::vector<Entry> &row) {
+    auto face_size = [&](int32_t f) { return (int)(adj->corner_start[f + 1] - adj->corner_start[f]); };
     const Sdc::Scheme<Sdc::SCHEME_CATMARK> scheme(sdc);
     const Sdc::Crease crease(sdc);
     const int n = (int)ring.far_end.size(), nf = (int)ring.a.size();
@@ -943,7 +876,7 @@ bool ring_row(FaceVerticesOf face_vertices, const Ring &ring, float vertex_sharp
             double *ew = s.edge_masks.data() + em * ((size_t)level * n + i);
             const int faces = ring.edge_face[2 * (size_t)i + 1] >= 0 ? 2 : 1;
             for (int k = 0; k < faces; ++k)
-                sizes[k] = level == 0 ? face_vertices(ring.faces[(size_t)ring.edge_face[2 * (size_t)i + k]]).size : 4;
+                sizes[k] = level == 0 ? face_size(ring.faces[(size_t)ring.edge_face[2 * (size_t)i + k]]) : 4;
             RingEdge edge{faces, es[(size_t)i], sizes};
             RingMask emask(ew, nullptr, ew + 2);
             const Sdc::Crease::Rule ep = es[(size_t)i] > 0.0f ? Sdc::Crease::RULE_CREASE : Sdc::Crease::RULE_SMOOTH;
@@ -1010,9 +943,9 @@ bool ring_row(FaceVerticesOf face_vertices, const Ring &ring, float vertex_sharp
         row.emplace_back(ring.centre, next[0]);
         for (int i = 0; i < n; ++i) row.emplace_back(ring.far_end[(size_t)i], next[1 + (size_t)i]);
         for (int j = 0; j < nf; ++j) {  // the base level's faces, of any size
-            const FaceVertices fv = face_vertices(ring.faces[(size_t)j]);
-            const double q = centre_of_face[(size_t)j] * (1.0 / (double)fv.size);
-            for (int c = 0; c < fv.size; ++c) row.emplace_back(fv.at[c], q);
+            const int32_t f = ring.faces[(size_t)j];
+            const double q = centre_of_face[(size_t)j] * (1.0 / (double)face_size(f));
+            for (int64_t c = adj->corner_start[f]; c < adj->corner_start[f + 1]; ++c) row.emplace_back(m->face_vertices[c], q);
         }
     }
     merge_entries(row, true);
@@ -1169,7 +1102,8 @@ bool next_to_high_valence(const Far::TopologyLevel &base, Far::Index v) {
 // 5. How each vertex of `wanted` (osd numbering) is evaluated.  At
 //    semi-sharp features and darts of manifold meshes Blender's surface
 //    depends on the isolation level.  Semi-sharp vertices of manifold fans
-//    take their row from their one ring (step 6b).  At darts and the other
+//    have their row from their one ring already (steps 6a, 6b) and do not
+//    come here.  At darts and the other
 //    semi-sharp vertices Bfr with its approximation
 //    levels (sharp and smooth) set to `quality` builds the same patches as
 //    Blender's adaptive refinement at that level, evaluated at the vertex's
@@ -1203,7 +1137,6 @@ void choose_evaluation(const spia_mesh *m, const spia_adjacency *adj, const spia
     ev.bfr_corner.assign((size_t)p.osd_n, -1);
     std::vector<char> approx((size_t)p.osd_n, 0);
     bool any_approx = false;
-    Ring ring;
     for (int32_t o : in_part_order(part, wanted)) {
         const int32_t lo = part.vertex(o);
         const float vs = base.GetVertexSharpness(lo);
@@ -1256,16 +1189,8 @@ void choose_evaluation(const spia_mesh *m, const spia_adjacency *adj, const spia
             adaptive = true;
         }
         if (!adaptive && (semi_sharp || dart)) {
-            // Semi-sharp vertices of a fan that is no dart: from their one
-            // ring (ring_rows), at most `quality` levels deep.
-            const int faces = base.GetVertexFaces(lo).size();
-            const bool fan = base.IsVertexBoundary(lo) ? faces >= 2 : faces >= 3 && faces == ve.size();
-            if (blender && !dart && fan && one_ring(base, lo, ring)) {
-                ev.ring.push_back(o);
-                ev.levels.push_back(std::min(depth, opt->quality));
-                continue;
-            }
-            // Bfr is the faster of the two where the faces around are of
+            // (Semi-sharp vertices of a fan that is no dart have their rows
+            // from their ring already, 6a.)  Bfr is the faster of the two where the faces around are of
             // low valence; next to a vertex of high valence its irregular
             // patches cost more than Far's adaptive ones (measured on the
             // hard set: a sphere with poles of valence 400, a printer bed).
@@ -1350,8 +1275,7 @@ void spatial_order(const spia_mesh *m, const Prepared &p, std::vector<int32_t> &
 }
 
 
-// 6b and 6c, on the threads: each such vertex's row from its ring, or
-// from its crease where it is non-manifold.
+// 6c, on the threads: each non-manifold vertex's row from its crease.
 spia_result ring_rows(const spia_options *opt, const Prepared &p, const Part &part, const Evaluation &ev,
                       HeldRows &held, spia_status *status) {
     const int32_t count = (int32_t)ev.ring.size();
@@ -1365,21 +1289,13 @@ spia_result ring_rows(const spia_options *opt, const Prepared &p, const Part &pa
         std::sort(at.begin(), at.end(),
                   [&](int32_t a, int32_t b) { return part.vertex(ev.ring[(size_t)a]) < part.vertex(ev.ring[(size_t)b]); });
     std::atomic<bool> failed(false);
-    auto far_face = [&](Far::Index f) {
-        Far::ConstIndexArray fv = base.GetFaceVertices(f);
-        return FaceVertices{&fv[0], fv.size()};
-    };
     run_batches(opt->threads, batches, [&](int32_t b) {
-        Ring ring;
         RingScratch scratch;
         for (int32_t j = b * batch; j < std::min(count, (b + 1) * batch); ++j) {
             const int32_t i = at[(size_t)j];
             const int32_t lo = part.vertex(ev.ring[(size_t)i]);
             std::vector<Entry> &row = rows[(size_t)i];
-            if (base.IsVertexNonManifold(lo)
-                    ? !nonmanifold_row(base, lo, ev.levels[(size_t)i], p.sdc, scratch, row)
-                    : !one_ring(base, lo, ring, &part) ||
-                          !ring_row(far_face, ring, base.GetVertexSharpness(lo), ev.levels[(size_t)i], p.sdc, scratch, row))
+            if (!base.IsVertexNonManifold(lo) || !nonmanifold_row(base, lo, ev.levels[(size_t)i], p.sdc, scratch, row))
                 failed = true;
             for (Entry &e : row) e.first = part.osd(e.first);
         }
@@ -1902,10 +1818,6 @@ void fan_ring_rows(const spia_mesh *m, const spia_adjacency *adj, const spia_opt
     const int threads = opt->threads > 0 ? opt->threads : 1;
     std::vector<std::vector<std::pair<int32_t, std::vector<Entry>>>> spill_of((size_t)threads);
     std::atomic<bool> out_of_memory(false);
-    auto mesh_face = [&](int32_t f) {
-        const int64_t c0 = adj->corner_start[f];
-        return FaceVertices{m->face_vertices + c0, (int)(adj->corner_start[f + 1] - c0)};
-    };
     parallel_for(threads, m->vertex_count, 4096, [&](int64_t v0, int64_t v1, int thread) {
         try {
             Ring ring;
@@ -1915,7 +1827,7 @@ void fan_ring_rows(const spia_mesh *m, const spia_adjacency *adj, const spia_opt
             for (int32_t v = (int32_t)v0; v < (int32_t)v1; ++v) {
                 if (table.length[(size_t)v] >= 0 || on_boundary[v] > 1) continue;
                 const int levels = fan_ring(m, adj, p, opt, v, on_boundary[v] == 1, next, prev, ring);
-                if (levels == 0 || !ring_row(mesh_face, ring, p.vertex_sharpness[(size_t)v], levels, p.sdc, scratch, row))
+                if (levels == 0 || !ring_row(m, adj, ring, p.vertex_sharpness[(size_t)v], levels, p.sdc, scratch, row))
                     continue;
                 table.write(v, row, spill_of[(size_t)thread]);
             }
