@@ -587,16 +587,20 @@ class Stencils:
         self._arrays = None
 
     def _csr(self):
-        """The CSR arrays, copied from the library the first time they are
-        asked for: a table that is only solved with (an operator, a live
-        cage) never holds a second copy (12 bytes per weight)."""
+        """The CSR arrays, made by the library the first time they are
+        asked for (it keeps most tables in their sweep layout alone, about
+        40 bytes a vertex): a table that is only solved with (an operator, a
+        live cage) never has them (12 bytes per weight more)."""
         if self._arrays is None:
             nnz = self._lib.spia_stencils_weight_count(self._handle)
             offsets = np.empty(self._rows + 1, dtype=np.int64)
             indices = np.empty(nnz, dtype=np.int32)
             weights = np.empty(nnz, dtype=np.float64)
-            self._lib.spia_stencils_copy_csr(self._handle, _ptr(offsets, ctypes.c_int64),
-                                             _ptr(indices, ctypes.c_int32), _ptr(weights, ctypes.c_double))
+            code = self._lib.spia_stencils_copy_csr(self._handle, _ptr(offsets, ctypes.c_int64),
+                                                    _ptr(indices, ctypes.c_int32), _ptr(weights, ctypes.c_double))
+            if code != 0:
+                name = _RESULT_NAMES.get(code, str(code))
+                raise PiaError(name, f"copying the stencil table out failed ({name})")
             self._arrays = offsets, indices, weights
         return self._arrays
 

@@ -52,10 +52,16 @@ typedef struct spia_plan {
     /* Every row starts with its own entry, of a positive weight: what
      * Gauss-Seidel needs. */
     int diagonal_first;
+    /* The table can be rebuilt from the plan, to the bit: every row's
+     * columns strictly increase, so the row's own entry, placed first, goes
+     * back before its first larger column (spia__plan_row). */
+    int holds_table;
 } spia_plan;
 
 /* The stencil table behind the opaque handle: CSR rows, one per control
- * vertex.  offsets has rows + 1 entries. */
+ * vertex.  offsets has rows + 1 entries.  Once spia_limit_stencils_create
+ * is done, a table whose plan holds it keeps the plan alone (offsets,
+ * indices and weights NULL; see spia__stencils_compact). */
 struct spia_stencils {
     int32_t rows;
     int64_t nnz;
@@ -171,6 +177,25 @@ int32_t spia__vertex_neighbours(const spia_mesh *mesh, const spia_adjacency *adj
  * when memory runs out.  The plan does not depend on the thread count. */
 spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status);
 void spia__plan_free(spia_plan *p);
+/* Where p->holds_table: the table's CSR arrays rebuilt from the plan, the
+ * same to the bit: offsets (rows + 1) and, where not NULL, indices and
+ * weights. */
+void spia__plan_table(const spia_plan *p, int64_t *offsets, int32_t *indices, double *weights);
+/* Where p->holds_table: spia_stencils_apply from the plan, each row summed
+ * in the table's order (so to the same bits). */
+void spia__plan_apply(const spia_plan *p, const double *cage, double *out);
+
+/* Once the plan is built: where it holds the table, the CSR arrays go (the
+ * table is then 40 to 50 bytes a vertex, not 150) and offsets, indices and
+ * weights are NULL.  Whatever needs the arrays asks spia__stencils_expand
+ * for them. */
+void spia__stencils_compact(spia_stencils *s);
+/* *full = *s with its CSR arrays: s's own, or rebuilt from the plan into
+ * new ones (then SPIA_ERROR_OUT_OF_MEMORY is possible).  full shares s's
+ * other arrays: give it back with spia__stencils_expanded_free, never
+ * spia_stencils_free. */
+spia_result spia__stencils_expand(const spia_stencils *s, spia_stencils *full);
+void spia__stencils_expanded_free(const spia_stencils *s, spia_stencils *full);
 
 /* GS_PIA_FAST (fast.c), called by spia_solve once the arguments are checked
  * and L->plan found fit (every row's own weight positive): writes the cage

@@ -66,6 +66,7 @@ spia_result spia_limit_stencils_create(const spia_mesh *mesh, const spia_options
         spia_stencils_free(*out);
         *out = NULL;
     }
+    if (r == SPIA_OK) spia__stencils_compact(*out);
     if (r == SPIA_OK && cancelled(&opt)) {
         spia_stencils_free(*out);
         *out = NULL;

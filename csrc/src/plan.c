@@ -430,6 +430,7 @@ typedef struct placing {
     const int64_t *entry;               /* per position: its first entry in the plan */
     int64_t widest[256];                /* per thread: the largest |column position - row position| */
     int32_t reach[256];                 /* per thread */
+    unsigned char unsorted[256];        /* per thread: a row whose columns do not strictly increase */
 } placing;
 
 static inline int32_t position_of(const placing *pl, int32_t r) { return pl->position ? pl->position[r] : r; }
@@ -467,7 +468,9 @@ static void reach_rows(void *context, int64_t r0, int64_t r1, int thread) {
 
 /* Table rows [r0, r1), in table order: each entry's code (into the second
  * half of the dictionary for the larger off-diagonal weights) and column
- * offset, the offsets' range and the reach. */
+ * offset, the offsets' range, the reach and whether every row's columns
+ * strictly increase, without a zero weight (then the plan holds the table;
+ * see spia__plan_table). */
 static void measure_rows(void *context, int64_t r0, int64_t r1, int thread) {
     placing *pl = (placing *)context;
     const spia_stencils *s = pl->s;
@@ -481,6 +484,7 @@ static void measure_rows(void *context, int64_t r0, int64_t r1, int thread) {
             if (s->indices[k] != r && s->weights[k] > largest) largest = s->weights[k];
         for (int64_t k = s->offsets[r]; k < s->offsets[r + 1]; ++k) {
             const int32_t j = s->indices[k];
+            if ((k > s->offsets[r] && j <= s->indices[k - 1]) || s->weights[k] == 0.0) pl->unsorted[thread] = 1;
             if (j != r && s->weights[k] >= 0.5 * largest) pl->codes[k] = (uint16_t)(pl->codes[k] + edges);
             const int64_t delta = (int64_t)position_of(pl, j) - i;
             const int64_t wide = delta > 0 ? delta : -delta;
@@ -658,9 +662,11 @@ spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status)
     pl.entry = entry;
     spia__parallel_for(threads, n, 0, measure_rows, &pl);
     int64_t widest = 0;
+    p->holds_table = 1;
     for (int t = 0; t < threads; ++t) {
         if (pl.widest[t] > widest) widest = pl.widest[t];
         if (pl.reach[t] > p->reach) p->reach = pl.reach[t];
+        if (pl.unsorted[t]) p->holds_table = 0;
     }
     if (widest <= 32767)
         p->delta16 = (int16_t *)malloc(sizeof(int16_t) * entries);
@@ -699,4 +705,87 @@ out_of_memory:
     free(block);
     spia__plan_free(p);
     return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory laying out the stencils for the solver");
+}
+
+/* ------------------------------------------------------------------------ */
+/* The table, from the plan                                                  */
+/* ------------------------------------------------------------------------ */
+
+static inline int32_t plan_delta(const spia_plan *p, int64_t k) { return p->delta16 ? p->delta16[k] : p->delta32[k]; }
+static inline double plan_weight(const spia_plan *p, int64_t k) {
+    return p->weight[p->code8 ? p->code8[k] : p->code16[k]];
+}
+static inline int32_t plan_column(const spia_plan *p, int32_t i, int64_t k) {
+    const int32_t at = i + plan_delta(p, k);
+    return p->order ? p->order[at] : at;
+}
+
+/* Position i's entries (from entry e on) in the table's order.  The plan
+ * has the row's own entry first (the only one with offset 0) and the others
+ * as the table had them, by increasing column; `slot` is where the own
+ * entry goes back among them (-1: the row has none). */
+typedef struct plan_row {
+    int64_t e;
+    int32_t length, slot, row;
+} plan_row;
+
+static plan_row row_at(const spia_plan *p, int32_t i, int64_t e) {
+    plan_row w = {e, p->length[i], -1, p->order ? p->order[i] : i};
+    if (w.length > 0 && plan_delta(p, e) == 0) {
+        int32_t lo = 0, hi = w.length - 1; /* the first other entry of a larger column */
+        while (lo < hi) {
+            const int32_t mid = lo + (hi - lo) / 2;
+            if (plan_column(p, i, e + 1 + mid) < w.row)
+                lo = mid + 1;
+            else
+                hi = mid;
+        }
+        w.slot = lo;
+    }
+    return w;
+}
+
+/* The plan entry of the row's t-th entry in the table. */
+static inline int64_t entry_of(const plan_row *w, int32_t t) {
+    return w->slot < 0 || t > w->slot ? w->e + t : t < w->slot ? w->e + 1 + t : w->e;
+}
+
+void spia__plan_table(const spia_plan *p, int64_t *offsets, int32_t *indices, double *weights) {
+    const int32_t n = p->rows;
+    offsets[0] = 0;
+    for (int32_t i = 0; i < n; ++i) offsets[(p->order ? p->order[i] : i) + 1] = p->length[i];
+    for (int32_t r = 0; r < n; ++r) offsets[r + 1] += offsets[r];
+    if (!indices && !weights) return;
+    int64_t e = 0;
+    for (int32_t i = 0; i < n; ++i) {
+        const plan_row w = row_at(p, i, e);
+        const int64_t base = offsets[w.row];
+        for (int32_t t = 0; t < w.length; ++t) {
+            const int64_t k = entry_of(&w, t);
+            if (indices) indices[base + t] = plan_column(p, i, k);
+            if (weights) weights[base + t] = plan_weight(p, k);
+        }
+        e += w.length;
+    }
+}
+
+void spia__plan_apply(const spia_plan *p, const double *cage, double *out) {
+    int64_t e = 0;
+    for (int32_t i = 0; i < p->rows; ++i) {
+        const plan_row w = row_at(p, i, e);
+        double a = 0.0, b = 0.0, c = 0.0; /* as spia__row_product, in the table's order */
+        for (int32_t t = 0; t < w.length; ++t) {
+            const int64_t k = entry_of(&w, t);
+            const double x = plan_weight(p, k);
+            const double *q = cage + 3 * (int64_t)plan_column(p, i, k);
+            a += x * q[0];
+            b += x * q[1];
+            c += x * q[2];
+        }
+        double *o = out + 3 * (int64_t)w.row;
+        o[0] = a;
+        o[1] = b;
+        o[2] = c;
+        e += w.length;
+    }
 }

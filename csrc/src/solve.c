@@ -936,6 +936,11 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
     memset(&s, 0, sizeof s);
     float *handover = NULL;
     int32_t it0 = 0;
+    /* L's CSR arrays, for whatever is not GS_PIA_FAST (see
+     * spia__stencils_expand): L points at `table` from there on. */
+    const spia_stencils *const given = L;
+    spia_stencils table;
+    memset(&table, 0, sizeof table);
     double initial_relative = -1.0;
     spia_result res = spia__resolve_options(options, &opt, status);
     if (res != SPIA_OK) goto done;
@@ -985,6 +990,13 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
          * measured (a smooth 1M torus: 4 sweeps in 0.1 s against CG's one
          * iteration and its setup in 0.35 s; 30k: 3.4 ms against 8 ms);
          * below, the probe decides. */
+        if (n < AUTO_FAST_ROWS && L == given) {
+            if (spia__stencils_expand(given, &table) != SPIA_OK) {
+                res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
+                goto done;
+            }
+            L = &table;
+        }
         const double probe = n >= AUTO_FAST_ROWS
                                  ? 1.0
                                  : first_contraction_probe(L, targets, opt.initial_cage ? opt.initial_cage : targets);
@@ -1008,6 +1020,13 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
         if (handover) opt.initial_cage = handover;
     }
 
+    if (L == given) {
+        if (spia__stencils_expand(given, &table) != SPIA_OK) {
+            res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
+            goto done;
+        }
+        L = &table;
+    }
     s.method = opt.method;
     s.L = L;
     s.n = n;
@@ -1150,6 +1169,7 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
         report->diagonal = diagonal;
     }
 done:
+    if (L == &table) spia__stencils_expanded_free(given, &table);
     free(handover);
     free(s.colour_rows);
     free(s.V);

@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
 /* The CSR stencil table shared by every scheme: storage, access, product. */
 #include "internal.h"
+#include "threads.h"
 
 #include <stdlib.h>
 #include <string.h>
@@ -11,8 +12,11 @@ spia_stencils *spia__stencils_alloc(int32_t rows, int64_t nnz) {
     s->rows = rows;
     s->nnz = nnz;
     s->offsets = (int64_t *)calloc((size_t)rows + 1, sizeof(int64_t));
-    s->indices = (int32_t *)malloc(sizeof(int32_t) * (size_t)(nnz > 0 ? nnz : 1));
-    s->weights = (double *)malloc(sizeof(double) * (size_t)(nnz > 0 ? nnz : 1));
+    /* Large arrays in huge pages where the system gives them: fewer page
+     * faults as the builders fill them, and less work giving them back
+     * when the plan takes their place (spia__stencils_compact). */
+    s->indices = (int32_t *)spia__alloc_large(sizeof(int32_t) * (size_t)(nnz > 0 ? nnz : 1));
+    s->weights = (double *)spia__alloc_large(sizeof(double) * (size_t)(nnz > 0 ? nnz : 1));
     s->boundary = (unsigned char *)calloc((size_t)rows + 1, 1);
     if (!s->offsets || !s->indices || !s->weights || !s->boundary) {
         spia_stencils_free(s);
@@ -78,6 +82,15 @@ int64_t spia_stencils_weight_count(const spia_stencils *s) { return s ? s->nnz :
 
 spia_result spia_stencils_copy_csr(const spia_stencils *s, int64_t *offsets, int32_t *indices, double *weights) {
     if (!s) return SPIA_ERROR_INVALID_ARGUMENT;
+    if (!s->offsets) {
+        if (!offsets && !indices && !weights) return SPIA_OK;
+        /* Rows are placed by their offsets, so those are needed either way. */
+        int64_t *at = offsets ? offsets : (int64_t *)malloc(sizeof(int64_t) * ((size_t)s->rows + 1));
+        if (!at) return SPIA_ERROR_OUT_OF_MEMORY;
+        spia__plan_table(s->plan, at, indices, weights);
+        if (at != offsets) free(at);
+        return SPIA_OK;
+    }
     if (offsets) memcpy(offsets, s->offsets, sizeof(int64_t) * ((size_t)s->rows + 1));
     if (indices) memcpy(indices, s->indices, sizeof(int32_t) * (size_t)s->nnz);
     if (weights) memcpy(weights, s->weights, sizeof(double) * (size_t)s->nnz);
@@ -86,8 +99,47 @@ spia_result spia_stencils_copy_csr(const spia_stencils *s, int64_t *offsets, int
 
 spia_result spia_stencils_apply(const spia_stencils *s, const double *cage, double *out) {
     if (!s || !cage || !out) return SPIA_ERROR_INVALID_ARGUMENT;
+    if (!s->offsets) {
+        spia__plan_apply(s->plan, cage, out);
+        return SPIA_OK;
+    }
     for (int32_t r = 0; r < s->rows; ++r) spia__row_product(s, r, cage, out + 3 * (int64_t)r);
     return SPIA_OK;
+}
+
+void spia__stencils_compact(spia_stencils *s) {
+    if (!s->plan || !s->plan->holds_table || !s->offsets) return;
+    free(s->offsets);
+    free(s->indices);
+    free(s->weights);
+    s->offsets = NULL;
+    s->indices = NULL;
+    s->weights = NULL;
+}
+
+spia_result spia__stencils_expand(const spia_stencils *s, spia_stencils *full) {
+    *full = *s;
+    if (s->offsets) return SPIA_OK;
+    const size_t nnz = (size_t)(s->nnz > 0 ? s->nnz : 1);
+    full->offsets = (int64_t *)malloc(sizeof(int64_t) * ((size_t)s->rows + 1));
+    full->indices = (int32_t *)malloc(sizeof(int32_t) * nnz);
+    full->weights = (double *)malloc(sizeof(double) * nnz);
+    if (!full->offsets || !full->indices || !full->weights) {
+        spia__stencils_expanded_free(s, full);
+        return SPIA_ERROR_OUT_OF_MEMORY;
+    }
+    spia__plan_table(s->plan, full->offsets, full->indices, full->weights);
+    return SPIA_OK;
+}
+
+void spia__stencils_expanded_free(const spia_stencils *s, spia_stencils *full) {
+    if (s->offsets) return; /* s's own arrays */
+    free(full->offsets);
+    free(full->indices);
+    free(full->weights);
+    full->offsets = NULL;
+    full->indices = NULL;
+    full->weights = NULL;
 }
 
 void spia__stencils_mark_boundary(spia_stencils *s, const unsigned char *on_boundary) {
