@@ -107,14 +107,18 @@ spia_result spia_stencils_apply(const spia_stencils *s, const double *cage, doub
     return SPIA_OK;
 }
 
-void spia__stencils_compact(spia_stencils *s) {
-    if (!s->plan || !s->plan->holds_table || !s->offsets) return;
+/* Frees the CSR arrays of s and sets them to NULL. */
+static void drop_arrays(spia_stencils *s) {
     free(s->offsets);
     free(s->indices);
     free(s->weights);
     s->offsets = NULL;
     s->indices = NULL;
     s->weights = NULL;
+}
+
+void spia__stencils_compact(spia_stencils *s) {
+    if (s->plan && s->plan->holds_table) drop_arrays(s);
 }
 
 spia_result spia__stencils_expand(const spia_stencils *s, spia_stencils *full) {
@@ -133,13 +137,7 @@ spia_result spia__stencils_expand(const spia_stencils *s, spia_stencils *full) {
 }
 
 void spia__stencils_expanded_free(const spia_stencils *s, spia_stencils *full) {
-    if (s->offsets) return; /* s's own arrays */
-    free(full->offsets);
-    free(full->indices);
-    free(full->weights);
-    full->offsets = NULL;
-    full->indices = NULL;
-    full->weights = NULL;
+    if (!s->offsets) drop_arrays(full); /* (else they are s's own) */
 }
 
 void spia__stencils_mark_boundary(spia_stencils *s, const unsigned char *on_boundary) {
