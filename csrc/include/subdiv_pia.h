@@ -126,7 +126,8 @@ SPIA_API int spia_version(void);
  *                   carry creases and to mark loose edges.  May be NULL when
  *                   edge_count is 0.
  *   edge_creases    edge_count floats in [0, 1] (Blender's edge crease), or
- *                   NULL for none.
+ *                   NULL for none.  An edge listed more than once (either
+ *                   way round) takes its largest crease.
  *   vertex_creases  vertex_count floats in [0, 1] (Blender's vertex crease),
  *                   or NULL for none.
  *

@@ -94,6 +94,38 @@ bool is_face_edge(const spia_mesh *m, const spia_adjacency *adj, int32_t a, int3
     return false;
 }
 
+// Each vertex's creased edges, as (other end, sharpness) lists from
+// first[v] on, merged where an edge is listed more than once (either way
+// round) into one entry of its largest sharpness, in place.  Returns
+// whether any was.  (pos[u]: where u's entry is in the list being merged,
+// if at or after that list's start.)
+bool merge_repeated_creases(int32_t n, std::vector<int64_t> &first, std::vector<int32_t> &other,
+                            std::vector<float> &sharpness) {
+    std::vector<int64_t> pos((size_t)n, -1);
+    bool repeated = false;
+    int64_t out = 0;
+    for (int32_t v = 0; v < n; ++v) {
+        const int64_t begin = first[v], end = first[v + 1], start = out;
+        first[v] = out;
+        for (int64_t i = begin; i < end; ++i) {
+            const int32_t u = other[(size_t)i];
+            if (pos[(size_t)u] >= start) {
+                repeated = true;
+                float &kept = sharpness[(size_t)pos[(size_t)u]];
+                kept = std::max(kept, sharpness[(size_t)i]);
+                continue;
+            }
+            pos[(size_t)u] = out;
+            other[(size_t)out] = u;
+            sharpness[(size_t)out++] = sharpness[(size_t)i];
+        }
+    }
+    first[(size_t)n] = out;
+    other.resize((size_t)out);
+    sharpness.resize((size_t)out);
+    return repeated;
+}
+
 // A Catmull-Clark refiner for a face list, with Blender's sharpness values.
 // OpenSubdiv's TopologyRefinerFactory::Create holds the new refiner in a
 // plain pointer while it fills in the base level, so the refiner is lost
@@ -287,6 +319,20 @@ spia_result prepare_sharpness(const spia_mesh *m, const spia_adjacency *adj, con
                 p.crease_sharpness[(size_t)fill[b]++] = s;
             }
         }
+    }
+    // An edge listed more than once takes its largest crease: the lists
+    // merged, the pairs for OpenSubdiv are made again from them.
+    if (!crease_first.empty() && merge_repeated_creases(n, crease_first, p.crease_other, p.crease_sharpness)) {
+        crease_pairs.clear();
+        crease_weights.clear();
+        for (int32_t a = 0; a < n; ++a)
+            for (int64_t i = crease_first[(size_t)a]; i < crease_first[(size_t)a + 1]; ++i) {
+                const int32_t b = p.crease_other[(size_t)i];
+                if (a > b) continue;
+                crease_pairs.push_back(osd_of[(size_t)a]);
+                crease_pairs.push_back(osd_of[(size_t)b]);
+                crease_weights.push_back(p.crease_sharpness[(size_t)i]);
+            }
     }
     const bool any_edge_crease = !crease_first.empty();
 

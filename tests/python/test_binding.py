@@ -297,6 +297,49 @@ def test_staged_catmull_clark_moves_exactly_the_boundary(native):
     assert np.array_equal(moved, boundary), (np.flatnonzero(moved != boundary), boundary.sum())
 
 
+def test_an_edge_listed_twice_takes_its_largest_crease(native):
+    """An edge listed more than once, either way round, takes its largest
+    crease, wherever the repeats are: an open grid of quads with edges
+    creased 1.0 (infinitely sharp: closed-form crease rows) and 0.5
+    (semi-sharp: rings read from the mesh, vertices with two creased
+    edges), some listed again reversed with a smaller crease before and
+    after, some uncreased ones again with 0.7, gives the table of the list
+    with each edge once at its largest, weight for weight: Catmull-Clark at
+    quality 1 and 3, and Loop on the grid cut into triangles."""
+    nu, nv = 12, 9
+    i, j = np.meshgrid(np.arange(nu + 1), np.arange(nv + 1))
+    rng = np.random.default_rng(11)
+    P = np.stack([i, j, 0.3 * np.sin(i / 3.0) * np.cos(j / 2.0)], -1).reshape(-1, 3).astype(np.float32)
+    a = (j[:-1, :-1] * (nu + 1) + i[:-1, :-1]).ravel()
+    quads = np.stack([a, a + 1, a + nu + 2, a + nu + 1], -1).astype(np.int32)
+    tris = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]]).astype(np.int32)
+    for faces in (quads, tris):
+        sides = np.sort(np.stack([faces, np.roll(faces, -1, axis=1)], -1).reshape(-1, 2), axis=1)
+        edges = np.unique(sides, axis=0).astype(np.int32)
+        creases = rng.choice(np.array([0.0, 0.5, 1.0], np.float32), len(edges), p=[0.6, 0.25, 0.15])
+        creased, plain = np.flatnonzero(creases > 0), np.flatnonzero(creases == 0)
+        again = rng.choice(creased, len(creased) // 2, replace=False)
+        raised = rng.choice(plain, 5, replace=False)
+        largest = creases.copy()
+        largest[raised] = 0.7
+        listed = np.concatenate([edges[again][:, ::-1], edges, edges[again][:, ::-1], edges[raised]])
+        listed_creases = np.concatenate([0.5 * creases[again], creases, 0.3 * creases[again],
+                                         np.full(len(raised), 0.7, np.float32)]).astype(np.float32)
+        sizes = np.full(len(faces), faces.shape[1], np.int32)
+        once = native.Mesh(P, sizes, faces.ravel(), edges, largest)
+        repeated = native.Mesh(P, sizes, faces.ravel(), listed.astype(np.int32), listed_creases)
+        runs = [("CATMULL_CLARK", 1), ("CATMULL_CLARK", 3)] if faces is quads else [("LOOP", 3)]
+        for scheme, quality in runs:
+            want = native.limit_stencils(once, scheme=scheme, quality=quality)
+            got = native.limit_stencils(repeated, scheme=scheme, quality=quality)
+            assert np.array_equal(want.offsets, got.offsets), (scheme, quality)
+            assert np.array_equal(want.indices, got.indices), (scheme, quality)
+            assert np.array_equal(want.weights, got.weights), (scheme, quality)
+        # the creases matter here: without them the table is another
+        plain_table = native.limit_stencils(once, scheme=runs[0][0], use_creases=False)
+        assert not np.array_equal(plain_table.weights, want.weights)
+
+
 def test_opensubdiv_version(native):
     """Versions as Blender gives them (a tuple), as strings or as the number;
     after 3.6.0 the centre of two double-sided fins is infinitely sharp (its
