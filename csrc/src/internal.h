@@ -179,8 +179,8 @@ spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status)
 void spia__plan_free(spia_plan *p);
 /* Where p->holds_table: the table's CSR arrays rebuilt from the plan, the
  * same to the bit: offsets (rows + 1) and, where not NULL, indices and
- * weights. */
-void spia__plan_table(const spia_plan *p, int64_t *offsets, int32_t *indices, double *weights);
+ * weights; on up to `threads` threads. */
+void spia__plan_table(const spia_plan *p, int64_t *offsets, int32_t *indices, double *weights, int threads);
 /* Where p->holds_table: spia_stencils_apply from the plan, each row summed
  * in the table's order (so to the same bits). */
 void spia__plan_apply(const spia_plan *p, const double *cage, double *out);
@@ -194,7 +194,7 @@ void spia__stencils_compact(spia_stencils *s);
  * new ones (then SPIA_ERROR_OUT_OF_MEMORY is possible).  full shares s's
  * other arrays: give it back with spia__stencils_expanded_free, never
  * spia_stencils_free. */
-spia_result spia__stencils_expand(const spia_stencils *s, spia_stencils *full);
+spia_result spia__stencils_expand(const spia_stencils *s, spia_stencils *full, int threads);
 void spia__stencils_expanded_free(const spia_stencils *s, spia_stencils *full);
 
 /* GS_PIA_FAST (fast.c), called by spia_solve once the arguments are checked

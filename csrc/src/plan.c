@@ -750,23 +750,42 @@ static inline int64_t entry_of(const plan_row *w, int32_t t) {
     return w->slot < 0 || t > w->slot ? w->e + t : t < w->slot ? w->e + 1 + t : w->e;
 }
 
-void spia__plan_table(const spia_plan *p, int64_t *offsets, int32_t *indices, double *weights) {
+typedef struct table_task {
+    const spia_plan *p;
+    const int64_t *offsets;
+    int32_t *indices;
+    double *weights;
+} table_task;
+
+/* The rows of chunks [c0, c1) (each row written where its offset says, so
+ * that chunks on different threads write apart). */
+static void table_chunks(void *context, int64_t c0, int64_t c1, int thread) {
+    (void)thread;
+    const table_task *t = (const table_task *)context;
+    const spia_plan *p = t->p;
+    for (int64_t c = c0; c < c1; ++c) {
+        int64_t e = p->chunk_entry[c];
+        for (int32_t i = p->chunk_start[c]; i < p->chunk_start[c + 1]; ++i) {
+            const plan_row w = row_at(p, i, e);
+            const int64_t base = t->offsets[w.row];
+            for (int32_t k = 0; k < w.length; ++k) {
+                const int64_t at = entry_of(&w, k);
+                if (t->indices) t->indices[base + k] = plan_column(p, i, at);
+                if (t->weights) t->weights[base + k] = plan_weight(p, at);
+            }
+            e += w.length;
+        }
+    }
+}
+
+void spia__plan_table(const spia_plan *p, int64_t *offsets, int32_t *indices, double *weights, int threads) {
     const int32_t n = p->rows;
     offsets[0] = 0;
     for (int32_t i = 0; i < n; ++i) offsets[(p->order ? p->order[i] : i) + 1] = p->length[i];
     for (int32_t r = 0; r < n; ++r) offsets[r + 1] += offsets[r];
     if (!indices && !weights) return;
-    int64_t e = 0;
-    for (int32_t i = 0; i < n; ++i) {
-        const plan_row w = row_at(p, i, e);
-        const int64_t base = offsets[w.row];
-        for (int32_t t = 0; t < w.length; ++t) {
-            const int64_t k = entry_of(&w, t);
-            if (indices) indices[base + t] = plan_column(p, i, k);
-            if (weights) weights[base + t] = plan_weight(p, k);
-        }
-        e += w.length;
-    }
+    table_task t = {p, offsets, indices, weights};
+    spia__parallel_for(n >= SPIA_PARALLEL_ROWS ? threads : 1, p->chunks, 1, table_chunks, &t);
 }
 
 void spia__plan_apply(const spia_plan *p, const double *cage, double *out) {

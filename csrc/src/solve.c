@@ -991,7 +991,7 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
          * iteration and its setup in 0.35 s; 30k: 3.4 ms against 8 ms);
          * below, the probe decides. */
         if (n < AUTO_FAST_ROWS && L == given) {
-            if (spia__stencils_expand(given, &table) != SPIA_OK) {
+            if (spia__stencils_expand(given, &table, opt.threads) != SPIA_OK) {
                 res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
                 goto done;
             }
@@ -1021,7 +1021,7 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
     }
 
     if (L == given) {
-        if (spia__stencils_expand(given, &table) != SPIA_OK) {
+        if (spia__stencils_expand(given, &table, opt.threads) != SPIA_OK) {
             res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
             goto done;
         }

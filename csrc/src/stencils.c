@@ -87,7 +87,7 @@ spia_result spia_stencils_copy_csr(const spia_stencils *s, int64_t *offsets, int
         /* Rows are placed by their offsets, so those are needed either way. */
         int64_t *at = offsets ? offsets : (int64_t *)malloc(sizeof(int64_t) * ((size_t)s->rows + 1));
         if (!at) return SPIA_ERROR_OUT_OF_MEMORY;
-        spia__plan_table(s->plan, at, indices, weights);
+        spia__plan_table(s->plan, at, indices, weights, 1);
         if (at != offsets) free(at);
         return SPIA_OK;
     }
@@ -121,18 +121,18 @@ void spia__stencils_compact(spia_stencils *s) {
     if (s->plan && s->plan->holds_table) drop_arrays(s);
 }
 
-spia_result spia__stencils_expand(const spia_stencils *s, spia_stencils *full) {
+spia_result spia__stencils_expand(const spia_stencils *s, spia_stencils *full, int threads) {
     *full = *s;
     if (s->offsets) return SPIA_OK;
     const size_t nnz = (size_t)(s->nnz > 0 ? s->nnz : 1);
     full->offsets = (int64_t *)malloc(sizeof(int64_t) * ((size_t)s->rows + 1));
-    full->indices = (int32_t *)malloc(sizeof(int32_t) * nnz);
-    full->weights = (double *)malloc(sizeof(double) * nnz);
+    full->indices = (int32_t *)spia__alloc_large(sizeof(int32_t) * nnz);
+    full->weights = (double *)spia__alloc_large(sizeof(double) * nnz);
     if (!full->offsets || !full->indices || !full->weights) {
         spia__stencils_expanded_free(s, full);
         return SPIA_ERROR_OUT_OF_MEMORY;
     }
-    spia__plan_table(s->plan, full->offsets, full->indices, full->weights);
+    spia__plan_table(s->plan, full->offsets, full->indices, full->weights, threads);
     return SPIA_OK;
 }
 

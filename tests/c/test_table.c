@@ -125,7 +125,7 @@ static void check_table(const char *name, int32_t n, int32_t distinct, int unsor
     }
     /* The solvers' copy. */
     spia_stencils full;
-    CHECK(spia__stencils_expand(s, &full) == SPIA_OK, "%s: expand", name);
+    CHECK(spia__stencils_expand(s, &full, threads) == SPIA_OK, "%s: expand", name);
     CHECK(full.rows == n && full.nnz == nnz && full.plan == s->plan && full.boundary == s->boundary, "%s: expanded", name);
     CHECK(same(full.offsets, off0, sizeof(int64_t) * ((size_t)n + 1)) &&
               same(full.indices, idx0, sizeof(int32_t) * (size_t)nnz) && same(full.weights, w0, sizeof(double) * (size_t)nnz),
