@@ -927,6 +927,15 @@ static spia_result run_stage(solver_state *s, const spia_options *opt, double th
     return SPIA_OK;
 }
 
+/* *L pointed at `table`, given's CSR arrays (spia__stencils_expand), unless
+ * it already is; 0 when out of memory. */
+static int with_arrays(const spia_stencils *given, const spia_stencils **L, spia_stencils *table, int threads) {
+    if (*L == table) return 1;
+    if (spia__stencils_expand(given, table, threads) != SPIA_OK) return 0;
+    *L = table;
+    return 1;
+}
+
 spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_options *options, float *cage,
                        spia_report *report, spia_status *status) {
     report_reset(report);
@@ -990,12 +999,9 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
          * measured (a smooth 1M torus: 4 sweeps in 0.1 s against CG's one
          * iteration and its setup in 0.35 s; 30k: 3.4 ms against 8 ms);
          * below, the probe decides. */
-        if (n < AUTO_FAST_ROWS && L == given) {
-            if (spia__stencils_expand(given, &table, opt.threads) != SPIA_OK) {
-                res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
-                goto done;
-            }
-            L = &table;
+        if (n < AUTO_FAST_ROWS && !with_arrays(given, &L, &table, opt.threads)) {
+            res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
+            goto done;
         }
         const double probe = n >= AUTO_FAST_ROWS
                                  ? 1.0
@@ -1020,12 +1026,9 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
         if (handover) opt.initial_cage = handover;
     }
 
-    if (L == given) {
-        if (spia__stencils_expand(given, &table, opt.threads) != SPIA_OK) {
-            res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
-            goto done;
-        }
-        L = &table;
+    if (!with_arrays(given, &L, &table, opt.threads)) {
+        res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
+        goto done;
     }
     s.method = opt.method;
     s.L = L;
