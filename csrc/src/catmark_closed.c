@@ -34,8 +34,7 @@
 
 enum { SHARP_EDGE_LIMIT = 8 };
 
-/* Sharpness of face edge (v, w): 0 when not creased. */
-static float edge_sharpness(const spia_catmark_sharpness *sh, int32_t v, int32_t w) {
+float spia__catmark_edge_sharpness(const spia_catmark_sharpness *sh, int32_t v, int32_t w) {
     if (!sh->crease_first) return 0.0f;
     for (int64_t i = sh->crease_first[v]; i < sh->crease_first[v + 1]; ++i)
         if (sh->crease_other[i] == w) return sh->crease_sharpness[i];
@@ -165,7 +164,7 @@ int32_t spia__catmark_closed_row(const spia_mesh *m, const spia_adjacency *adj, 
     if (sh->crease_first && sh->crease_first[v + 1] > sh->crease_first[v]) {
         for (int32_t i = 0; i < k; ++i) {
             if (boundary && i == end) continue; /* a boundary edge */
-            const float s = edge_sharpness(sh, v, fan[i].next);
+            const float s = spia__catmark_edge_sharpness(sh, v, fan[i].next);
             if (s <= 0.0f) continue;
             if (s < SPIA__SHARPNESS_INFINITE) return SPIA__ROW_NOT_CLOSED; /* semi-sharp */
             if (n_sharp < SHARP_EDGE_LIMIT) sharp[n_sharp] = fan[i].next;

@@ -1762,6 +1762,17 @@ spia_result bfr_rows(const spia_mesh *m, const int64_t *corner_start, const spia
     return SPIA_OK;
 }
 
+// The sharpness of p as catmark_closed.c reads it.
+spia_catmark_sharpness sharpness_view(const Prepared &p, const spia_options *opt) {
+    spia_catmark_sharpness sh;
+    sh.vertex = p.vertex_sharpness.data();
+    sh.crease_first = p.crease_first.empty() ? nullptr : p.crease_first.data();
+    sh.crease_other = p.crease_other.empty() ? nullptr : p.crease_other.data();
+    sh.crease_sharpness = p.crease_sharpness.empty() ? nullptr : p.crease_sharpness.data();
+    sh.preserve_corners = opt->boundary_smooth == SPIA_BOUNDARY_SMOOTH_PRESERVE_CORNERS;
+    return sh;
+}
+
 // 6a. Semi-sharp vertices of one consistently oriented fan (the closed
 //     rows found the fan: on_boundary 0 or 1), darts and smooth corners
 //     excepted: the ring of 6b read from the mesh itself, with no refiner.
@@ -1772,8 +1783,9 @@ spia_result bfr_rows(const spia_mesh *m, const int64_t *corner_start, const spia
 //     current face's edge before it), as Sdc adds up the edges' sharpness
 //     in float in that order.  Returns the levels of 6b, or 0 where the
 //     vertex is not such a vertex.
-int fan_ring(const spia_mesh *m, const spia_adjacency *adj, const Prepared &p, const spia_options *opt, int32_t v,
-             bool boundary, std::vector<int32_t> &next, std::vector<int32_t> &prev, Ring &ring) {
+int fan_ring(const spia_mesh *m, const spia_adjacency *adj, const Prepared &p, const spia_catmark_sharpness &sh,
+             const spia_options *opt, int32_t v, bool boundary, std::vector<int32_t> &next, std::vector<int32_t> &prev,
+             Ring &ring) {
     const int64_t first = adj->first[v];
     const int k = (int)(adj->first[v + 1] - first);
     if (k < (boundary ? 2 : 3)) return 0;  // smooth corners (adaptive), two faces (Bfr)
@@ -1829,13 +1841,7 @@ int fan_ring(const spia_mesh *m, const spia_adjacency *adj, const Prepared &p, c
             ring.sharpness[(size_t)i] = kInfiniteSharpness;
             continue;
         }
-        float es = 0.0f;
-        if (!p.crease_first.empty())
-            for (int64_t e = p.crease_first[(size_t)v]; e < p.crease_first[(size_t)v + 1]; ++e)
-                if (p.crease_other[(size_t)e] == ring.far_end[(size_t)i]) {
-                    es = p.crease_sharpness[(size_t)e];
-                    break;
-                }
+        const float es = spia__catmark_edge_sharpness(&sh, v, ring.far_end[(size_t)i]);
         ring.sharpness[(size_t)i] = es;
         if (es >= kInfiniteSharpness) {
             ++infinitely_sharp;
@@ -1862,6 +1868,7 @@ int fan_ring(const spia_mesh *m, const spia_adjacency *adj, const Prepared &p, c
 void fan_ring_rows(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, const Prepared &p,
                    TableWriter &table, const unsigned char *on_boundary) {
     const int threads = opt->threads > 0 ? opt->threads : 1;
+    const spia_catmark_sharpness sh = sharpness_view(p, opt);
     std::vector<std::vector<std::pair<int32_t, std::vector<Entry>>>> spill_of((size_t)threads);
     std::atomic<bool> out_of_memory(false);
     parallel_for(threads, m->vertex_count, 4096, [&](int64_t v0, int64_t v1, int thread) {
@@ -1872,7 +1879,7 @@ void fan_ring_rows(const spia_mesh *m, const spia_adjacency *adj, const spia_opt
             std::vector<Entry> row;
             for (int32_t v = (int32_t)v0; v < (int32_t)v1; ++v) {
                 if (table.length[(size_t)v] >= 0 || on_boundary[v] > 1) continue;
-                const int levels = fan_ring(m, adj, p, opt, v, on_boundary[v] == 1, next, prev, ring);
+                const int levels = fan_ring(m, adj, p, sh, opt, v, on_boundary[v] == 1, next, prev, ring);
                 if (levels == 0 || !ring_row(m, adj, ring, p.vertex_sharpness[(size_t)v], levels, p.sdc, scratch, row))
                     continue;
                 table.write(v, row, spill_of[(size_t)thread]);
@@ -1890,12 +1897,7 @@ void fan_ring_rows(const spia_mesh *m, const spia_adjacency *adj, const spia_opt
 // the table; the vertices they do not cover (no closed form) get length -1.
 void closed_rows(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, const Prepared &p,
                  TableWriter &table, unsigned char *on_boundary) {
-    spia_catmark_sharpness sh;
-    sh.vertex = p.vertex_sharpness.data();
-    sh.crease_first = p.crease_first.empty() ? nullptr : p.crease_first.data();
-    sh.crease_other = p.crease_other.empty() ? nullptr : p.crease_other.data();
-    sh.crease_sharpness = p.crease_sharpness.empty() ? nullptr : p.crease_sharpness.data();
-    sh.preserve_corners = opt->boundary_smooth == SPIA_BOUNDARY_SMOOTH_PRESERVE_CORNERS;
+    const spia_catmark_sharpness sh = sharpness_view(p, opt);
     const int threads = opt->threads > 0 ? opt->threads : 1;
     std::atomic<bool> out_of_memory(false);
     spia_stencils *s = table.s;

@@ -237,6 +237,9 @@ typedef struct spia_catmark_sharpness {
     int preserve_corners; /* boundary vertices with one face are corners */
 } spia_catmark_sharpness;
 
+/* Sharpness of face edge (v, w): 0 when not creased. */
+float spia__catmark_edge_sharpness(const spia_catmark_sharpness *sh, int32_t v, int32_t w);
+
 typedef struct spia_row_entry {
     int32_t column;
     double weight;
