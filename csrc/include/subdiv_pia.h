@@ -245,9 +245,10 @@ enum {
     SPIA_SOLVE_MULTICOLOUR = 2,
     /* GS_PIA_FAST: sweep in double instead of float32. */
     SPIA_SOLVE_DOUBLE_SWEEPS = 4,
-    /* GS_PIA_FAST: the residual passes in SSE2 even where the processor has
-     * AVX, as on one that has none.  The results are the same to the bit
-     * (the same operations in the same order); only the time differs. */
+    /* GS_PIA_FAST's residual passes and spia_fit's sample products in SSE2
+     * even where the processor has AVX, as on one that has none.  The
+     * results are the same to the bit (the same operations in the same
+     * order); only the time differs. */
     SPIA_SOLVE_NO_AVX = 8
 };
 

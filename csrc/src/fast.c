@@ -177,13 +177,12 @@ static inline void sum3_get(sum3 a, sum3 b, double out[3]) {
 #endif
 
 /* The same sums in one AVX register, for the residual passes where the
- * processor and the system have AVX: the lanes take the same operations in
- * the same order as sum3's two SSE2 registers (no fused multiply-add), so the
- * sums are the same to the bit, in fewer instructions.  Not on Windows, where
- * GCC does not align the stack for spilled AVX registers (GCC bug 54412). */
-#if (defined(__GNUC__) || defined(__clang__)) && (defined(__x86_64__) || defined(__i386__)) && !defined(_WIN32)
+ * processor and the system have AVX (SPIA_AVX_KERNELS): the lanes take the
+ * same operations in the same order as sum3's two SSE2 registers (no fused
+ * multiply-add), so the sums are the same to the bit, in fewer
+ * instructions. */
+#ifdef SPIA_AVX_KERNELS
 #define SPIA_AVX_RESIDUALS 1
-#include <cpuid.h>
 #include <immintrin.h>
 #define AVX_TARGET __attribute__((target("avx")))
 #define AVX_INLINE static inline __attribute__((always_inline, target("avx")))
@@ -207,17 +206,6 @@ AVX_INLINE void sumv_get(sumv a, sumv b, double out[3]) {
     out[2] = xyzw[2];
 }
 
-/* Whether the processor has AVX and the system saves its registers
- * (OSXSAVE, and XCR0's SSE and AVX state bits). */
-static int have_avx(void) {
-    unsigned a = 0, b = 0, c = 0, d = 0;
-    if (!__get_cpuid(1, &a, &b, &c, &d)) return 0;
-    if (!(c & (1u << 27)) || !(c & (1u << 28))) return 0;
-    unsigned lo = 0, hi = 0;
-    __asm__ volatile("xgetbv" : "=a"(lo), "=d"(hi) : "c"(0));
-    (void)hi;
-    return (lo & 6u) == 6u;
-}
 #endif
 
 /* The sum of the square roots of x[0 .. count), two at a time where there
@@ -557,7 +545,7 @@ static kernels kernels_for(const fast *f, int no_avx) {
     const spia_plan *p = f->p;
     kernels k;
 #ifdef SPIA_AVX_RESIDUALS
-    const int avx = !no_avx && have_avx();
+    const int avx = !no_avx && spia__have_avx();
 #else
     const int avx = 0;
     (void)no_avx;

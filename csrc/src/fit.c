@@ -180,6 +180,7 @@ typedef struct sample_blocks {
     double *extra;    /* (BLOCK_PIECES - 1) * 3 * columns: the later pieces' sums */
     int32_t columns;
     int threads;
+    int avx;          /* the products' AVX kernels (SPIA_AVX_KERNELS) */
 } sample_blocks;
 
 /* The products run in this many pieces of the blocks, whatever the number
@@ -259,6 +260,7 @@ static spia_result blocks_build(const spia_mesh *cage, const spia_adjacency *adj
     B->per = per_edge * per_edge;
     B->columns = cage->vertex_count;
     B->threads = opt->threads > BLOCK_PIECES ? BLOCK_PIECES : opt->threads < 1 ? 1 : opt->threads;
+    B->avx = !(opt->solve_flags & SPIA_SOLVE_NO_AVX) && spia__have_avx();
     B->groups = spia_surface_sample_count(cage, per_edge) / B->per;
     B->start = calloc((size_t)B->groups + 1, sizeof(int64_t));
     B->u = malloc(sizeof(double) * 3 * BLOCK_PIECES * (size_t)B->per);
@@ -281,29 +283,73 @@ static spia_result blocks_build(const spia_mesh *cage, const spia_adjacency *adj
 
 static inline int64_t block_width(const sample_blocks *B, int64_t g) { return B->start[g + 1] - B->start[g]; }
 
-/* u = block g times the columns of x: its samples' positions. */
-static inline void block_forward(const sample_blocks *B, int64_t g, const double *x, double *u) {
+/* The block products four samples at a time, in GCC's and Clang's vector
+ * types: two SSE2 registers each by default, one AVX register in the
+ * kernels compiled for AVX (SPIA_AVX_KERNELS).  Every lane does the
+ * operations the scalar loops would, in their order, so both give the same
+ * bits.  Loads and stores go through memcpy (any alignment). */
+typedef double v4d __attribute__((vector_size(32)));
+typedef float v4f __attribute__((vector_size(16)));
+#define ALWAYS_INLINE static inline __attribute__((always_inline))
+
+ALWAYS_INLINE void load4(v4d *out, const float *w) {
+    v4f f;
+    memcpy(&f, w, sizeof f);
+    *out = __builtin_convertvector(f, v4d);
+}
+
+/* u = block g times the columns of x: its samples' positions.  Each sample
+ * sums over the columns in order, eight (then four, then one) samples at a
+ * time in registers. */
+ALWAYS_INLINE void block_forward(const sample_blocks *B, int64_t g, const double *x, double *u) {
     const int32_t *cols = B->cols + B->start[g];
     const int64_t width = block_width(B, g);
     const int32_t per = B->per;
     const float *w = B->w + per * B->start[g];
     double *ux = u, *uy = u + per, *uz = u + 2 * per;
-    for (int32_t s = 0; s < per; ++s) ux[s] = uy[s] = uz[s] = 0.0;
-    for (int64_t j = 0; j < width; ++j) {
-        const double *p = x + 3 * (int64_t)cols[j];
-        const float *col = w + per * j;
-        const double px = p[0], py = p[1], pz = p[2];
-        for (int32_t s = 0; s < per; ++s) {
-            ux[s] += col[s] * px;
-            uy[s] += col[s] * py;
-            uz[s] += col[s] * pz;
+    int32_t s = 0;
+    for (; s + 8 <= per; s += 8) {
+        v4d x0 = {0.0, 0.0, 0.0, 0.0}, x1 = x0, y0 = x0, y1 = x0, z0 = x0, z1 = x0;
+        for (int64_t j = 0; j < width; ++j) {
+            const double *p = x + 3 * (int64_t)cols[j];
+            const double px = p[0], py = p[1], pz = p[2];
+            v4d m0, m1;
+            load4(&m0, w + per * j + s);
+            load4(&m1, w + per * j + s + 4);
+            x0 += m0 * px, x1 += m1 * px;
+            y0 += m0 * py, y1 += m1 * py;
+            z0 += m0 * pz, z1 += m1 * pz;
         }
+        memcpy(ux + s, &x0, sizeof x0), memcpy(ux + s + 4, &x1, sizeof x1);
+        memcpy(uy + s, &y0, sizeof y0), memcpy(uy + s + 4, &y1, sizeof y1);
+        memcpy(uz + s, &z0, sizeof z0), memcpy(uz + s + 4, &z1, sizeof z1);
+    }
+    for (; s + 4 <= per; s += 4) {
+        v4d x0 = {0.0, 0.0, 0.0, 0.0}, y0 = x0, z0 = x0;
+        for (int64_t j = 0; j < width; ++j) {
+            const double *p = x + 3 * (int64_t)cols[j];
+            v4d m;
+            load4(&m, w + per * j + s);
+            x0 += m * p[0], y0 += m * p[1], z0 += m * p[2];
+        }
+        memcpy(ux + s, &x0, sizeof x0), memcpy(uy + s, &y0, sizeof y0), memcpy(uz + s, &z0, sizeof z0);
+    }
+    for (; s < per; ++s) {
+        double sx = 0.0, sy = 0.0, sz = 0.0;
+        for (int64_t j = 0; j < width; ++j) {
+            const double *p = x + 3 * (int64_t)cols[j];
+            const double m = w[per * j + s];
+            sx += m * p[0], sy += m * p[1], sz += m * p[2];
+        }
+        ux[s] = sx, uy[s] = sy, uz[s] = sz;
     }
 }
 
-/* out[cols] += block g transposed times u.  Four partial sums per axis keep
- * the additions independent (one chain each was the loop's bound). */
-static inline void block_backward(const sample_blocks *B, int64_t g, const double *u, double *out) {
+/* out[cols] += block g transposed times u.  Four partial sums per axis, one
+ * per lane (sample s in lane s mod 4; the samples after the last four in
+ * lane 0), added pairwise at the end: the additions do not wait for each
+ * other. */
+ALWAYS_INLINE void block_backward(const sample_blocks *B, int64_t g, const double *u, double *out) {
     const int32_t *cols = B->cols + B->start[g];
     const int64_t width = block_width(B, g);
     const int32_t per = B->per;
@@ -311,16 +357,18 @@ static inline void block_backward(const sample_blocks *B, int64_t g, const doubl
     const double *ux = u, *uy = u + per, *uz = u + 2 * per;
     for (int64_t j = 0; j < width; ++j) {
         const float *col = w + per * j;
-        double a[4] = {0.0, 0.0, 0.0, 0.0}, b[4] = {0.0, 0.0, 0.0, 0.0}, c[4] = {0.0, 0.0, 0.0, 0.0};
+        v4d a = {0.0, 0.0, 0.0, 0.0}, b = a, c = a;
         int32_t s = 0;
-        for (; s + 4 <= per; s += 4)
-            for (int l = 0; l < 4; ++l) {
-                const double m = col[s + l];
-                a[l] += m * ux[s + l];
-                b[l] += m * uy[s + l];
-                c[l] += m * uz[s + l];
-            }
-        for (; s < per; ++s) a[0] += col[s] * ux[s], b[0] += col[s] * uy[s], c[0] += col[s] * uz[s];
+        for (; s + 4 <= per; s += 4) {
+            v4d m, vx, vy, vz;
+            load4(&m, col + s);
+            memcpy(&vx, ux + s, sizeof vx), memcpy(&vy, uy + s, sizeof vy), memcpy(&vz, uz + s, sizeof vz);
+            a += m * vx, b += m * vy, c += m * vz;
+        }
+        for (; s < per; ++s) {
+            const double m = col[s];
+            a[0] += m * ux[s], b[0] += m * uy[s], c[0] += m * uz[s];
+        }
         double *p = out + 3 * (int64_t)cols[j];
         p[0] += (a[0] + a[1]) + (a[2] + a[3]);
         p[1] += (b[0] + b[1]) + (b[2] + b[3]);
@@ -365,14 +413,29 @@ static void blocks_run(const sample_blocks *B, block_piece_fn fn, const void *co
     }
 }
 
+/* A piece function `name` around its body, and where the library has AVX
+ * kernels its twin compiled for AVX (name##_avx); PIECE(B, name) is the
+ * one B chose (B->avx). */
+#define PIECE_ARGS const void *context, const sample_blocks *B, int64_t begin, int64_t end, double *u, double *out
+#ifdef SPIA_AVX_KERNELS
+#define DEFINE_PIECE(name, body)                                                   \
+    static void name(PIECE_ARGS) { body(context, B, begin, end, u, out); }         \
+    SPIA_TARGET_AVX static void name##_avx(PIECE_ARGS) { body(context, B, begin, end, u, out); }
+#define PIECE(B, name) ((B)->avx ? name##_avx : name)
+#else
+#define DEFINE_PIECE(name, body) \
+    static void name(PIECE_ARGS) { body(context, B, begin, end, u, out); }
+#define PIECE(B, name) name
+#endif
+
 /* X = M x, 3 doubles per sample. */
 typedef struct apply_context {
     const double *x;
     double *X;
 } apply_context;
 
-static void positions_piece(const void *context, const sample_blocks *B, int64_t begin, int64_t end, double *u,
-                            double *out) {
+ALWAYS_INLINE void positions_body(const void *context, const sample_blocks *B, int64_t begin, int64_t end,
+                                  double *u, double *out) {
     (void)out;
     const apply_context *a = context;
     const int32_t per = B->per;
@@ -383,9 +446,11 @@ static void positions_piece(const void *context, const sample_blocks *B, int64_t
     }
 }
 
+DEFINE_PIECE(positions_piece, positions_body)
+
 static void blocks_apply(const sample_blocks *B, const double *x, double *X) {
     apply_context a = {x, X};
-    blocks_run(B, positions_piece, &a, NULL, 0);
+    blocks_run(B, PIECE(B, positions_piece), &a, NULL, 0);
 }
 
 /* ---- distances ------------------------------------------------------------ */
@@ -544,7 +609,7 @@ typedef struct fit_system {
 } fit_system;
 
 /* g = B_s u with B_s = w_s (n n^T + alpha I). */
-static inline void apply_b(const fit_system *f, int64_t s, const double u[3], double g[3]) {
+ALWAYS_INLINE void apply_b(const fit_system *f, int64_t s, const double u[3], double g[3]) {
     const double w = f->weight[s];
     if (w == 0.0) {
         g[0] = g[1] = g[2] = 0.0;
@@ -558,7 +623,7 @@ static inline void apply_b(const fit_system *f, int64_t s, const double u[3], do
 
 /* The right-hand side's share of sample s: B_s-weighted targets, the
  * tangential anchor at the sample's current place X_s. */
-static inline void target_b(const fit_system *f, int64_t s, const float T[3], const double X[3], double g[3]) {
+ALWAYS_INLINE void target_b(const fit_system *f, int64_t s, const float T[3], const double X[3], double g[3]) {
     const double w = f->weight[s];
     if (w == 0.0) {
         g[0] = g[1] = g[2] = 0.0;
@@ -609,7 +674,7 @@ static void fairness_add(const fit_system *f, const double *x, double *z) {
 }
 
 /* Whether any sample of block g pulls. */
-static inline int block_pulls(const fit_system *f, int64_t g) {
+ALWAYS_INLINE int block_pulls(const fit_system *f, int64_t g) {
     const float *w = f->weight + g * f->blocks->per;
     for (int32_t s = 0; s < f->blocks->per; ++s)
         if (w[s] != 0.0f) return 1;
@@ -624,8 +689,8 @@ typedef struct normal_context {
 
 /* Over blocks [begin, end): out += M^T B M x, or with targets T the
  * right-hand side's share, out += M^T (B-weighted targets). */
-static void normal_piece(const void *context, const sample_blocks *B, int64_t begin, int64_t end, double *u,
-                         double *out) {
+ALWAYS_INLINE void normal_body(const void *context, const sample_blocks *B, int64_t begin, int64_t end, double *u,
+                               double *out) {
     const normal_context *c = context;
     const fit_system *f = c->f;
     const int32_t per = B->per;
@@ -647,12 +712,14 @@ static void normal_piece(const void *context, const sample_blocks *B, int64_t be
     }
 }
 
+DEFINE_PIECE(normal_piece, normal_body)
+
 /* y = A x, the normal-equation matrix: M^T B M x block by block, then the
  * fairness and the damping. */
 static void system_apply(const fit_system *f, const double *x, double *y) {
     memset(y, 0, sizeof(double) * 3 * (size_t)f->n);
     normal_context c = {f, x, NULL};
-    blocks_run(f->blocks, normal_piece, &c, y, 1);
+    blocks_run(f->blocks, PIECE(f->blocks, normal_piece), &c, y, 1);
     if (f->lambda > 0.0) {
         fairness_add(f, x, y);
     }
@@ -706,7 +773,7 @@ static int least_squares_round(fit_system *f, const float *T, const double *V0, 
     const int32_t per = B->per;
     memset(b, 0, sizeof(double) * (size_t)N3);
     normal_context c = {f, NULL, T};
-    blocks_run(B, normal_piece, &c, b, 1);
+    blocks_run(B, PIECE(B, normal_piece), &c, b, 1);
     if (f->lambda > 0.0) {
         fairness_add(f, V0, b);
     }

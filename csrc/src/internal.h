@@ -9,6 +9,19 @@
 extern "C" {
 #endif
 
+/* Kernels compiled a second time for AVX (__attribute__((target("avx"))),
+ * without fused multiply-add, so that they give the same bits as the SSE2
+ * ones) and chosen at run time where spia__have_avx() says so.  Not on
+ * Windows, where GCC does not align the stack for spilled AVX registers
+ * (GCC bug 54412). */
+#if (defined(__GNUC__) || defined(__clang__)) && (defined(__x86_64__) || defined(__i386__)) && !defined(_WIN32)
+#define SPIA_AVX_KERNELS 1
+#define SPIA_TARGET_AVX __attribute__((target("avx")))
+#endif
+/* Whether the processor has AVX and the system saves its registers; 0
+ * where the library has no AVX kernels. */
+int spia__have_avx(void);
+
 /* Tables of this many rows or more are solved on several threads (below
  * it a parallel region costs more than it saves). */
 #define SPIA_PARALLEL_ROWS 50000

@@ -141,6 +141,35 @@ def test_surface_fit_puts_every_sample_on_the_sphere(native, sphere_scan):
     assert rep.history[0] == pytest.approx(rep.before.mean) and len(rep.history) == rep.rounds + 1
 
 
+@pytest.mark.parametrize("per_edge", [1, 2, 3, 5, 6])
+def test_sample_products_for_every_grid_size(native, sphere_scan, per_edge):
+    """The sample products take eight, four and single samples at a time:
+    grids of 1, 4, 9, 25 and 36 samples per face use each mix.  The fit's
+    samples are where the library's sample stencils put them (the report's
+    largest distance against the closest points of M.apply(cage)), the
+    surface reaches the unit sphere where there are enough samples to fit
+    it, and the products give the same bits in SSE2 as in AVX (NO_AVX)."""
+    cp, cf = quad_sphere(6)
+    # quads, and a band of triangles (a ptex face per corner)
+    tris = np.vstack([cf[:36, [0, 1, 2]], cf[:36, [0, 2, 3]]])
+    cage = native.Mesh(cp, np.r_[np.full(len(tris), 3), np.full(len(cf) - 36, 4)].astype(np.int32),
+                       np.r_[tris.ravel(), cf[36:].ravel()])
+    fits = [native.fit(cage, sphere_scan, samples_per_edge=per_edge, max_rounds=4, threads=2, solve_flags=flags)
+            for flags in ((), ("NO_AVX",))]
+    (out, rep), (out_sse2, rep_sse2) = fits
+    assert np.array_equal(out.view(np.uint32), out_sse2.view(np.uint32))
+    assert rep.after.mean == rep_sse2.after.mean and rep.rounds == rep_sse2.rounds
+    M = native.surface_stencils(native.Mesh(out, cage.face_sizes, cage.face_vertices), per_edge)
+    samples = M.apply(out)
+    assert len(samples) == rep.sample_count
+    _, _, dist, _ = sphere_scan.closest_points(samples)
+    # (the fit's blocks hold the weights in float: 6e-8 of the cage's size at most)
+    assert rep.after.max == pytest.approx(dist.max() / sphere_scan.diagonal, rel=0, abs=5e-8)
+    if per_edge >= 2:
+        assert rep.after.mean < rep.before.mean / 10
+        assert np.abs(np.linalg.norm(samples, axis=1) - 1).mean() / sphere_scan.diagonal < 2e-4
+
+
 def test_vertex_fit_puts_every_limit_point_on_the_sphere(native, sphere_scan):
     cage, out, rep = _fit_sphere(native, sphere_scan, "VERTICES")
     fitted = native.Mesh(out, cage.face_sizes, cage.face_vertices)
