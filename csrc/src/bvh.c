@@ -705,6 +705,45 @@ void spia__bvh_free(spia__bvh *bvh) {
     memset(bvh, 0, sizeof *bvh);
 }
 
+/* The boxes of node `index`'s children from its triangles and its child
+ * nodes' boxes, and its own box (their union) into lo, hi. */
+static void refit_node(spia__bvh *bvh, uint32_t index, float lo[3], float hi[3]) {
+    spia__bvh_node *node = bvh->nodes + index;
+    for (int k = 0; k < 3; ++k) lo[k] = FLT_MAX, hi[k] = -FLT_MAX;
+    for (uint32_t i = 0; i < node->children; ++i) {
+        float clo[3] = {FLT_MAX, FLT_MAX, FLT_MAX}, chi[3] = {-FLT_MAX, -FLT_MAX, -FLT_MAX};
+        if (node->count[i] == 0) {
+            refit_node(bvh, node->child[i], clo, chi);
+        } else {
+            for (uint32_t t = node->child[i]; t < node->child[i] + node->count[i]; ++t)
+                for (int c = 0; c < 3; ++c) {
+                    const float *v = bvh->positions + 3 * (int64_t)bvh->triangles[3 * (int64_t)t + c];
+                    for (int k = 0; k < 3; ++k) {
+                        clo[k] = v[k] < clo[k] ? v[k] : clo[k];
+                        chi[k] = v[k] > chi[k] ? v[k] : chi[k];
+                    }
+                }
+        }
+        for (int k = 0; k < 3; ++k) {
+            node->lo[k][i] = clo[k], node->hi[k][i] = chi[k];
+            lo[k] = clo[k] < lo[k] ? clo[k] : lo[k];
+            hi[k] = chi[k] > hi[k] ? chi[k] : hi[k];
+        }
+    }
+}
+
+void spia__bvh_refit(spia__bvh *bvh) {
+    if (!bvh || bvh->node_count < 1) return;
+    float lo[3], hi[3];
+    refit_node(bvh, 0, lo, hi);
+    double extent = 0.0;
+    for (int k = 0; k < 3; ++k) {
+        extent = fabs(lo[k]) > extent ? fabs(lo[k]) : extent;
+        extent = fabs(hi[k]) > extent ? fabs(hi[k]) : extent;
+    }
+    bvh->extent = extent;
+}
+
 size_t spia__bvh_bytes(const spia__bvh *bvh) {
     return sizeof(spia__bvh_node) * (size_t)bvh->node_count + sizeof(uint32_t) * (size_t)bvh->triangle_count;
 }

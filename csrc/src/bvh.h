@@ -94,6 +94,13 @@ spia_result spia__bvh_build_progress(spia__bvh *bvh, const float *positions, int
                                      spia_status *status);
 void spia__bvh_free(spia__bvh *bvh);
 
+/* After the borrowed positions have moved (the triangles and their order
+ * staying), gives every node the boxes of its children again, from the
+ * leaves up, and the extent: the tree is valid for the new positions (its
+ * queries as exact as ever), though no longer shaped for them.  Cheap
+ * beside a build (a pass over the triangles and the nodes). */
+void spia__bvh_refit(spia__bvh *bvh);
+
 /* The bytes the hierarchy holds (nodes and order; not the borrowed arrays). */
 size_t spia__bvh_bytes(const spia__bvh *bvh);
 

@@ -867,6 +867,7 @@ typedef struct fit_buffers {
     /* The scan side: the limit surface as a quad grid, its positions, its
      * face sizes (all 4), and the scan vertices measured, in double. */
     spia__limit_grid *grid;
+    spia_scan *surface; /* the grid as a scan: built by the first measure, moved by later ones */
     float *grid_pos, *scan_d, *scan_scratch, *scan_radius;
     int32_t *grid_sizes, *scan_vertex, *scan_quad;
     double *scan_pts;
@@ -882,6 +883,7 @@ static void buffers_free(fit_buffers *b) {
     free(b->nb_start), free(b->nb), free(b->free_vertex), free(b->sample_face);
     free(b->dots), free(b->folded), free(b->mark), free(b->stiffness);
     if (b->grid) spia__limit_grid_free(b->grid);
+    spia_scan_free(b->surface);
     free(b->grid_pos), free(b->scan_d), free(b->scan_scratch), free(b->grid_sizes), free(b->scan_vertex);
     free(b->scan_radius), free(b->scan_quad);
     free(b->scan_pts);
@@ -1016,10 +1018,12 @@ static spia_result scan_side_prepare(const spia_mesh *cage, const spia_adjacency
 }
 
 /* The distances of the scan vertices to the limit surface of cage V.  The
- * first measure keeps each vertex's closest grid quad; a later one starts
- * each search from the distance to the nearest corner of that quad on the
- * new surface (a bound, as every grid vertex lies on the surface), which
- * prunes most of the hierarchy. */
+ * first measure builds the grid's hierarchy and keeps each vertex's closest
+ * grid quad; a later one moves the grid (refitting the hierarchy: a build
+ * took 0.75 s of the 50k-vertex cage's 0.8M quads, a refit about 0.05) and
+ * starts each search from the distance to the nearest corner of that quad
+ * on the new surface (a bound, as every grid vertex lies on the surface),
+ * which prunes most of the hierarchy. */
 static spia_result scan_side_measure(fit_buffers *b, const double *V, double cutoff_abs, double diagonal, int threads,
                                      int warm, fit_clock *clock, spia_fit_distances *out, spia_status *status) {
     spia_result r = spia__limit_grid_evaluate(b->grid, V, b->grid_pos, status);
@@ -1041,20 +1045,23 @@ static spia_result scan_side_measure(fit_buffers *b, const double *V, double cut
             b->scan_radius[k] = bound;
         }
     }
-    spia_mesh view;
-    memset(&view, 0, sizeof view);
-    view.vertex_count = spia__limit_grid_vertex_count(b->grid);
-    view.positions = b->grid_pos;
-    view.face_count = spia__limit_grid_face_count(b->grid);
-    view.face_sizes = b->grid_sizes;
-    view.face_vertices = spia__limit_grid_quads(b->grid);
-    spia_scan *surface = NULL;
-    if ((r = spia_scan_create_progress(&view, clock->fn ? clock_scan_tick : NULL, clock, &surface, status)) != SPIA_OK)
-        return r == SPIA_ERROR_CANCELLED ? scan_side_cancelled(status) : r;
+    if (!b->surface) {
+        spia_mesh view;
+        memset(&view, 0, sizeof view);
+        view.vertex_count = spia__limit_grid_vertex_count(b->grid);
+        view.positions = b->grid_pos;
+        view.face_count = spia__limit_grid_face_count(b->grid);
+        view.face_sizes = b->grid_sizes;
+        view.face_vertices = spia__limit_grid_quads(b->grid);
+        r = spia_scan_create_progress(&view, clock->fn ? clock_scan_tick : NULL, clock, &b->surface, status);
+        if (r != SPIA_OK) return r == SPIA_ERROR_CANCELLED ? scan_side_cancelled(status) : r;
+    } else if ((r = spia__scan_move(b->surface, b->grid_pos)) != SPIA_OK) {
+        return spia__fail(status, r, -1, "%s moving the surface's grid to the fitted cage",
+                          r == SPIA_ERROR_NONFINITE ? "non-finite positions" : "out of memory");
+    }
     const int cancelled = clock_tick(clock) ||
-                          closest_in_chunks(surface, b->scan_count, b->scan_pts, warm ? b->scan_radius : NULL, NULL,
+                          closest_in_chunks(b->surface, b->scan_count, b->scan_pts, warm ? b->scan_radius : NULL, NULL,
                                             NULL, b->scan_d, warm ? NULL : b->scan_quad, NULL, threads, clock);
-    spia_scan_free(surface);
     if (cancelled) return scan_side_cancelled(status);
     *out = distance_stats(b->scan_d, b->scan_count, cutoff_abs, diagonal, b->scan_scratch);
     return SPIA_OK;

@@ -344,6 +344,13 @@ void spia__limit_grid_free(spia__limit_grid *grid);
 const float *spia__scan_positions(const spia_scan *scan, int32_t *vertex_count, const int32_t **original);
 void spia__scan_used_vertices(const spia_scan *scan, uint8_t *used);
 
+/* Moves the scan's vertices to `positions` (3 floats per vertex of the
+ * mesh it was made from, in that mesh's order), its faces staying: its
+ * normals, diagonal (over the vertices its triangles use) and hierarchy
+ * (refitted, not rebuilt: spia__bvh_refit) follow.  Fails, changing
+ * nothing, with SPIA_ERROR_NONFINITE or SPIA_ERROR_OUT_OF_MEMORY. */
+spia_result spia__scan_move(spia_scan *s, const float *positions);
+
 /* Closest points for points in double (scan.c); no argument checks.  radius,
  * when not NULL, bounds each point's distance from above (a search hint;
  * a bound that proves too small falls back to a full search).  threads as

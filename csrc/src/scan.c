@@ -204,6 +204,28 @@ static spia_result renumber_vertices(spia_scan *s, spia__build_progress *p) {
     return SPIA_OK;
 }
 
+/* The area-weighted vertex normals: each triangle's cross product added to
+ * its corners in triangle order (acc: 3 zeroed doubles per vertex), then
+ * made unit (zero where they cancel or no triangle is). */
+static void vertex_normals(spia_scan *s, double *acc) {
+    for (int64_t t = 0; t < s->triangle_count; ++t) {
+        const int32_t *tri = s->triangles + 3 * t;
+        const float *a = s->positions + 3 * (int64_t)tri[0], *b = s->positions + 3 * (int64_t)tri[1],
+                    *c = s->positions + 3 * (int64_t)tri[2];
+        const double e1[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+        const double e2[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+        const double cr[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                              e1[0] * e2[1] - e1[1] * e2[0]};
+        for (int j = 0; j < 3; ++j)
+            for (int q = 0; q < 3; ++q) acc[3 * (int64_t)tri[j] + q] += cr[q];
+    }
+    for (int32_t v = 0; v < s->vertex_count; ++v) {
+        const double *a = acc + 3 * (int64_t)v;
+        const double len = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+        for (int q = 0; q < 3; ++q) s->normals[3 * (int64_t)v + q] = len > 0.0 ? (float)(a[q] / len) : 0.0f;
+    }
+}
+
 static int face_repeats_vertex(const int32_t *fv, int32_t size) {
     for (int32_t a = 0; a < size; ++a)
         for (int32_t b = a + 1; b < size; ++b)
@@ -333,25 +355,11 @@ spia_result spia_scan_create_progress(const spia_mesh *mesh, spia_progress_fn pr
             tri[1] = fv[k];
             tri[2] = fv[k + 1];
             s->polygon_of[t++] = f;
-            /* Area-weighted normal: the cross product, added to each corner. */
-            const float *a = s->positions + 3 * (int64_t)tri[0], *b = s->positions + 3 * (int64_t)tri[1],
-                        *c = s->positions + 3 * (int64_t)tri[2];
-            const double e1[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
-            const double e2[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
-            const double cr[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
-                                  e1[0] * e2[1] - e1[1] * e2[0]};
-            for (int j = 0; j < 3; ++j)
-                for (int q = 0; q < 3; ++q) acc[3 * (int64_t)tri[j] + q] += cr[q];
         }
     }
     s->diagonal = sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
                        (hi[2] - lo[2]) * (hi[2] - lo[2]));
-    for (int32_t v = 0; v < n; ++v) {
-        const double *a = acc + 3 * (int64_t)v;
-        const double len = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
-        if (len > 0.0)
-            for (int q = 0; q < 3; ++q) s->normals[3 * (int64_t)v + q] = (float)(a[q] / len);
-    }
+    vertex_normals(s, acc);
     free(acc);
     s->seconds[1] = spia__now() - t0;
     t0 = spia__now();
@@ -553,4 +561,30 @@ const float *spia__scan_positions(const spia_scan *scan, int32_t *vertex_count, 
 void spia__scan_used_vertices(const spia_scan *scan, uint8_t *used) {
     memset(used, 0, (size_t)scan->vertex_count);
     for (int64_t k = 0; k < 3 * scan->triangle_count; ++k) used[scan->triangles[k]] = 1;
+}
+
+spia_result spia__scan_move(spia_scan *s, const float *positions) {
+    const int32_t n = s->vertex_count;
+    for (int64_t i = 0; i < 3 * (int64_t)n; ++i)
+        if (!isfinite(positions[i])) return SPIA_ERROR_NONFINITE;
+    double *acc = calloc(3 * (size_t)n, sizeof(double));
+    if (!acc) return SPIA_ERROR_OUT_OF_MEMORY;
+    double lo[3] = {DBL_MAX, DBL_MAX, DBL_MAX}, hi[3] = {-DBL_MAX, -DBL_MAX, -DBL_MAX};
+    for (int32_t v = 0; v < n; ++v) {
+        const float *from = positions + 3 * (int64_t)(s->original ? s->original[v] : v);
+        memcpy(s->positions + 3 * (int64_t)v, from, sizeof(float) * 3);
+    }
+    for (int64_t k = 0; k < 3 * s->triangle_count; ++k) {
+        const float *x = s->positions + 3 * (int64_t)s->triangles[k];
+        for (int c = 0; c < 3; ++c) {
+            lo[c] = x[c] < lo[c] ? x[c] : lo[c];
+            hi[c] = x[c] > hi[c] ? x[c] : hi[c];
+        }
+    }
+    s->diagonal = sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
+                       (hi[2] - lo[2]) * (hi[2] - lo[2]));
+    vertex_normals(s, acc);
+    free(acc);
+    spia__bvh_refit(&s->bvh);
+    return SPIA_OK;
 }

@@ -5,7 +5,8 @@
  * box; and on nasty cases: triangles without area, duplicates, a flat scan,
  * one triangle, coordinates near 1e6, points on vertices and edges (ties),
  * a tree the heuristic would make too deep, 1, 2 and 3 threads, radius
- * hints that are too small, and every allocation failing in turn.  The hit
+ * hints that are too small, every allocation failing in turn, and a tree
+ * refitted to moved positions.  The hit
  * must be the very triangle the full search finds (least distance, then
  * lowest index) at the very same distance. */
 #include "support.h"
@@ -554,9 +555,48 @@ static void out_of_memory(void) {
     tmesh_free(&m);
 }
 
+/* Refitting (spia__bvh_refit): on positions that have not moved it gives
+ * every node the boxes the build gave, to the bit; after the bunny is bent
+ * and shaken (a smooth bend of 5% of its size and a random jitter of 0.1%),
+ * the refitted tree answers as a search over every moved triangle does. */
+static void refit(void) {
+    tmesh m;
+    CHECK(read_scan(SPIA_TEST_DATA_DIR "/bun_zipper.obj", &m), "cannot read bun_zipper.obj");
+    if (!m.nv) return;
+    tris t = fans(&m);
+    spia__bvh b;
+    int32_t *sorted;
+    if (!build(&t, 2, &b, &sorted)) return;
+    const size_t bytes = sizeof(spia__bvh_node) * (size_t)b.node_count;
+    spia__bvh_node *built = (spia__bvh_node *)malloc(bytes);
+    memcpy(built, b.nodes, bytes);
+    const double extent = b.extent;
+    spia__bvh_refit(&b);
+    CHECK(!memcmp(built, b.nodes, bytes) && b.extent == extent, "refitting an unmoved tree changed its boxes");
+    rng = 31;
+    double *points = box_points(&t, 400, 0.1);
+    for (int32_t v = 0; v < m.nv; ++v) { /* m.pos is what t and the tree borrow */
+        float *p = m.pos + 3 * (int64_t)v;
+        p[1] += (float)(0.008 * sin(40.0 * p[0]) + 0.0002 * (uniform() - 0.5));
+        p[2] += (float)(0.008 * cos(30.0 * p[1]) + 0.0002 * (uniform() - 0.5));
+    }
+    spia__bvh_refit(&b);
+    int moved = 0;
+    for (int64_t i = 0; i < b.node_count && !moved; ++i) moved = memcmp(&built[i], &b.nodes[i], sizeof *built) != 0;
+    CHECK(moved, "refitting a moved tree left its boxes");
+    compare("bunny, bent and refitted", &t, &b, points, 400);
+    free(points);
+    free(built);
+    spia__bvh_free(&b);
+    free(sorted);
+    tris_free(&t);
+    tmesh_free(&m);
+}
+
 int main(void) {
     nasty();
     out_of_memory();
+    refit();
     bunny();
     dragon();
     TEST_MAIN_END();
