@@ -1178,6 +1178,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
 
     double t0 = spia__now();
     int sign = 1;
+    int measured_best = 0; /* the samples' last measure is of the best cage */
     fit_clock clock = {opt.progress, opt.progress_user_data, spia__now(), 0.0, 0, 0};
     spia_options surface_opt = opt;
     surface_opt.scheme = SPIA_SCHEME_CATMULL_CLARK;
@@ -1217,6 +1218,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         }
         if (evaluate(scan, &b, b.V, S, diagonal, opt.threads, &report->query_seconds, &clock)) goto cancelled;
         report->before = distance_stats(b.d, S, cutoff_abs, diagonal, b.scratch);
+        measured_best = 1;
         clock.mean = report->before.mean;
         if (report->before.ignored >= S) {
             r = nothing_to_fit(status, "sample of the cage's limit surface", fo.cutoff);
@@ -1304,6 +1306,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
                 const int64_t i = 3 * (int64_t)v + c;
                 b.best[i] = adj.first[v + 1] > adj.first[v] ? (double)b.solved[i] : b.V0[i];
             }
+        measured_best = 0;
         report->rounds = 1;
     } else {
         b.work = malloc(sizeof(double) * 5 * (size_t)N3);
@@ -1372,7 +1375,8 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
              * a row that improved it by less than round_tolerance. */
             const double score = mean_clamped(b.d, guard ? b.folded : NULL, S, cutoff_abs);
             const double gain = best_score > 0.0 ? (best_score - score) / best_score : 0.0;
-            if (score < best_score) {
+            measured_best = score < best_score;
+            if (measured_best) {
                 best_score = score;
                 memcpy(b.best, b.V, sizeof(double) * (size_t)N3);
             }
@@ -1391,11 +1395,16 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         }
     }
 
-    /* Distances of the cage written. */
+    /* Distances of the cage written: measured already when it is the last
+     * cage measured (the samples, their closest points, their normals'
+     * agreement are those of the best cage). */
     if (S > 0) {
-        if (evaluate(scan, &b, b.best, S, diagonal, opt.threads, &report->query_seconds, &clock)) goto cancelled;
+        if (!measured_best) {
+            if (evaluate(scan, &b, b.best, S, diagonal, opt.threads, &report->query_seconds, &clock))
+                goto cancelled;
+            normal_agreement(b.X, b.N, S, fo.samples_per_edge, b.dots);
+        }
         report->after = distance_stats(b.d, S, cutoff_abs, diagonal, b.scratch);
-        normal_agreement(b.X, b.N, S, fo.samples_per_edge, b.dots);
         report->folded_after =
             fo.samples_per_edge < 2 ? -1 : find_folds(b.dots, b.d, b.on_boundary, S, cutoff_abs, sign, b.folded);
         if (b.grid) {
