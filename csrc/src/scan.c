@@ -204,33 +204,101 @@ static spia_result renumber_vertices(spia_scan *s, spia__build_progress *p) {
     return SPIA_OK;
 }
 
+static int face_repeats_vertex(const int32_t *fv, int32_t size) {
+    for (int32_t a = 0; a < size; ++a)
+        for (int32_t b = a + 1; b < size; ++b)
+            if (fv[a] == fv[b]) return 1;
+    return 0;
+}
+
 /* The area-weighted vertex normals: each triangle's cross product added to
  * its corners in triangle order (acc: 3 zeroed doubles per vertex), then
- * made unit (zero where they cancel or no triangle is). */
-static void vertex_normals(spia_scan *s, double *acc) {
+ * made unit (zero where they cancel or no triangle is).  On threads, each
+ * taking a range of the vertices and every triangle with a corner in it:
+ * each vertex's sum is in triangle order whatever the threads. */
+typedef struct normals_job {
+    spia_scan *s;
+    double *acc;
+    spia__build_progress *p;
+} normals_job;
+
+static void normals_range(void *context, int64_t begin, int64_t end, int thread) {
+    const normals_job *j = context;
+    const spia_scan *s = j->s;
     for (int64_t t = 0; t < s->triangle_count; ++t) {
+        if (POLL_EVERY(t) && spia__build_poll(j->p, thread, 0.5 + 0.5 * (double)t / (double)s->triangle_count))
+            return;
         const int32_t *tri = s->triangles + 3 * t;
+        const int in0 = tri[0] >= begin && tri[0] < end, in1 = tri[1] >= begin && tri[1] < end,
+                  in2 = tri[2] >= begin && tri[2] < end;
+        if (!(in0 | in1 | in2)) continue;
         const float *a = s->positions + 3 * (int64_t)tri[0], *b = s->positions + 3 * (int64_t)tri[1],
                     *c = s->positions + 3 * (int64_t)tri[2];
         const double e1[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
         const double e2[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
         const double cr[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
                               e1[0] * e2[1] - e1[1] * e2[0]};
-        for (int j = 0; j < 3; ++j)
-            for (int q = 0; q < 3; ++q) acc[3 * (int64_t)tri[j] + q] += cr[q];
+        const int in[3] = {in0, in1, in2};
+        for (int k = 0; k < 3; ++k)
+            if (in[k])
+                for (int q = 0; q < 3; ++q) j->acc[3 * (int64_t)tri[k] + q] += cr[q];
     }
-    for (int32_t v = 0; v < s->vertex_count; ++v) {
-        const double *a = acc + 3 * (int64_t)v;
+    for (int64_t v = begin; v < end; ++v) {
+        const double *a = j->acc + 3 * v;
         const double len = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
-        for (int q = 0; q < 3; ++q) s->normals[3 * (int64_t)v + q] = len > 0.0 ? (float)(a[q] / len) : 0.0f;
+        for (int q = 0; q < 3; ++q) s->normals[3 * v + q] = len > 0.0 ? (float)(a[q] / len) : 0.0f;
     }
 }
 
-static int face_repeats_vertex(const int32_t *fv, int32_t size) {
-    for (int32_t a = 0; a < size; ++a)
-        for (int32_t b = a + 1; b < size; ++b)
-            if (fv[a] == fv[b]) return 1;
-    return 0;
+static void vertex_normals(spia_scan *s, double *acc, int threads, spia__build_progress *p) {
+    normals_job j = {s, acc, p};
+    spia__parallel_for(threads, s->vertex_count, 0, normals_range, &j);
+}
+
+/* Whether a build with progress p was cancelled. */
+static int build_cancelled(spia__build_progress *p) { return p && spia__counter_get(&p->cancelled); }
+
+/* The fans of the faces of piece k (FAN_PIECE faces from piece_start's
+ * corner and triangle) and the box of their vertices (box[6 k ..]: lo,
+ * hi). */
+#define FAN_PIECE 65536
+typedef struct fan_job {
+    spia_scan *s;
+    const spia_mesh *mesh;
+    const int64_t *piece_start;
+    double *box;
+    spia__build_progress *p;
+} fan_job;
+
+static void fan_range(void *context, int64_t begin, int64_t end, int thread) {
+    const fan_job *j = context;
+    const spia_mesh *mesh = j->mesh;
+    for (int64_t k = begin; k < end; ++k) {
+        if (spia__build_poll(j->p, thread, 0.5 * (double)k / (double)(mesh->face_count / FAN_PIECE + 1))) return;
+        double lo[3] = {DBL_MAX, DBL_MAX, DBL_MAX}, hi[3] = {-DBL_MAX, -DBL_MAX, -DBL_MAX};
+        int64_t corner = j->piece_start[2 * k], t = j->piece_start[2 * k + 1];
+        const int64_t last = (k + 1) * FAN_PIECE < mesh->face_count ? (k + 1) * FAN_PIECE : mesh->face_count;
+        for (int64_t f = k * FAN_PIECE; f < last; ++f) {
+            const int32_t size = mesh->face_sizes[f];
+            const int32_t *fv = mesh->face_vertices + corner;
+            corner += size;
+            for (int32_t c = 0; c < size; ++c)
+                for (int q = 0; q < 3; ++q) {
+                    const double x = mesh->positions[3 * (int64_t)fv[c] + q];
+                    lo[q] = x < lo[q] ? x : lo[q];
+                    hi[q] = x > hi[q] ? x : hi[q];
+                }
+            if (face_repeats_vertex(fv, size)) continue;
+            for (int32_t c = 1; c + 1 < size; ++c) {
+                int32_t *tri = j->s->triangles + 3 * t;
+                tri[0] = fv[0];
+                tri[1] = fv[c];
+                tri[2] = fv[c + 1];
+                j->s->polygon_of[t++] = (int32_t)f;
+            }
+        }
+        for (int q = 0; q < 3; ++q) j->box[6 * k + q] = lo[q], j->box[6 * k + 3 + q] = hi[q];
+    }
 }
 
 /* The phases of a build and where each starts in the whole (roughly their
@@ -282,19 +350,29 @@ spia_result spia_scan_create_progress(const spia_mesh *mesh, spia_progress_fn pr
             return spia__fail(status, SPIA_ERROR_NONFINITE, i / 3, "scan vertex %lld has a non-finite coordinate",
                               (long long)(i / 3));
     }
-    /* Count triangles (fans), checking sizes and indices. */
+    /* Count triangles (fans), checking sizes and indices, and note where
+     * each piece of FAN_PIECE faces starts (its first corner and triangle). */
+    const int64_t pieces = ((int64_t)mesh->face_count + FAN_PIECE - 1) / FAN_PIECE;
+    int64_t *piece_start = malloc(sizeof(int64_t) * 2 * (size_t)(pieces + 1));
+    if (!piece_start) return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the scan");
     int64_t tris = 0, corner = 0, skipped = 0;
-    for (int32_t f = 0; f < mesh->face_count; ++f) {
-        if (POLL_EVERY(f) && spia__build_poll(p, 0, 0.5 + 0.5 * (double)f / (double)mesh->face_count))
-            return cancelled(status, "checking the scan");
+    spia_result bad = SPIA_OK;
+    for (int32_t f = 0; f < mesh->face_count && bad == SPIA_OK; ++f) {
+        if (f % FAN_PIECE == 0) piece_start[2 * (f / FAN_PIECE)] = corner, piece_start[2 * (f / FAN_PIECE) + 1] = tris;
+        if (POLL_EVERY(f) && spia__build_poll(p, 0, 0.5 + 0.5 * (double)f / (double)mesh->face_count)) {
+            bad = cancelled(status, "checking the scan");
+            break;
+        }
         const int32_t size = mesh->face_sizes[f];
-        if (size < 3)
-            return spia__fail(status, SPIA_ERROR_FACE_SIZE, f, "scan face %d has %d corners (at least 3 needed)", f,
-                              size);
-        for (int32_t k = 0; k < size; ++k) {
+        if (size < 3) {
+            bad = spia__fail(status, SPIA_ERROR_FACE_SIZE, f, "scan face %d has %d corners (at least 3 needed)", f,
+                             size);
+            break;
+        }
+        for (int32_t k = 0; k < size && bad == SPIA_OK; ++k) {
             const int32_t v = mesh->face_vertices[corner + k];
             if (v < 0 || v >= n)
-                return spia__fail(status, SPIA_ERROR_INDEX_RANGE, f, "scan face %d refers to vertex %d of %d", f, v, n);
+                bad = spia__fail(status, SPIA_ERROR_INDEX_RANGE, f, "scan face %d refers to vertex %d of %d", f, v, n);
         }
         if (face_repeats_vertex(mesh->face_vertices + corner, size))
             ++skipped;
@@ -302,12 +380,17 @@ spia_result spia_scan_create_progress(const spia_mesh *mesh, spia_progress_fn pr
             tris += size - 2;
         corner += size;
     }
-    if (tris == 0)
-        return spia__fail(status, SPIA_ERROR_EMPTY_MESH, -1, "the scan has no usable faces (%lld degenerate)",
-                          (long long)skipped);
-    if (tris > UINT32_MAX / 3)
-        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "the scan has too many triangles (%lld)",
-                          (long long)tris);
+    if (bad == SPIA_OK && tris == 0)
+        bad = spia__fail(status, SPIA_ERROR_EMPTY_MESH, -1, "the scan has no usable faces (%lld degenerate)",
+                         (long long)skipped);
+    if (bad == SPIA_OK && tris > UINT32_MAX / 3)
+        bad = spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "the scan has too many triangles (%lld)",
+                         (long long)tris);
+    if (bad != SPIA_OK) {
+        free(piece_start);
+        return bad;
+    }
+    piece_start[2 * pieces] = corner, piece_start[2 * pieces + 1] = tris;
 
     spia_scan *s = calloc(1, sizeof *s);
     if (!s) return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the scan");
@@ -329,38 +412,33 @@ spia_result spia_scan_create_progress(const spia_mesh *mesh, spia_progress_fn pr
     }
     memcpy(s->positions, mesh->positions, sizeof(float) * 3 * (size_t)n);
 
-    /* Bounding box of the vertices faces use. */
-    double lo[3] = {DBL_MAX, DBL_MAX, DBL_MAX}, hi[3] = {-DBL_MAX, -DBL_MAX, -DBL_MAX};
-    int64_t t = 0;
-    corner = 0;
-    for (int32_t f = 0; f < mesh->face_count; ++f) {
-        if (POLL_EVERY(f) && spia__build_poll(p, 0, 0.8 * (double)f / (double)mesh->face_count)) {
-            free(acc);
-            scan_release(s);
-            return cancelled(status, "making the scan's triangles");
-        }
-        const int32_t size = mesh->face_sizes[f];
-        const int32_t *fv = mesh->face_vertices + corner;
-        corner += size;
-        for (int32_t k = 0; k < size; ++k)
-            for (int c = 0; c < 3; ++c) {
-                const double x = mesh->positions[3 * (int64_t)fv[k] + c];
-                lo[c] = x < lo[c] ? x : lo[c];
-                hi[c] = x > hi[c] ? x : hi[c];
-            }
-        if (face_repeats_vertex(fv, size)) continue;
-        for (int32_t k = 1; k + 1 < size; ++k) {
-            int32_t *tri = s->triangles + 3 * t;
-            tri[0] = fv[0];
-            tri[1] = fv[k];
-            tri[2] = fv[k + 1];
-            s->polygon_of[t++] = f;
-        }
+    /* The fans and the bounding box of the vertices faces use, piece by
+     * piece on threads; then the normals. */
+    const int threads = spia__processor_count();
+    double *piece_box = malloc(sizeof(double) * 6 * (size_t)(pieces > 0 ? pieces : 1));
+    if (!piece_box) {
+        free(acc), free(piece_start);
+        scan_release(s);
+        return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the scan");
     }
+    fan_job fj = {s, mesh, piece_start, piece_box, p};
+    spia__parallel_for(threads, pieces, 1, fan_range, &fj);
+    free(piece_start);
+    double lo[3] = {DBL_MAX, DBL_MAX, DBL_MAX}, hi[3] = {-DBL_MAX, -DBL_MAX, -DBL_MAX};
+    for (int64_t k = 0; k < pieces; ++k)
+        for (int c = 0; c < 3; ++c) {
+            lo[c] = piece_box[6 * k + c] < lo[c] ? piece_box[6 * k + c] : lo[c];
+            hi[c] = piece_box[6 * k + 3 + c] > hi[c] ? piece_box[6 * k + 3 + c] : hi[c];
+        }
+    free(piece_box);
     s->diagonal = sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
                        (hi[2] - lo[2]) * (hi[2] - lo[2]));
-    vertex_normals(s, acc);
+    if (!build_cancelled(p)) vertex_normals(s, acc, threads, p);
     free(acc);
+    if (build_cancelled(p)) {
+        scan_release(s);
+        return cancelled(status, "making the scan's triangles");
+    }
     s->seconds[1] = spia__now() - t0;
     t0 = spia__now();
     phase(&pr, 2);
@@ -583,7 +661,7 @@ spia_result spia__scan_move(spia_scan *s, const float *positions) {
     }
     s->diagonal = sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
                        (hi[2] - lo[2]) * (hi[2] - lo[2]));
-    vertex_normals(s, acc);
+    vertex_normals(s, acc, spia__processor_count(), NULL);
     free(acc);
     spia__bvh_refit(&s->bvh);
     return SPIA_OK;

@@ -107,6 +107,31 @@ def test_renumbered_vertices_give_the_same_closest_points(native):
     assert np.allclose(np.linalg.norm(normals, axis=1), 1, atol=1e-5)
 
 
+def test_vertex_normals_match_numpy(native):
+    """At a scan vertex the closest point's normal is the vertex's
+    area-weighted normal: the triangles' cross products summed (numpy, in
+    double) and made unit; on a scan of quads and triangles large enough
+    (about 400k faces) for the fans and normals to be made in pieces on
+    several threads."""
+    pos, tris = grid(450)
+    cells = len(tris) // 2  # triangles (a, b, c) of every cell, then (a, c, d)
+    half = cells // 2       # the first half of the cells as quads (a, b, c, d): the same fans
+    quads = np.concatenate([tris[:half], tris[cells:cells + half, 2:]], 1)
+    rest = np.concatenate([tris[half:cells], tris[cells + half:]])
+    sizes = np.r_[np.full(half, 4), np.full(len(rest), 3)].astype(np.int32)
+    scan = native.Scan(native.Mesh(pos.astype(np.float32), sizes, np.r_[quads.ravel(), rest.ravel()].astype(np.int32)))
+    p = pos.astype(np.float32).astype(np.float64)
+    cross = np.cross(p[tris[:, 1]] - p[tris[:, 0]], p[tris[:, 2]] - p[tris[:, 0]])
+    acc = np.zeros_like(p)
+    for k in range(3):
+        np.add.at(acc, tris[:, k], cross)
+    want = acc / np.linalg.norm(acc, axis=1, keepdims=True)
+    pick = np.arange(0, len(pos), 37)
+    _, normals, d, _ = scan.closest_points(pos[pick].astype(np.float32))
+    assert d.max() == 0.0
+    assert np.abs(normals - want[pick]).max() < 1e-6
+
+
 def brute_force_distance(p, a, b, c):
     """Distances from p to every triangle (a, b, c: (T, 3)), by dense
     sampling-free projection: the least of the plane distance (inside) and
