@@ -393,7 +393,10 @@ spia_result spia_scan_create_progress(const spia_mesh *mesh, spia_progress_fn pr
     piece_start[2 * pieces] = corner, piece_start[2 * pieces + 1] = tris;
 
     spia_scan *s = calloc(1, sizeof *s);
-    if (!s) return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the scan");
+    if (!s) {
+        free(piece_start);
+        return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the scan");
+    }
     s->vertex_count = n;
     s->triangle_count = tris;
     s->skipped_faces = skipped;
@@ -406,7 +409,7 @@ spia_result spia_scan_create_progress(const spia_mesh *mesh, spia_progress_fn pr
     s->polygon_of = malloc(sizeof(int32_t) * (size_t)tris);
     double *acc = calloc(3 * (size_t)n, sizeof(double));
     if (!s->positions || !s->normals || !s->triangles || !s->polygon_of || !acc) {
-        free(acc);
+        free(acc), free(piece_start);
         scan_release(s);
         return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the scan");
     }
