@@ -2146,13 +2146,15 @@ struct LimitGrid {
 };
 
 spia_result limit_grid(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, int32_t levels,
-                       LimitGrid &g, spia_status *status) {
+                       spia__tick_fn tick, void *user, LimitGrid &g, spia_status *status) {
     spia_result r = prepare(m, adj, opt, g.p, status);
     if (r != SPIA_OK) return r;
+    if (tick && tick(user)) return SPIA_ERROR_CANCELLED;
     Far::TopologyRefiner &refiner = *g.p.refiner;
     Far::TopologyRefiner::UniformOptions uniform(levels);
     uniform.fullTopologyInLastLevel = true;  // PrimvarRefiner::Limit needs it
     refiner.RefineUniform(uniform);
+    if (tick && tick(user)) return SPIA_ERROR_CANCELLED;
     const Far::TopologyLevel &last = refiner.GetLevel(levels);
     g.levels = levels;
     g.vertex_count = last.GetNumVertices();
@@ -2168,7 +2170,7 @@ spia_result limit_grid(const spia_mesh *m, const spia_adjacency *adj, const spia
     return SPIA_OK;
 }
 
-void limit_grid_evaluate(const LimitGrid &g, const double *cage, float *out) {
+spia_result limit_grid_evaluate(const LimitGrid &g, const double *cage, spia__tick_fn tick, void *user, float *out) {
     const Far::TopologyRefiner &refiner = *g.p.refiner;
     std::vector<Point> src((size_t)refiner.GetNumVerticesTotal()), limit((size_t)g.vertex_count);
     for (int32_t o = 0; o < g.p.osd_n; ++o)
@@ -2179,11 +2181,13 @@ void limit_grid_evaluate(const LimitGrid &g, const double *cage, float *out) {
         Point *level_dst = level_src + refiner.GetLevel(level - 1).GetNumVertices();
         primvar.Interpolate(level, level_src, level_dst);
         level_src = level_dst;
+        if (tick && tick(user)) return SPIA_ERROR_CANCELLED;
     }
     Point *limit_dst = limit.data();
     primvar.Limit(level_src, limit_dst);
     for (int32_t i = 0; i < g.vertex_count; ++i)
         for (int a = 0; a < 3; ++a) out[3 * (int64_t)i + a] = (float)limit[(size_t)i].p[a];
+    return SPIA_OK;
 }
 
 // Limit stencils at samples inside the faces: per ptex face (a quad, or each
@@ -2555,11 +2559,12 @@ struct spia__limit_grid {
 
 extern "C" spia_result spia__osd_limit_grid_create(const spia_mesh *mesh, const spia_adjacency *adj,
                                                    const spia_options *options, int32_t levels,
-                                                   spia__limit_grid **out, spia_status *status) {
+                                                   spia__tick_fn tick, void *user, spia__limit_grid **out,
+                                                   spia_status *status) {
     *out = nullptr;
     try {
         std::unique_ptr<spia__limit_grid> grid(new spia__limit_grid);
-        spia_result r = limit_grid(mesh, adj, options, levels, grid->g, status);
+        spia_result r = limit_grid(mesh, adj, options, levels, tick, user, grid->g, status);
         if (r == SPIA_OK) *out = grid.release();
         return r;
     } catch (const std::bad_alloc &) {
@@ -2573,11 +2578,10 @@ extern "C" int32_t spia__limit_grid_vertex_count(const spia__limit_grid *grid) {
 extern "C" int32_t spia__limit_grid_face_count(const spia__limit_grid *grid) { return grid->g.face_count; }
 extern "C" const int32_t *spia__limit_grid_quads(const spia__limit_grid *grid) { return grid->g.quads.data(); }
 
-extern "C" spia_result spia__limit_grid_evaluate(const spia__limit_grid *grid, const double *cage, float *out,
-                                                 spia_status *status) {
+extern "C" spia_result spia__limit_grid_evaluate(const spia__limit_grid *grid, const double *cage,
+                                                 spia__tick_fn tick, void *user, float *out, spia_status *status) {
     try {
-        limit_grid_evaluate(grid->g, cage, out);
-        return SPIA_OK;
+        return limit_grid_evaluate(grid->g, cage, tick, user, out);
     } catch (const std::bad_alloc &) {
         return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory evaluating the limit surface");
     } catch (...) {

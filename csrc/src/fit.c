@@ -136,6 +136,10 @@ static int clock_tick(fit_clock *c) {
     return c->cancelled;
 }
 
+/* clock_tick for a caller that takes a plain tick function (the surface's
+ * grid). */
+static int clock_tick_fn(void *user) { return clock_tick((fit_clock *)user); }
+
 /* The clock ticking from a build with a progress callback of its own (the
  * surface's grid as a scan): its phases and fractions are not passed on. */
 static int clock_scan_tick(void *user, int32_t phase, double fraction) {
@@ -977,7 +981,8 @@ static spia_result scan_side_prepare(const spia_mesh *cage, const spia_adjacency
     int64_t quads = 0;
     for (int32_t f = 0; f < cage->face_count; ++f) quads += cage->face_sizes[f]; /* quads after one level */
     while (levels > 1 && (quads << (2 * (levels - 1))) > SCAN_GRID_FACES) --levels;
-    spia_result r = spia__osd_limit_grid_create(cage, adj, opt, levels, &b->grid, status);
+    spia_result r = spia__osd_limit_grid_create(cage, adj, opt, levels, clock_tick_fn, clock, &b->grid, status);
+    if (r == SPIA_ERROR_CANCELLED) return scan_side_cancelled(status);
     if (r != SPIA_OK) return r;
     if (clock_tick(clock)) return scan_side_cancelled(status);
     const int32_t gv = spia__limit_grid_vertex_count(b->grid), gf = spia__limit_grid_face_count(b->grid);
@@ -1026,7 +1031,8 @@ static spia_result scan_side_prepare(const spia_mesh *cage, const spia_adjacency
  * which prunes most of the hierarchy. */
 static spia_result scan_side_measure(fit_buffers *b, const double *V, double cutoff_abs, double diagonal, int threads,
                                      int warm, fit_clock *clock, spia_fit_distances *out, spia_status *status) {
-    spia_result r = spia__limit_grid_evaluate(b->grid, V, b->grid_pos, status);
+    spia_result r = spia__limit_grid_evaluate(b->grid, V, clock_tick_fn, clock, b->grid_pos, status);
+    if (r == SPIA_ERROR_CANCELLED) return scan_side_cancelled(status);
     if (r != SPIA_OK) return r;
     if (clock_tick(clock)) return scan_side_cancelled(status);
     if (warm) {

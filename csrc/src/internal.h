@@ -327,15 +327,20 @@ spia_result spia__osd_surface_blocks(const spia_mesh *mesh, const spia_adjacency
 /* The Catmull-Clark limit surface as a quad mesh (catmark_osd.cpp): the
  * cage refined uniformly `levels` times with every vertex at its limit
  * position.  Create once per topology, evaluate for each cage (vertex_count
- * * 3 doubles of the original mesh; out: the grid's vertex count * 3). */
+ * * 3 doubles of the original mesh; out: the grid's vertex count * 3).
+ * Both call tick(user), when not NULL, between their OpenSubdiv steps (the
+ * topology, the refinement; each level's interpolation, the limit); a
+ * nonzero return stops them with SPIA_ERROR_CANCELLED (status not set). */
 typedef struct spia__limit_grid spia__limit_grid;
+typedef int (*spia__tick_fn)(void *user);
 spia_result spia__osd_limit_grid_create(const spia_mesh *mesh, const spia_adjacency *adj, const spia_options *options,
-                                        int32_t levels, spia__limit_grid **out, spia_status *status);
+                                        int32_t levels, spia__tick_fn tick, void *user, spia__limit_grid **out,
+                                        spia_status *status);
 int32_t spia__limit_grid_vertex_count(const spia__limit_grid *grid);
 int32_t spia__limit_grid_face_count(const spia__limit_grid *grid);
 const int32_t *spia__limit_grid_quads(const spia__limit_grid *grid);
-spia_result spia__limit_grid_evaluate(const spia__limit_grid *grid, const double *cage, float *out,
-                                      spia_status *status);
+spia_result spia__limit_grid_evaluate(const spia__limit_grid *grid, const double *cage, spia__tick_fn tick,
+                                      void *user, float *out, spia_status *status);
 void spia__limit_grid_free(spia__limit_grid *grid);
 
 /* The scan's own copy of its positions (scan.c), in its own order, with
