@@ -180,8 +180,9 @@ typedef struct sample_blocks {
     int64_t *start;   /* groups + 1: the columns of block g are cols[start[g] .. start[g + 1]) */
     int32_t *cols;
     float *w;         /* block g at w + per * start[g]: column j's per weights at + per * j */
-    double *u;        /* BLOCK_PIECES * 3 * per: per piece, a block's samples' vectors (x, y, z apart) */
-    double *extra;    /* (BLOCK_PIECES - 1) * 3 * columns: the later pieces' sums */
+    double *u;        /* BLOCK_PIECES * 6 * per: per piece, a block's samples' vectors (x, y, z apart; 6 for the
+                         preconditioner's products) */
+    double *extra;    /* (BLOCK_PIECES - 1) * 6 * columns: the later pieces' sums */
     int32_t columns;
     int threads;
     int avx;          /* the products' AVX kernels (SPIA_AVX_KERNELS) */
@@ -267,8 +268,8 @@ static spia_result blocks_build(const spia_mesh *cage, const spia_adjacency *adj
     B->avx = !(opt->solve_flags & SPIA_SOLVE_NO_AVX) && spia__have_avx();
     B->groups = spia_surface_sample_count(cage, per_edge) / B->per;
     B->start = calloc((size_t)B->groups + 1, sizeof(int64_t));
-    B->u = malloc(sizeof(double) * 3 * BLOCK_PIECES * (size_t)B->per);
-    B->extra = malloc(sizeof(double) * 3 * (BLOCK_PIECES - 1) * (size_t)(B->columns > 0 ? B->columns : 1));
+    B->u = malloc(sizeof(double) * 6 * BLOCK_PIECES * (size_t)B->per);
+    B->extra = malloc(sizeof(double) * 6 * (BLOCK_PIECES - 1) * (size_t)(B->columns > 0 ? B->columns : 1));
     if (!B->start || !B->u || !B->extra) {
         blocks_free(B);
         return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the sample stencils");
@@ -390,6 +391,7 @@ typedef struct block_run {
     const void *context;
     double *out;
     int64_t grain;
+    int stride; /* values per column in out */
 } block_run;
 
 static void block_run_piece(void *context, int64_t begin, int64_t end, int thread) {
@@ -397,23 +399,23 @@ static void block_run_piece(void *context, int64_t begin, int64_t end, int threa
     const block_run *run = context;
     const int64_t piece = begin / run->grain;
     const sample_blocks *B = run->B;
-    double *out = piece == 0 ? run->out : B->extra + 3 * (piece - 1) * (int64_t)B->columns;
-    if (piece > 0 && run->out) memset(out, 0, sizeof(double) * 3 * (size_t)B->columns);
-    run->fn(run->context, B, begin, end, B->u + 3 * piece * B->per, out);
+    double *out = piece == 0 ? run->out : B->extra + run->stride * (piece - 1) * (int64_t)B->columns;
+    if (piece > 0 && run->out) memset(out, 0, sizeof(double) * (size_t)run->stride * (size_t)B->columns);
+    run->fn(run->context, B, begin, end, B->u + 6 * piece * B->per, out);
 }
 
-/* Runs fn over the blocks in BLOCK_PIECES pieces; `out` (3 per column)
- * gets the sum, when `summed`, or is written by piece 0 alone (fn writing
- * only its own blocks' places). */
-static void blocks_run(const sample_blocks *B, block_piece_fn fn, const void *context, double *out, int summed) {
-    block_run run = {B, fn, context, out, (B->groups + BLOCK_PIECES - 1) / BLOCK_PIECES};
+/* Runs fn over the blocks in BLOCK_PIECES pieces; `out` (stride values per
+ * column, 3 or 6) gets the sum, or with stride 0 is written by piece 0
+ * alone (fn writing only its own blocks' places). */
+static void blocks_run(const sample_blocks *B, block_piece_fn fn, const void *context, double *out, int stride) {
+    block_run run = {B, fn, context, out, (B->groups + BLOCK_PIECES - 1) / BLOCK_PIECES, stride};
     if (run.grain < 1) run.grain = 1;
     spia__parallel_for(B->threads, B->groups, run.grain, block_run_piece, &run);
-    if (!summed) return;
-    const int64_t pieces = (B->groups + run.grain - 1) / run.grain, N3 = 3 * (int64_t)B->columns;
+    if (!stride) return;
+    const int64_t pieces = (B->groups + run.grain - 1) / run.grain, size = stride * (int64_t)B->columns;
     for (int64_t piece = 1; piece < pieces; ++piece) {
-        const double *e = B->extra + (piece - 1) * N3;
-        for (int64_t i = 0; i < N3; ++i) out[i] += e[i];
+        const double *e = B->extra + (piece - 1) * size;
+        for (int64_t i = 0; i < size; ++i) out[i] += e[i];
     }
 }
 
@@ -718,12 +720,61 @@ ALWAYS_INLINE void normal_body(const void *context, const sample_blocks *B, int6
 
 DEFINE_PIECE(normal_piece, normal_body)
 
+/* Over blocks [begin, end): out (6 per column: xx, xy, xz, yy, yz, zz) +=
+ * sum_s m_sj^2 B_s, the diagonal 3x3 blocks of M^T B M.  Each sample's
+ * B_s first (6 values apart in u), then per column the squared weights
+ * against them, four samples at a time. */
+ALWAYS_INLINE void diagonal_body(const void *context, const sample_blocks *B, int64_t begin, int64_t end, double *u,
+                                 double *out) {
+    const fit_system *f = context;
+    const int32_t per = B->per;
+    const double al = f->alpha + f->beta, kp = 1.0 - f->beta;
+    for (int64_t g = begin; g < end; ++g) {
+        if (!block_pulls(f, g)) continue;
+        for (int32_t s = 0; s < per; ++s) {
+            const int64_t q = g * per + s;
+            const double w = f->weight[q];
+            const float *nn = f->normals + 3 * q;
+            const double e[6] = {kp * nn[0] * nn[0] + al, kp * nn[0] * nn[1], kp * nn[0] * nn[2],
+                                 kp * nn[1] * nn[1] + al, kp * nn[1] * nn[2], kp * nn[2] * nn[2] + al};
+            for (int c = 0; c < 6; ++c) u[c * per + s] = w * e[c];
+        }
+        const int32_t *cols = B->cols + B->start[g];
+        const int64_t width = block_width(B, g);
+        const float *w = B->w + per * B->start[g];
+        for (int64_t j = 0; j < width; ++j) {
+            const float *col = w + per * j;
+            v4d acc[6];
+            for (int c = 0; c < 6; ++c) acc[c] = (v4d){0.0, 0.0, 0.0, 0.0};
+            int32_t s = 0;
+            for (; s + 4 <= per; s += 4) {
+                v4d m;
+                load4(&m, col + s);
+                m *= m;
+                for (int c = 0; c < 6; ++c) {
+                    v4d e;
+                    memcpy(&e, u + c * per + s, sizeof e);
+                    acc[c] += m * e;
+                }
+            }
+            for (; s < per; ++s) {
+                const double m = (double)col[s] * col[s];
+                for (int c = 0; c < 6; ++c) acc[c][0] += m * u[c * per + s];
+            }
+            double *a = out + 6 * (int64_t)cols[j];
+            for (int c = 0; c < 6; ++c) a[c] += (acc[c][0] + acc[c][1]) + (acc[c][2] + acc[c][3]);
+        }
+    }
+}
+
+DEFINE_PIECE(diagonal_piece, diagonal_body)
+
 /* y = A x, the normal-equation matrix: M^T B M x block by block, then the
  * fairness and the damping. */
 static void system_apply(const fit_system *f, const double *x, double *y) {
     memset(y, 0, sizeof(double) * 3 * (size_t)f->n);
     normal_context c = {f, x, NULL};
-    blocks_run(f->blocks, PIECE(f->blocks, normal_piece), &c, y, 1);
+    blocks_run(f->blocks, PIECE(f->blocks, normal_piece), &c, y, 3);
     if (f->lambda > 0.0) {
         fairness_add(f, x, y);
     }
@@ -774,10 +825,9 @@ static int least_squares_round(fit_system *f, const float *T, const double *V0, 
     /* b = M^T B T + lambda Lap^T Lap V0 + damping V (the damping anchors the
      * current iterate, so it does not bias the fit). */
     const sample_blocks *B = f->blocks;
-    const int32_t per = B->per;
     memset(b, 0, sizeof(double) * (size_t)N3);
     normal_context c = {f, NULL, T};
-    blocks_run(B, PIECE(B, normal_piece), &c, b, 1);
+    blocks_run(B, PIECE(B, normal_piece), &c, b, 3);
     if (f->lambda > 0.0) {
         fairness_add(f, V0, b);
     }
@@ -786,25 +836,7 @@ static int least_squares_round(fit_system *f, const float *T, const double *V0, 
     /* Block-Jacobi preconditioner: sum_s m_si^2 B_s + lambda (Lap^T Lap)_ii + damping. */
     double *diag = f->tmp_diag;
     memset(diag, 0, sizeof(double) * 6 * (size_t)f->n);
-    for (int64_t g = 0; g < B->groups; ++g) {
-        if (!block_pulls(f, g)) continue;
-        const int64_t width = block_width(B, g);
-        const int32_t *cols = B->cols + B->start[g];
-        const float *w = B->w + per * B->start[g];
-        for (int32_t s = 0; s < per; ++s) {
-            const int64_t q = g * per + s;
-            if (f->weight[q] == 0.0f) continue;
-            const float *nn = f->normals + 3 * q;
-            const double al = f->alpha + f->beta, kp = 1.0 - f->beta;
-            const double e[6] = {kp * nn[0] * nn[0] + al, kp * nn[0] * nn[1], kp * nn[0] * nn[2],
-                                 kp * nn[1] * nn[1] + al, kp * nn[1] * nn[2], kp * nn[2] * nn[2] + al};
-            for (int64_t j = 0; j < width; ++j) {
-                const double m = w[per * j + s], w2 = m * m * f->weight[q];
-                double *a = diag + 6 * (int64_t)cols[j];
-                for (int c = 0; c < 6; ++c) a[c] += w2 * e[c];
-            }
-        }
-    }
+    blocks_run(B, PIECE(B, diagonal_piece), f, diag, 6);
     for (int32_t v = 0; v < f->n; ++v) {
         double *a = diag + 6 * (int64_t)v;
         const int64_t na = f->nb_start[v], nb = f->nb_start[v + 1];
