@@ -605,15 +605,20 @@ def find_target(obj, settings):
     return target
 
 
-def scan_arrays(target, cage_obj, context=None):
+def scan_arrays(target, cage_obj, context=None, tick=None):
     """(positions (N, 3) float32, face_sizes, face_vertices) of target's
     evaluated mesh (its modifiers applied) in cage_obj's object space.
-    ValueError if it has no faces.
+    ValueError if it has no faces.  tick(), when given, is called between
+    the steps (each a fraction of a second on a scan of millions of faces);
+    True stops the reading (native.PiaCancelled).
 
     Only what a scan needs is read (no edges, no creases), each array once
     and at once (foreach_get on Blender's own attributes), and the positions
     are transformed only when the two objects' spaces differ: a scan of
     millions of faces is read in a few hundredths of a second a million."""
+    def step():
+        if tick is not None and tick():
+            raise native.PiaCancelled("CANCELLED", "cancelled while reading the scan")
     context = context or bpy.context
     depsgraph = context.evaluated_depsgraph_get()
     evaluated = target.evaluated_get(depsgraph)
@@ -621,11 +626,18 @@ def scan_arrays(target, cage_obj, context=None):
     try:
         if mesh is None or len(mesh.polygons) == 0:
             raise ValueError("Target '%s' has no faces: the scan must be a mesh with faces" % target.name)
+        step()
         loop_start, face_sizes, ordered = _faces_of(mesh)
-        face_vertices = _face_vertices(loop_start, face_sizes, ordered, _corner_vertices(mesh))
+        step()
+        corners = _corner_vertices(mesh)
+        step()
+        face_vertices = _face_vertices(loop_start, face_sizes, ordered, corners)
+        del corners
+        step()
         positions = read_positions(mesh)
     finally:
         evaluated.to_mesh_clear()
+    step()
     to_cage = np.array(cage_obj.matrix_world.inverted() @ target.matrix_world, dtype=np.float64)
     if not np.array_equal(to_cage, np.eye(4)):
         out = np.empty_like(positions)
@@ -633,6 +645,8 @@ def scan_arrays(target, cage_obj, context=None):
         for begin in range(0, len(positions), chunk):
             block = positions[begin:begin + chunk].astype(np.float64)
             out[begin:begin + chunk] = block @ to_cage[:3, :3].T + to_cage[:3, 3]
+            if begin % (1 << 21) == 0:
+                step()
         positions = out
     return (np.ascontiguousarray(positions, np.float32), np.ascontiguousarray(face_sizes, np.int32),
             np.ascontiguousarray(face_vertices, np.int32))
@@ -641,10 +655,12 @@ def scan_arrays(target, cage_obj, context=None):
 def make_scan(target, cage_obj, context=None, progress=None):
     """native.Scan of target's evaluated mesh in cage_obj's object space.
     progress(iteration, relative_error), as interpolate's, is called with
-    (0, 0.0) through the build (seconds for a scan of millions of
-    triangles) and once at its end; True cancels (native.PiaCancelled)."""
+    (0, 0.0) while the scan is read and through the build (seconds for a
+    scan of millions of triangles) and once at its end; True cancels
+    (native.PiaCancelled)."""
     _require_library()
-    positions, face_sizes, face_vertices = scan_arrays(target, cage_obj, context)
+    tick = None if progress is None else (lambda: progress(0, 0.0))
+    positions, face_sizes, face_vertices = scan_arrays(target, cage_obj, context, tick=tick)
     building = None if progress is None else (lambda _phase, _fraction: progress(0, 0.0))
     return native.Scan(native.Mesh(positions, face_sizes, face_vertices), progress=building)
 

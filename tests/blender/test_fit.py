@@ -437,10 +437,17 @@ def test_api_fit_progress_and_cancel():
     line = api.format_fit_report(report, scan.name)
     assert line.startswith("Surface fit to '%s': mean distance" % scan.name) and "rounds" in line
     count = len(bpy.data.objects), len(bpy.data.meshes)
-    # The scan's build calls it too (at least at its end), so a cancel at
-    # the first call stops there.
+    # Reading the scan and its build call it too, so a cancel at the first
+    # call stops there, and one at a later call within the build.
     with pytest.raises(native.PiaCancelled) as e:
         subdiv_pia.interpolate(cage, target=scan.name, progress=lambda r, d: True)
+    assert "cancelled while reading the scan" in str(e.value), str(e.value)
+    assert (len(bpy.data.objects), len(bpy.data.meshes)) == count
+    # (reading takes five steps, a call after each, before the build's)
+    assert [r for r, _ in calls[:6]] == [0] * 6, calls[:8]
+    seen = []
+    with pytest.raises(native.PiaCancelled) as e:
+        subdiv_pia.interpolate(cage, target=scan.name, progress=lambda r, d: seen.append(r) or len(seen) >= 6)
     assert "cancelled while" in str(e.value) and "scan" in str(e.value), str(e.value)
     assert (len(bpy.data.objects), len(bpy.data.meshes)) == count
 
