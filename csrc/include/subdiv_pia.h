@@ -680,7 +680,7 @@ typedef struct spia_fit_report {
  * boundary) and, for VERTICES, the solver settings; its progress callback
  * is called after every round with the round and the mean relative
  * distance (VERTICES: the solve's iterations), and also at least every
- * 0.2 s within the long steps, repeating the last call's figures (0 and
+ * 0.1 s within the long steps, repeating the last call's figures (0 and
  * the cage given's mean before any), and cancels as elsewhere.
  *
  * Returns SPIA_OK; or SPIA_MAX_ITERATIONS when SURFACE used max_rounds with

@@ -117,7 +117,7 @@ spia_result spia_surface_stencils_create(const spia_mesh *mesh, const spia_optio
  * figures (the rounds done and their mean distance, or the VERTICES
  * solve's last iteration and error; 0 and the cage given's mean before
  * any). */
-#define PROGRESS_INTERVAL 0.2
+#define PROGRESS_INTERVAL 0.1
 #define QUERY_CHUNK 65536
 typedef struct fit_clock {
     spia_progress_fn fn;
