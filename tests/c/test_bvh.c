@@ -555,6 +555,64 @@ static void out_of_memory(void) {
     tmesh_free(&m);
 }
 
+/* Cancelling: a progress callback called at every poll (interval 0) that
+ * asks to stop at its k-th call, for every k a build makes; each cancelled
+ * build fails with SPIA_ERROR_CANCELLED, leaving nothing allocated and the
+ * triangles in their first order.  On two threads the subtrees are joined
+ * side by side, and the calling thread polls between them. */
+typedef struct cancel_counter {
+    long calls, stop_at, in_join;
+} cancel_counter;
+
+static int cancel_at(void *user, int32_t phase, double fraction) {
+    (void)phase;
+    cancel_counter *c = (cancel_counter *)user;
+    ++c->calls;
+    c->in_join += fraction > 0.9 && fraction < 0.93; /* the join's share of the build */
+    return c->calls == c->stop_at;
+}
+
+static void cancelled(void) {
+    tmesh m = make_torus(100, 50, 1);
+    tris t = fans(&m);
+    int32_t *v = (int32_t *)malloc(sizeof(int32_t) * 3 * (size_t)t.n);
+    for (int threads = 1; threads <= 2; ++threads) {
+        cancel_counter all = {0, -1, 0};
+        spia__build_progress pr;
+        memset(&pr, 0, sizeof pr);
+        pr.fn = cancel_at, pr.user_data = &all, pr.interval = 0.0, pr.from = 0.0, pr.to = 1.0;
+        spia__bvh b;
+        spia_status st;
+        memcpy(v, t.v, sizeof(int32_t) * 3 * (size_t)t.n);
+        CHECK(spia__bvh_build_progress(&b, t.pos, v, t.n, threads, &pr, &st) == SPIA_OK, "torus: %s", st.message);
+        spia__bvh_free(&b);
+        CHECK(all.calls > 3, "%ld progress calls on %d threads", all.calls, threads);
+        CHECK(threads == 1 || all.in_join > 0, "no progress call while joining the subtrees");
+        for (long k = 1; k <= all.calls; ++k) {
+            cancel_counter c = {0, k, 0};
+            memset(&pr, 0, sizeof pr);
+            pr.fn = cancel_at, pr.user_data = &c, pr.interval = 0.0, pr.from = 0.0, pr.to = 1.0;
+            memcpy(v, t.v, sizeof(int32_t) * 3 * (size_t)t.n);
+            memset(&st, 0, sizeof st);
+            const spia_result r = spia__bvh_build_progress(&b, t.pos, v, t.n, threads, &pr, &st);
+            CHECK(r == SPIA_ERROR_CANCELLED && st.code == r, "cancelled at call %ld of %ld on %d threads: %s", k,
+                  all.calls, threads, spia_result_name(r));
+            if (r == SPIA_OK) {
+                spia__bvh_free(&b);
+                continue;
+            }
+            CHECK(c.calls == k, "%ld calls after cancelling at call %ld", c.calls, k);
+            CHECK(b.nodes == NULL && b.order == NULL && b.node_count == 0, "cancelled at call %ld: bvh not zeroed", k);
+            CHECK(!memcmp(v, t.v, sizeof(int32_t) * 3 * (size_t)t.n), "cancelled at call %ld: triangles moved", k);
+            CHECK(atomic_load(&live_blocks) == 0, "cancelled at call %ld: %ld blocks left", k,
+                  (long)atomic_load(&live_blocks));
+        }
+    }
+    free(v);
+    tris_free(&t);
+    tmesh_free(&m);
+}
+
 /* Refitting (spia__bvh_refit): on positions that have not moved it gives
  * every node the boxes the build gave, to the bit; after the bunny is bent
  * and shaken (a smooth bend of 5% of its size and a random jitter of 0.1%),
@@ -596,6 +654,7 @@ static void refit(void) {
 int main(void) {
     nasty();
     out_of_memory();
+    cancelled();
     refit();
     bunny();
     dragon();
