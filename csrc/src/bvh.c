@@ -686,21 +686,19 @@ static void refs_range(void *context, int64_t begin, int64_t end, int thread) {
  * with the indices of their inner children (and of the subtree root's,
  * among the top nodes) moved by that place. */
 typedef struct join_job {
-    builder *b;
+    const builder *b;
     const subtree *subtrees;
     const uint32_t *base; /* each subtree's first node in the array */
     spia__bvh_node *nodes;
     const spia__bvh_node *top;
     int64_t count;
-    spia__counter cancelled;
 } join_job;
 
 static void join_range(void *context, int64_t begin, int64_t end, int thread) {
-    join_job *j = (join_job *)context;
+    const join_job *j = (const join_job *)context;
     for (int64_t i = begin; i < end; ++i) {
         if (spia__build_poll(j->b->progress, thread, 0.1 + SUBTREE_SHARE + 0.03 * (double)i / (double)j->count))
-            spia__counter_set(&j->cancelled, 1);
-        if (spia__counter_get(&j->cancelled)) return;
+            return; /* cancelled: the poll after the join reports it */
         const subtree *st = &j->subtrees[i];
         const uint32_t base = j->base[i];
         spia__bvh_node *dst = j->nodes + base;
@@ -941,12 +939,8 @@ spia_result spia__bvh_build_progress(spia__bvh *bvh, const float *positions, int
         uint32_t base[MAX_TOP_TASKS];
         base[0] = top.n;
         for (int i = 1; i < open; ++i) base[i] = base[i - 1] + subtrees[i - 1].nodes.n;
-        join_job job = {&b, subtrees, base, bvh->nodes, top.v, open, {0}};
+        join_job job = {&b, subtrees, base, bvh->nodes, top.v, open};
         spia__parallel_for(threads, open, 1, join_range, &job);
-        if (spia__counter_get(&job.cancelled)) {
-            result = cancelled(status);
-            goto done;
-        }
     }
     bvh->node_count = (int64_t)total;
     bvh->depth = level;
