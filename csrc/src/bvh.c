@@ -1051,8 +1051,9 @@ static void test_leaf(query *q, uint32_t first, uint32_t count) {
     }
 }
 
-/* One search; best_d2 bounds it (the hint squared, or INFINITY). */
-static void search(const spia__bvh *bvh, const double p[3], double best_d2, spia__bvh_hit *hit) {
+/* One search; best_d2 bounds it (the hint squared, or INFINITY), and
+ * triangle `start` (when not negative) is its first candidate. */
+static void search(const spia__bvh *bvh, const double p[3], double best_d2, int64_t start, spia__bvh_hit *hit) {
     const spia__bvh_node *nodes = bvh->nodes;
     const v4 x = v4_set1((float)p[0]), y = v4_set1((float)p[1]), z = v4_set1((float)p[2]);
     double extent = bvh->extent;
@@ -1066,6 +1067,7 @@ static void search(const spia__bvh *bvh, const double p[3], double best_d2, spia
     q.best = -1;
     q.bound = prune_bound(best_d2, q.margin);
     q.hit = hit;
+    if (start >= 0) test_leaf(&q, (uint32_t)start, 1);
     stack_entry stack[3 * SPIA__BVH_MAX_DEPTH + 4];
     int top = 0;
     uint32_t at = 0;
@@ -1120,8 +1122,13 @@ done:
 void spia__bvh_closest(const spia__bvh *bvh, const double p[3], double radius, spia__bvh_hit *hit) {
     hit->triangle = -1;
     if (radius >= 0.0 && radius < INFINITY) {
-        search(bvh, p, radius * radius, hit);
+        search(bvh, p, radius * radius, -1, hit);
         if (hit->triangle >= 0) return;
     }
-    search(bvh, p, INFINITY, hit);
+    search(bvh, p, INFINITY, -1, hit);
+}
+
+void spia__bvh_closest_from(const spia__bvh *bvh, const double p[3], int64_t start, spia__bvh_hit *hit) {
+    hit->triangle = -1;
+    search(bvh, p, INFINITY, start >= 0 && start < bvh->triangle_count ? start : -1, hit);
 }

@@ -82,8 +82,8 @@ int spia__build_poll(spia__build_progress *p, int thread, double fraction);
  * scan) that a caller wants to be able to cancel.  Returns nonzero when
  * cancelled, the outputs then partly written.  Defined in scan.c. */
 int spia__scan_closest_points_polled(const spia_scan *s, int64_t count, const double *points,
-                                     const float *radius, float *closest, float *normals, float *distances,
-                                     int32_t *faces, uint8_t *on_boundary, int threads,
+                                     const float *radius, int32_t *near, float *closest, float *normals,
+                                     float *distances, int32_t *faces, uint8_t *on_boundary, int threads,
                                      spia__build_progress *progress);
 
 /* spia__bvh_build polling `progress` (which may be NULL) from every thread;
@@ -119,6 +119,13 @@ typedef struct spia__bvh_hit {
  * on the hint, only the time does.  The hit's triangle is -1 only when p
  * is not finite. */
 void spia__bvh_closest(const spia__bvh *bvh, const double p[3], double radius, spia__bvh_hit *hit);
+
+/* The same hit as spia__bvh_closest, the search starting from triangle
+ * `start` (in leaf order, as a hit names it; ignored when out of range):
+ * its distance bounds the search from the first step.  For a point that
+ * moved a little since its last search, that triangle's distance is
+ * nearly the answer, and far tighter than any radius known beforehand. */
+void spia__bvh_closest_from(const spia__bvh *bvh, const double p[3], int64_t start, spia__bvh_hit *hit);
 
 /* The closest point to p on triangle (a, b, c): its barycentric weights of
  * a, b, c, the point, and the squared distance; in double.  A triangle

@@ -572,12 +572,12 @@ static void robust_weights(const float *d, int64_t count, double c, float *w) {
 
 /* Closest points in chunks, the clock ticking between them; returns 1 when
  * cancelled (the rest left undone). */
-static int closest_in_chunks(const spia_scan *scan, int64_t count, const double *points, const float *radius,
+static int closest_in_chunks(const spia_scan *scan, int64_t count, const double *points, int32_t *near,
                              float *closest, float *normals, float *distances, int32_t *faces, uint8_t *on_boundary,
                              int threads, fit_clock *clock) {
     for (int64_t at = 0; at < count; at += QUERY_CHUNK) {
         const int64_t n = count - at < QUERY_CHUNK ? count - at : QUERY_CHUNK;
-        spia__scan_closest_points_double(scan, n, points + 3 * at, radius ? radius + at : NULL,
+        spia__scan_closest_points_near(scan, n, points + 3 * at, near + at,
                                          closest ? closest + 3 * at : NULL, normals ? normals + 3 * at : NULL,
                                          distances + at, faces ? faces + at : NULL, on_boundary ? on_boundary + at : NULL,
                                          threads);
@@ -886,8 +886,8 @@ static int least_squares_round(fit_system *f, const float *T, const double *V0, 
 typedef struct fit_buffers {
     spia_stencils *L;
     sample_blocks blocks;
-    double *V0, *V, *best, *X, *X_prev, *work, *precond, *tmp_n, *tmp_diag;
-    float *radius;
+    double *V0, *V, *best, *X, *work, *precond, *tmp_n, *tmp_diag;
+    int32_t *near; /* S: each sample's scan triangle of the last query, or -1 */
     int evaluated;
     float *T, *N, *d, *scratch, *targets, *solved, *wts;
     uint8_t *on_boundary;
@@ -904,8 +904,8 @@ typedef struct fit_buffers {
      * face sizes (all 4), and the scan vertices measured, in double. */
     spia__limit_grid *grid;
     spia_scan *surface; /* the grid as a scan: built by the first measure, moved by later ones */
-    float *grid_pos, *scan_d, *scan_scratch, *scan_radius;
-    int32_t *grid_sizes, *scan_vertex, *scan_quad;
+    float *grid_pos, *scan_d, *scan_scratch;
+    int32_t *grid_sizes, *scan_vertex, *scan_near;
     double *scan_pts;
     int64_t scan_count;
 } fit_buffers;
@@ -913,7 +913,7 @@ typedef struct fit_buffers {
 static void buffers_free(fit_buffers *b) {
     blocks_free(&b->blocks);
     spia_stencils_free(b->L);
-    free(b->V0), free(b->V), free(b->best), free(b->X), free(b->X_prev), free(b->radius), free(b->work), free(b->precond), free(b->tmp_diag);
+    free(b->V0), free(b->V), free(b->best), free(b->X), free(b->near), free(b->work), free(b->precond), free(b->tmp_diag);
     free(b->tmp_n), free(b->T), free(b->N), free(b->d), free(b->scratch), free(b->targets), free(b->solved);
     free(b->wts), free(b->on_boundary);
     free(b->nb_start), free(b->nb), free(b->free_vertex), free(b->sample_face);
@@ -921,7 +921,7 @@ static void buffers_free(fit_buffers *b) {
     if (b->grid) spia__limit_grid_free(b->grid);
     spia_scan_free(b->surface);
     free(b->grid_pos), free(b->scan_d), free(b->scan_scratch), free(b->grid_sizes), free(b->scan_vertex);
-    free(b->scan_radius), free(b->scan_quad);
+    free(b->scan_near);
     free(b->scan_pts);
 }
 
@@ -1037,9 +1037,8 @@ static spia_result scan_side_prepare(const spia_mesh *cage, const spia_adjacency
     b->scan_pts = malloc(sizeof(double) * 3 * (size_t)(count + 1));
     b->scan_d = malloc(sizeof(float) * (size_t)(count + 1));
     b->scan_scratch = malloc(sizeof(float) * (size_t)(count + 1));
-    b->scan_radius = malloc(sizeof(float) * (size_t)(count + 1));
-    b->scan_quad = malloc(sizeof(int32_t) * (size_t)(count + 1));
-    if (!b->scan_vertex || !b->scan_pts || !b->scan_d || !b->scan_scratch || !b->scan_radius || !b->scan_quad) {
+    b->scan_near = malloc(sizeof(int32_t) * (size_t)(count + 1));
+    if (!b->scan_vertex || !b->scan_pts || !b->scan_d || !b->scan_scratch || !b->scan_near) {
         free(used);
         return SPIA_ERROR_OUT_OF_MEMORY;
     }
@@ -1056,33 +1055,18 @@ static spia_result scan_side_prepare(const spia_mesh *cage, const spia_adjacency
 
 /* The distances of the scan vertices to the limit surface of cage V.  The
  * first measure builds the grid's hierarchy and keeps each vertex's closest
- * grid quad; a later one moves the grid (refitting the hierarchy: a build
- * took 0.75 s of the 50k-vertex cage's 0.8M quads, a refit about 0.05) and
- * starts each search from the distance to the nearest corner of that quad
- * on the new surface (a bound, as every grid vertex lies on the surface),
- * which prunes most of the hierarchy. */
+ * grid triangle; a later one moves the grid (refitting the hierarchy: a
+ * build took 0.75 s of the 50k-vertex cage's 0.8M quads, a refit about
+ * 0.05) and starts each search from that triangle on the new surface,
+ * whose distance prunes most of the hierarchy. */
 static spia_result scan_side_measure(fit_buffers *b, const double *V, double cutoff_abs, double diagonal, int threads,
                                      int warm, fit_clock *clock, spia_fit_distances *out, spia_status *status) {
     spia_result r = spia__limit_grid_evaluate(b->grid, V, clock_tick_fn, clock, b->grid_pos, status);
     if (r == SPIA_ERROR_CANCELLED) return scan_side_cancelled(status);
     if (r != SPIA_OK) return r;
     if (clock_tick(clock)) return scan_side_cancelled(status);
-    if (warm) {
-        const int32_t *quads = spia__limit_grid_quads(b->grid), faces = spia__limit_grid_face_count(b->grid);
-        for (int64_t k = 0; k < b->scan_count; ++k) {
-            const int32_t q = b->scan_quad[k];
-            float bound = INFINITY;
-            if (q >= 0 && q < faces)
-                for (int c = 0; c < 4; ++c) {
-                    const float *g = b->grid_pos + 3 * (int64_t)quads[4 * (int64_t)q + c];
-                    const double *p = b->scan_pts + 3 * k;
-                    const double dx = p[0] - g[0], dy = p[1] - g[1], dz = p[2] - g[2];
-                    const float d = (float)(sqrt(dx * dx + dy * dy + dz * dz) * (1.0 + 1e-5) + 1e-7 * diagonal);
-                    if (d < bound) bound = d;
-                }
-            b->scan_radius[k] = bound;
-        }
-    }
+    if (!warm)
+        for (int64_t k = 0; k < b->scan_count; ++k) b->scan_near[k] = -1;
     if (!b->surface) {
         spia_mesh view;
         memset(&view, 0, sizeof view);
@@ -1098,8 +1082,8 @@ static spia_result scan_side_measure(fit_buffers *b, const double *V, double cut
                           r == SPIA_ERROR_NONFINITE ? "non-finite positions" : "out of memory");
     }
     const int cancelled = clock_tick(clock) ||
-                          closest_in_chunks(b->surface, b->scan_count, b->scan_pts, warm ? b->scan_radius : NULL, NULL,
-                                            NULL, b->scan_d, warm ? NULL : b->scan_quad, NULL, threads, clock);
+                          closest_in_chunks(b->surface, b->scan_count, b->scan_pts, b->scan_near, NULL, NULL,
+                                            b->scan_d, NULL, NULL, threads, clock);
     if (cancelled) return scan_side_cancelled(status);
     *out = distance_stats(b->scan_d, b->scan_count, cutoff_abs, diagonal, b->scan_scratch);
     return SPIA_OK;
@@ -1150,19 +1134,13 @@ static spia_result nothing_to_fit(spia_status *status, const char *what, double 
                       what, cutoff);
 }
 
-static int evaluate(const spia_scan *scan, fit_buffers *b, const double *V, int64_t S, double diagonal,
-                    int threads, double *query_seconds, fit_clock *clock) {
+static int evaluate(const spia_scan *scan, fit_buffers *b, const double *V, int64_t S, int threads,
+                    double *query_seconds, fit_clock *clock) {
     const double t0 = spia__now();
-    if (b->evaluated) memcpy(b->X_prev, b->X, sizeof(double) * 3 * (size_t)S);
     blocks_apply(&b->blocks, V, b->X);
-    if (b->evaluated)
-        for (int64_t s = 0; s < S; ++s) {
-            const double *x = b->X + 3 * s, *y = b->X_prev + 3 * s;
-            const double moved = sqrt((x[0] - y[0]) * (x[0] - y[0]) + (x[1] - y[1]) * (x[1] - y[1]) +
-                                      (x[2] - y[2]) * (x[2] - y[2]));
-            b->radius[s] = (float)((b->d[s] + moved) * (1.0 + 1e-5) + 1e-7 * diagonal);
-        }
-    const int cancelled = closest_in_chunks(scan, S, b->X, b->evaluated ? b->radius : NULL, b->T, b->N, b->d, NULL,
+    if (!b->evaluated)
+        for (int64_t s = 0; s < S; ++s) b->near[s] = -1;
+    const int cancelled = closest_in_chunks(scan, S, b->X, b->near, b->T, b->N, b->d, NULL,
                                             b->on_boundary, threads, clock);
     b->evaluated = 1;
     *query_seconds += spia__now() - t0;
@@ -1245,16 +1223,15 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         b.d = malloc(sizeof(float) * (size_t)S);
         b.scratch = malloc(sizeof(float) * (size_t)S);
         b.on_boundary = malloc((size_t)S);
-        b.X_prev = malloc(sizeof(double) * 3 * (size_t)S);
-        b.radius = malloc(sizeof(float) * (size_t)S);
-        if (!b.X || !b.T || !b.N || !b.d || !b.scratch || !b.on_boundary || !b.X_prev || !b.radius)
+        b.near = malloc(sizeof(int32_t) * (size_t)S);
+        if (!b.X || !b.T || !b.N || !b.d || !b.scratch || !b.on_boundary || !b.near)
             goto oom;
         if ((r = build_sample_faces(cage, fo.samples_per_edge, S, &b)) != SPIA_OK) {
             if (r == SPIA_ERROR_OUT_OF_MEMORY) goto oom;
             r = spia__fail(status, SPIA_ERROR_INTERNAL, -1, "the samples do not match the cage's faces");
             goto done;
         }
-        if (evaluate(scan, &b, b.V, S, diagonal, opt.threads, &report->query_seconds, &clock)) goto cancelled;
+        if (evaluate(scan, &b, b.V, S, opt.threads, &report->query_seconds, &clock)) goto cancelled;
         report->before = distance_stats(b.d, S, cutoff_abs, diagonal, b.scratch);
         measured_best = 1;
         clock.mean = report->before.mean;
@@ -1392,7 +1369,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
                 least_squares_round(&f, b.T, b.V0, b.V, fo.solver_iterations, b.work, b.precond, &clock);
             if (clock.cancelled) goto cancelled;
             report->solve_seconds += spia__now() - t0;
-            if (evaluate(scan, &b, b.V, S, diagonal, opt.threads, &report->query_seconds, &clock)) goto cancelled;
+            if (evaluate(scan, &b, b.V, S, opt.threads, &report->query_seconds, &clock)) goto cancelled;
             normal_agreement(b.X, b.N, S, fo.samples_per_edge, b.dots);
             find_folds(b.dots, b.d, b.on_boundary, S, cutoff_abs, sign, b.folded);
             const double mean = mean_within(b.d, S, cutoff_abs);
@@ -1438,7 +1415,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
      * agreement are those of the best cage). */
     if (S > 0) {
         if (!measured_best) {
-            if (evaluate(scan, &b, b.best, S, diagonal, opt.threads, &report->query_seconds, &clock))
+            if (evaluate(scan, &b, b.best, S, opt.threads, &report->query_seconds, &clock))
                 goto cancelled;
             normal_agreement(b.X, b.N, S, fo.samples_per_edge, b.dots);
         }

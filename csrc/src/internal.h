@@ -364,6 +364,16 @@ void spia__scan_closest_points_double(const spia_scan *scan, int64_t count, cons
                                       float *closest, float *normals, float *distances, int32_t *faces,
                                       uint8_t *on_boundary, int threads);
 
+/* The same, each point's search starting from near[i]: its triangle in the
+ * scan's own numbering as an earlier call wrote it (-1 for none), which is
+ * overwritten with the triangle found.  For points that moved a little
+ * since (a fit's next round), that triangle's distance is nearly the
+ * answer: a tighter bound than any radius known beforehand.  The results
+ * are those of spia__scan_closest_points_double. */
+void spia__scan_closest_points_near(const spia_scan *scan, int64_t count, const double *points, int32_t *near,
+                                    float *closest, float *normals, float *distances, int32_t *faces,
+                                    uint8_t *on_boundary, int threads);
+
 #ifdef __cplusplus
 }
 #endif

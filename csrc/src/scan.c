@@ -519,10 +519,14 @@ static int on_scan_boundary(unsigned char bits, const double bary[3]) {
 }
 
 /* One query; writes the outputs for point i. */
-static void closest_one(const spia_scan *s, const double p[3], float radius, int64_t i, float *closest,
-                        float *normals, float *distances, int32_t *faces, uint8_t *on_boundary) {
+static void closest_one(const spia_scan *s, const double p[3], float radius, int32_t *near, int64_t i,
+                        float *closest, float *normals, float *distances, int32_t *faces, uint8_t *on_boundary) {
     spia__bvh_hit q;
-    spia__bvh_closest(&s->bvh, p, radius, &q);
+    if (near && near[i] >= 0)
+        spia__bvh_closest_from(&s->bvh, p, near[i], &q);
+    else
+        spia__bvh_closest(&s->bvh, p, radius, &q);
+    if (near) near[i] = q.triangle >= 0 && q.triangle <= INT32_MAX ? (int32_t)q.triangle : -1;
     if (q.triangle < 0) { /* a point that is not finite (the internal entry point does not check) */
         q.triangle = 0;
         const int32_t *tri = s->triangles;
@@ -561,6 +565,7 @@ typedef struct closest_task {
     const double *points_double;
     const float *points_float;
     const float *radius;
+    int32_t *near;
     float *closest, *normals, *distances;
     int32_t *faces;
     uint8_t *on_boundary;
@@ -574,7 +579,7 @@ static void closest_range(void *context, int64_t begin, int64_t end, int thread)
     for (int64_t i = begin; i < end; ++i) {
         double p[3];
         for (int c = 0; c < 3; ++c) p[c] = t->points_double ? t->points_double[3 * i + c] : t->points_float[3 * i + c];
-        closest_one(t->scan, p, t->radius ? t->radius[i] : INFINITY, i, t->closest, t->normals, t->distances,
+        closest_one(t->scan, p, t->radius ? t->radius[i] : INFINITY, t->near, i, t->closest, t->normals, t->distances,
                     t->faces, t->on_boundary);
     }
 }
@@ -582,14 +587,23 @@ static void closest_range(void *context, int64_t begin, int64_t end, int thread)
 void spia__scan_closest_points_double(const spia_scan *s, int64_t count, const double *points, const float *radius,
                                       float *closest, float *normals, float *distances, int32_t *faces,
                                       uint8_t *on_boundary, int threads) {
-    spia__scan_closest_points_polled(s, count, points, radius, closest, normals, distances, faces, on_boundary,
+    spia__scan_closest_points_polled(s, count, points, radius, NULL, closest, normals, distances, faces,
+                                     on_boundary, threads, NULL);
+}
+
+void spia__scan_closest_points_near(const spia_scan *s, int64_t count, const double *points, int32_t *near,
+                                    float *closest, float *normals, float *distances, int32_t *faces,
+                                    uint8_t *on_boundary, int threads) {
+    spia__scan_closest_points_polled(s, count, points, NULL, near, closest, normals, distances, faces, on_boundary,
                                      threads, NULL);
 }
 
 int spia__scan_closest_points_polled(const spia_scan *s, int64_t count, const double *points, const float *radius,
-                                     float *closest, float *normals, float *distances, int32_t *faces,
-                                     uint8_t *on_boundary, int threads, spia__build_progress *progress) {
-    closest_task task = {s, points, NULL, radius, closest, normals, distances, faces, on_boundary, progress, count};
+                                     int32_t *near, float *closest, float *normals, float *distances,
+                                     int32_t *faces, uint8_t *on_boundary, int threads,
+                                     spia__build_progress *progress) {
+    closest_task task = {s, points, NULL, radius, near, closest, normals, distances, faces, on_boundary,
+                         progress, count};
     spia__parallel_for(threads, count, 256, closest_range, &task);
     return progress && spia__counter_get(&progress->cancelled) ? 1 : 0;
 }
@@ -621,7 +635,7 @@ spia_result spia_scan_closest_points_progress(const spia_scan *scan, int64_t cou
     pr.from = 0.0, pr.to = 1.0;
     pr.last = spia__now();
     spia__counter_set(&pr.cancelled, 0);
-    closest_task task = {scan, NULL, points, NULL, closest, normals, distances, faces, on_boundary,
+    closest_task task = {scan, NULL, points, NULL, NULL, closest, normals, distances, faces, on_boundary,
                          progress ? &pr : NULL, count};
     spia__parallel_for(spia__processor_count(), count, 256, closest_range, &task);
     if (progress) {

@@ -5,7 +5,9 @@
  * box; and on nasty cases: triangles without area, duplicates, a flat scan,
  * one triangle, coordinates near 1e6, points on vertices and edges (ties),
  * a tree the heuristic would make too deep, 1, 2 and 3 threads, radius
- * hints that are too small, every allocation failing in turn, and a tree
+ * hints that are too small, searches from a given start triangle (the
+ * answer's, a neighbour, a far one, out of range), every allocation
+ * failing in turn, and a tree
  * refitted to moved positions.  The hit
  * must be the very triangle the full search finds (least distance, then
  * lowest index) at the very same distance. */
@@ -298,6 +300,29 @@ static void bunny(void) {
         int64_t differ = 0;
         for (int64_t i = 0; i < count; ++i) differ += !same_answer(want[i], got[i]);
         CHECK(differ == 0, "bunny: radius hints %g of the distance: %lld points differ", scale[s], (long long)differ);
+    }
+
+    /* Start triangles (spia__bvh_closest_from): the answer itself, its
+     * leaf neighbour, one far away, the last, and ones out of range. */
+    {
+        const int64_t starts = 6;
+        int64_t differ = 0;
+        for (int64_t i = 0; i < count; ++i) {
+            int64_t hit_leaf = -1;
+            for (int64_t k = 0; k < t.n && hit_leaf < 0; ++k)
+                if (want[i].triangle >= 0 && b[0].order[k] == (uint32_t)want[i].triangle) hit_leaf = k;
+            const int64_t start[6] = {hit_leaf, hit_leaf + 1 < t.n ? hit_leaf + 1 : 0, (hit_leaf + t.n / 2) % t.n,
+                                      t.n - 1, t.n, -7};
+            for (int64_t s = 0; s < starts; ++s) {
+                spia__bvh_hit hit;
+                spia__bvh_closest_from(&b[0], points + 3 * i, start[s], &hit);
+                const answer a = {hit.triangle < 0 ? -1 : (int64_t)b[0].order[hit.triangle], hit.d2,
+                                  {hit.point[0], hit.point[1], hit.point[2]}};
+                differ += !same_answer(want[i], a);
+            }
+        }
+        CHECK(differ == 0, "bunny: %lld of %lld searches from a start triangle differ", (long long)differ,
+              (long long)(starts * count));
     }
 
     /* The public entry points (the library's own tree, on every
