@@ -620,9 +620,13 @@ def scan_arrays(target, cage_obj, context=None, tick=None):
         if tick is not None and tick():
             raise native.PiaCancelled("CANCELLED", "cancelled while reading the scan")
     context = context or bpy.context
-    depsgraph = context.evaluated_depsgraph_get()
-    evaluated = target.evaluated_get(depsgraph)
-    mesh = evaluated.to_mesh()
+    # A mesh without modifiers or shape keys, in object mode, evaluates to
+    # itself: it is read as it is, without the copy to_mesh() makes (on a
+    # scan of 3.6M quads 0.12 s and some 300 MB).
+    as_is = (target.type == 'MESH' and target.mode == 'OBJECT' and not target.modifiers
+             and target.data.shape_keys is None and not target.data.is_editmode)
+    evaluated = None if as_is else target.evaluated_get(context.evaluated_depsgraph_get())
+    mesh = target.data if as_is else evaluated.to_mesh()
     try:
         if mesh is None or len(mesh.polygons) == 0:
             raise ValueError("Target '%s' has no faces: the scan must be a mesh with faces" % target.name)
@@ -636,7 +640,8 @@ def scan_arrays(target, cage_obj, context=None, tick=None):
         step()
         positions = read_positions(mesh)
     finally:
-        evaluated.to_mesh_clear()
+        if evaluated is not None:
+            evaluated.to_mesh_clear()
     step()
     to_cage = np.array(cage_obj.matrix_world.inverted() @ target.matrix_world, dtype=np.float64)
     if not np.array_equal(to_cage, np.eye(4)):

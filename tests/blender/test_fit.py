@@ -420,6 +420,45 @@ def test_scan_modifiers_are_applied():
     assert on_base.max() > 1e-3  # the base mesh is elsewhere: it was not what was fitted
 
 
+def _evaluated_arrays(obj):
+    """(positions, face sizes, face vertices) of obj as Blender evaluates it,
+    by to_mesh() and per-face loops: independent of api.scan_arrays."""
+    evaluated = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    me = evaluated.to_mesh()
+    try:
+        return (np.array([v.co[:] for v in me.vertices], np.float32),
+                np.array([p.loop_total for p in me.polygons], np.int32),
+                np.array([i for p in me.polygons for i in p.vertices], np.int32))
+    finally:
+        evaluated.to_mesh_clear()
+
+
+def test_scan_read_as_blender_evaluates_it():
+    """A scan without modifiers is read without a copy of its mesh; one with
+    shape keys, or a modifier, through its evaluated copy: either way the
+    arrays are those of Blender's evaluated mesh."""
+    scan = fine_sphere("Plain", segments=24, rings=12)
+    cage = quad_sphere(cuts=1)
+    keyed = fine_sphere("Keyed", segments=24, rings=12)
+    keyed.shape_key_add(name="Basis")
+    key = keyed.shape_key_add(name="Squash")
+    for point in key.data:
+        point.co = point.co * Vector((1.0, 1.0, 0.5))
+    key.value = 1.0
+    modified = fine_sphere("Modified", segments=24, rings=12)
+    modified.modifiers.new("Displace", 'DISPLACE').strength = 0.25
+    bpy.context.view_layer.update()
+    for obj in (scan, keyed, modified):
+        got = api.scan_arrays(obj, cage)
+        want = _evaluated_arrays(obj)
+        for a, b in zip(got, want):
+            assert a.shape == b.shape and np.array_equal(a, b), obj.name
+    # The shape key and the modifier did move the vertices.
+    base = positions(keyed.data)
+    assert np.abs(api.scan_arrays(keyed, cage)[0] - base).max() > 0.1
+    assert np.abs(api.scan_arrays(modified, cage)[0] - positions(modified.data)).max() > 0.1
+
+
 # --- script API, progress, command line -----------------------------------------------
 
 def test_api_fit_progress_and_cancel():
