@@ -611,8 +611,8 @@ typedef enum spia_fit_flags {
     /* SURFACE: no fold guard.  By default a sample whose limit normal faces
      * away from the scan's normal at its closest point (a fold, or a
      * sample caught by the wrong side of a thin part) does not pull, and
-     * the cage around it is held 4 times more firmly to its initial shape
-     * for every round in which it stays folded. */
+     * the cage around it is smoothed, twice as firmly for every round in
+     * which it stays folded. */
     SPIA_FIT_ALLOW_FOLDS = 1,
     /* SURFACE: the cut-off alone decides which samples pull (weight 1
      * within it, 0 beyond), with no robust kernel. */

@@ -94,11 +94,11 @@ def test_fold_guard_on_the_bunny(native, bunny):
     print("folded: guarded %.3f%%, without the guard %.3f%%; mean %.3g against %.3g" % (
         100 * share, 100 * share_free, rep.after.mean, rep_free.after.mean))
     assert share_free > 0.01                      # the plain fit folds ...
-    assert share < min(0.002, share_free / 8)     # ... the guarded one hardly
+    assert share < min(0.001, share_free / 8)     # ... the guarded one on at most 0.1% of its points
     assert rep.after.mean < 1.1 * rep_free.after.mean
     assert rep.after.mean < rep.before.mean / 8
     # the report's own count (4 x 4 samples, smooth scan normals) tells the same
-    assert rep.folded_after / rep.sample_count < 0.002 < rep_free.folded_after / rep_free.sample_count
+    assert rep.folded_after / rep.sample_count < 0.001 < rep_free.folded_after / rep_free.sample_count
 
 
 def test_stray_triangles_do_not_pull(native, bunny):
