@@ -618,8 +618,10 @@ typedef struct fit_system {
     const int64_t *nb_start;
     const int32_t *nb;
     const unsigned char *free_vertex;
-    const double *stiffness; /* n: per-vertex factor c_i on Lap^T C Lap (the fold guard) */
-    const double *hold;      /* n: per-vertex factor h_i on the right-hand side's Lap^T H Lap V0 */
+    /* The fold guard, per vertex (see stiffen): the hold h_i on the given
+     * shape (the right-hand side's Lap^T H Lap V0) and the smoothing s_i;
+     * the operator's Lap^T C Lap has c_i = h_i + s_i - 1. */
+    const double *hold, *smooth;
     double *tmp_n;          /* n * 3 */
     double *tmp_diag;       /* n * 6 */
 } fit_system;
@@ -681,11 +683,16 @@ static void laplacian_transpose_add(const fit_system *f, const double *y, double
     }
 }
 
-/* z += lambda Lap^T C Lap x, C the per-vertex stiffness. */
-static void fairness_add(const fit_system *f, const double *x, double *z) {
+static inline double stiffness(const fit_system *f, int32_t v) { return f->hold[v] + f->smooth[v] - 1.0; }
+
+/* z += lambda Lap^T C Lap x (the operator's share), or with `held` the
+ * right-hand side's lambda Lap^T H Lap x. */
+static void fairness_add(const fit_system *f, const double *x, int held, double *z) {
     laplacian(f, x, f->tmp_n);
-    for (int32_t v = 0; v < f->n; ++v)
-        for (int c = 0; c < 3; ++c) f->tmp_n[3 * (int64_t)v + c] *= f->stiffness[v];
+    for (int32_t v = 0; v < f->n; ++v) {
+        const double k = held ? f->hold[v] : stiffness(f, v);
+        for (int c = 0; c < 3; ++c) f->tmp_n[3 * (int64_t)v + c] *= k;
+    }
     laplacian_transpose_add(f, f->tmp_n, f->lambda, z);
 }
 
@@ -786,7 +793,7 @@ static void system_apply(const fit_system *f, const double *x, double *y) {
     normal_context c = {f, x, NULL};
     blocks_run(f->blocks, PIECE(f->blocks, normal_piece), &c, y, 3);
     if (f->lambda > 0.0) {
-        fairness_add(f, x, y);
+        fairness_add(f, x, 0, y);
     }
     for (int32_t v = 0; v < f->n; ++v)
         for (int c = 0; c < 3; ++c) {
@@ -839,10 +846,7 @@ static int least_squares_round(fit_system *f, const float *T, const double *V0, 
     normal_context c = {f, NULL, T};
     blocks_run(B, PIECE(B, normal_piece), &c, b, 3);
     if (f->lambda > 0.0) {
-        laplacian(f, V0, f->tmp_n); /* the fairness term's share: lambda Lap^T H Lap V0 */
-        for (int32_t v = 0; v < f->n; ++v)
-            for (int c = 0; c < 3; ++c) f->tmp_n[3 * (int64_t)v + c] *= f->hold[v];
-        laplacian_transpose_add(f, f->tmp_n, f->lambda, b);
+        fairness_add(f, V0, 1, b);
     }
     for (int64_t i = 0; i < N3; ++i) b[i] += f->damping * V[i];
 
@@ -855,11 +859,11 @@ static int least_squares_round(fit_system *f, const float *T, const double *V0, 
         const int64_t na = f->nb_start[v], nb = f->nb_start[v + 1];
         double lap = 0.0; /* (Lap^T C Lap)_vv */
         if (nb > na) {
-            lap = f->stiffness[v];
+            lap = stiffness(f, v);
             for (int64_t k = na; k < nb; ++k) {
                 const int32_t j = f->nb[k];
                 const double deg = (double)(f->nb_start[j + 1] - f->nb_start[j]);
-                lap += f->stiffness[j] / (deg * deg);
+                lap += stiffness(f, j) / (deg * deg);
             }
         }
         const double d = f->lambda * lap + f->damping;
@@ -912,7 +916,7 @@ typedef struct fit_buffers {
      * folded; per vertex the stiffness and a mark. */
     float *dots;
     uint8_t *folded, *mark;
-    double *stiffness, *hold, *smooth;
+    double *hold, *smooth;
     /* The scan side: the limit surface as a quad grid, its positions, its
      * face sizes (all 4), and the scan vertices measured, in double. */
     spia__limit_grid *grid;
@@ -930,7 +934,7 @@ static void buffers_free(fit_buffers *b) {
     free(b->tmp_n), free(b->T), free(b->N), free(b->d), free(b->scratch), free(b->targets), free(b->solved);
     free(b->wts), free(b->on_boundary);
     free(b->nb_start), free(b->nb), free(b->free_vertex), free(b->sample_face);
-    free(b->dots), free(b->folded), free(b->mark), free(b->stiffness), free(b->hold), free(b->smooth);
+    free(b->dots), free(b->folded), free(b->mark), free(b->hold), free(b->smooth);
     if (b->grid) spia__limit_grid_free(b->grid);
     spia_scan_free(b->surface);
     free(b->grid_pos), free(b->scan_d), free(b->scan_scratch), free(b->grid_sizes), free(b->scan_vertex);
@@ -995,8 +999,7 @@ static int64_t find_folds(const float *dots, const float *d, const uint8_t *on_b
  * FOLD_NEAR times `near`, the robust kernel's scale, of its closest point:
  * a pleat) doubles the vertex's smoothing s_i; a sample facing a scan part
  * farther away (a base plate under a hole) quadruples its hold h_i on the
- * shape given.  Both stop at STIFFNESS_MAX, and the Laplacian term's factor
- * is c_i = h_i + s_i - 1.
+ * shape given.  Both stop at STIFFNESS_MAX.
  *
  * Measured on the bench_fit.py cages (Blender's level-3 surface; share of
  * its points facing away from the scan, mean distance) and the base-plate
@@ -1013,7 +1016,7 @@ static int64_t find_folds(const float *dots, const float *d, const uint8_t *on_b
 #define STIFFNESS_MAX 65536.0
 static void stiffen(const spia_mesh *cage, const spia_adjacency *adj, const uint8_t *folded, const float *d,
                     double near, const int32_t *sample_face, int64_t S, uint8_t *mark, double *hold,
-                    double *smooth, double *stiffness) {
+                    double *smooth) {
     memset(mark, 0, (size_t)cage->vertex_count);
     for (int64_t s = 0; s < S; ++s)
         if (folded[s]) {
@@ -1024,7 +1027,6 @@ static void stiffen(const spia_mesh *cage, const spia_adjacency *adj, const uint
     for (int32_t v = 0; v < cage->vertex_count; ++v) {
         if ((mark[v] & 1) && smooth[v] < STIFFNESS_MAX) smooth[v] *= SMOOTHING_GROWTH;
         if ((mark[v] & 2) && hold[v] < STIFFNESS_MAX) hold[v] *= HOLD_GROWTH;
-        stiffness[v] = hold[v] + smooth[v] - 1.0;
     }
 }
 
@@ -1365,14 +1367,13 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         b.tmp_n = malloc(sizeof(double) * (size_t)N3);
         b.tmp_diag = malloc(sizeof(double) * 6 * (size_t)(n > 0 ? n : 1));
         b.wts = malloc(sizeof(float) * (size_t)S);
-        b.stiffness = malloc(sizeof(double) * (size_t)(n > 0 ? n : 1));
         b.hold = malloc(sizeof(double) * (size_t)(n > 0 ? n : 1));
         b.smooth = malloc(sizeof(double) * (size_t)(n > 0 ? n : 1));
         b.mark = malloc((size_t)n + 1);
-        if (!b.work || !b.precond || !b.tmp_n || !b.tmp_diag || !b.wts || !b.stiffness || !b.hold || !b.smooth ||
+        if (!b.work || !b.precond || !b.tmp_n || !b.tmp_diag || !b.wts || !b.hold || !b.smooth ||
             !b.mark)
             goto oom;
-        for (int32_t v = 0; v < n; ++v) b.stiffness[v] = b.hold[v] = b.smooth[v] = 1.0;
+        for (int32_t v = 0; v < n; ++v) b.hold[v] = b.smooth[v] = 1.0;
         const int guard = !(fo.flags & SPIA_FIT_ALLOW_FOLDS) && fo.samples_per_edge >= 2;
         if (build_neighbours(cage, &adj, &b) != SPIA_OK) goto oom;
         int64_t counted = S - report->before.ignored;
@@ -1387,8 +1388,8 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         /* A whisper of damping towards the current iterate keeps vertices no
          * sample reaches (and global drift) determined. */
         f.damping = 1e-6 * (1.0 + f.lambda) * (double)S / (double)(free_count > 0 ? free_count : 1);
-        f.nb_start = b.nb_start, f.nb = b.nb, f.free_vertex = b.free_vertex, f.stiffness = b.stiffness;
-        f.hold = b.hold;
+        f.nb_start = b.nb_start, f.nb = b.nb, f.free_vertex = b.free_vertex;
+        f.hold = b.hold, f.smooth = b.smooth;
         f.tmp_n = b.tmp_n, f.tmp_diag = b.tmp_diag;
         double best_score = mean_clamped(b.d, guard ? b.folded : NULL, S, cutoff_abs);
         if (report->history && report->history_capacity > 0) {
@@ -1404,8 +1405,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
             if (guard) {
                 for (int64_t q = 0; q < S; ++q)
                     if (b.folded[q]) b.wts[q] = 0.0f;
-                stiffen(cage, &adj, b.folded, b.d, kernel_scale, b.sample_face, S, b.mark, b.hold, b.smooth,
-                        b.stiffness);
+                stiffen(cage, &adj, b.folded, b.d, kernel_scale, b.sample_face, S, b.mark, b.hold, b.smooth);
             }
             report->iterations +=
                 least_squares_round(&f, b.T, b.V0, b.V, fo.solver_iterations, b.work, b.precond, &clock);

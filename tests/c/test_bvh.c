@@ -307,10 +307,10 @@ static void bunny(void) {
     {
         const int64_t starts = 6;
         int64_t differ = 0;
+        int64_t *leaf_of = (int64_t *)malloc(sizeof(int64_t) * (size_t)t.n); /* triangle -> its place in leaf order */
+        for (int64_t k = 0; k < t.n; ++k) leaf_of[b[0].order[k]] = k;
         for (int64_t i = 0; i < count; ++i) {
-            int64_t hit_leaf = -1;
-            for (int64_t k = 0; k < t.n && hit_leaf < 0; ++k)
-                if (want[i].triangle >= 0 && b[0].order[k] == (uint32_t)want[i].triangle) hit_leaf = k;
+            const int64_t hit_leaf = want[i].triangle >= 0 ? leaf_of[want[i].triangle] : -1;
             const int64_t start[6] = {hit_leaf, hit_leaf + 1 < t.n ? hit_leaf + 1 : 0, (hit_leaf + t.n / 2) % t.n,
                                       t.n - 1, t.n, -7};
             for (int64_t s = 0; s < starts; ++s) {
@@ -323,6 +323,7 @@ static void bunny(void) {
         }
         CHECK(differ == 0, "bunny: %lld of %lld searches from a start triangle differ", (long long)differ,
               (long long)(starts * count));
+        free(leaf_of);
     }
 
     /* The public entry points (the library's own tree, on every
