@@ -48,7 +48,6 @@
 #include <climits>
 #include <cmath>
 #include <cstring>
-#include <exception>
 #include <memory>
 #include <new>
 #include <type_traits>
@@ -2134,118 +2133,6 @@ spia_result refine(const spia_mesh *m, const spia_adjacency *adj, const spia_opt
     return SPIA_OK;
 }
 
-// The limit surface as a quad mesh: the cage refined uniformly `levels`
-// times, every vertex moved to its limit position (the limit surface at the
-// vertex's own parameter location), for measuring distances to the surface.
-// The refiner is kept, so that each new cage costs one pass of primvar
-// refinement and nothing else.
-struct LimitGrid {
-    Prepared p;
-    int32_t levels = 0;
-    int32_t vertex_count = 0, face_count = 0;
-    int threads = 1;             // spia_options.threads: above 1, the long calls run beside the polling
-    std::vector<int32_t> quads;  // face_count * 4, into the last level's vertices
-};
-
-// The uniform refinement, run beside the caller's polling (spia__run_beside):
-// an exception must not leave its thread, so it is kept and thrown again.
-struct UniformRefinement {
-    Far::TopologyRefiner *refiner;
-    Far::TopologyRefiner::UniformOptions options;
-    std::exception_ptr failure;
-};
-
-void refine_uniform(void *context) {
-    UniformRefinement *job = static_cast<UniformRefinement *>(context);
-    try {
-        job->refiner->RefineUniform(job->options);
-    } catch (...) {
-        job->failure = std::current_exception();
-    }
-}
-
-spia_result limit_grid(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, int32_t levels,
-                       spia__tick_fn tick, void *user, LimitGrid &g, spia_status *status) {
-    spia_result r = prepare(m, adj, opt, g.p, status);
-    if (r != SPIA_OK) return r;
-    if (tick && tick(user)) return SPIA_ERROR_CANCELLED;
-    Far::TopologyRefiner &refiner = *g.p.refiner;
-    Far::TopologyRefiner::UniformOptions uniform(levels);
-    uniform.fullTopologyInLastLevel = true;  // PrimvarRefiner::Limit needs it
-    // One call into OpenSubdiv that cannot poll: 1.3 s on a 100k-vertex
-    // cage at two levels.  On a thread of its own, the caller's progress
-    // goes on meanwhile (a cancel takes effect when it returns).
-    g.threads = opt->threads > 1 ? opt->threads : 1;
-    UniformRefinement job = {&refiner, uniform, nullptr};
-    const int cancelled = spia__run_beside(tick ? g.threads : 1, refine_uniform, &job, tick, user);
-    if (job.failure) std::rethrow_exception(job.failure);
-    if (cancelled || (tick && tick(user))) return SPIA_ERROR_CANCELLED;
-    const Far::TopologyLevel &last = refiner.GetLevel(levels);
-    g.levels = levels;
-    g.vertex_count = last.GetNumVertices();
-    g.face_count = last.GetNumFaces();
-    g.quads.resize((size_t)g.face_count * 4);
-    for (int32_t f = 0; f < g.face_count; ++f) {
-        if (f % 65536 == 0 && tick && tick(user)) return SPIA_ERROR_CANCELLED;
-        Far::ConstIndexArray fv = last.GetFaceVertices(f);
-        if (fv.size() != 4)
-            return spia__fail(status, SPIA_ERROR_INTERNAL, f, "refined face %d has %d vertices", (int)f, fv.size());
-        for (int c = 0; c < 4; ++c) g.quads[(size_t)f * 4 + c] = fv[c];
-    }
-    spia__ok(status);
-    return SPIA_OK;
-}
-
-// The grid's limit positions: the levels' interpolation and the limit, each
-// a call into OpenSubdiv that cannot poll (0.4 s on a 100k-vertex cage);
-// beside the caller's polling when the grid has threads, else on the
-// caller's thread with `tick` between the levels.
-struct GridEvaluation {
-    const LimitGrid *g;
-    const double *cage;
-    float *out;
-    spia__tick_fn tick;  // nullptr beside the polling
-    void *user;
-    bool cancelled;
-    std::exception_ptr failure;
-};
-
-void evaluate_grid(void *context) {
-    GridEvaluation &job = *static_cast<GridEvaluation *>(context);
-    try {
-        const LimitGrid &g = *job.g;
-        const Far::TopologyRefiner &refiner = *g.p.refiner;
-        std::vector<Point> src((size_t)refiner.GetNumVerticesTotal()), limit((size_t)g.vertex_count);
-        for (int32_t o = 0; o < g.p.osd_n; ++o)
-            for (int a = 0; a < 3; ++a) src[(size_t)o].p[a] = job.cage[3 * (int64_t)g.p.vertex_of[(size_t)o] + a];
-        Far::PrimvarRefinerReal<float> primvar(refiner);
-        Point *level_src = src.data();
-        for (int level = 1; level <= g.levels; ++level) {
-            Point *level_dst = level_src + refiner.GetLevel(level - 1).GetNumVertices();
-            primvar.Interpolate(level, level_src, level_dst);
-            level_src = level_dst;
-            if (job.tick && job.tick(job.user)) {
-                job.cancelled = true;
-                return;
-            }
-        }
-        Point *limit_dst = limit.data();
-        primvar.Limit(level_src, limit_dst);
-        for (int32_t i = 0; i < g.vertex_count; ++i)
-            for (int a = 0; a < 3; ++a) job.out[3 * (int64_t)i + a] = (float)limit[(size_t)i].p[a];
-    } catch (...) {
-        job.failure = std::current_exception();
-    }
-}
-
-spia_result limit_grid_evaluate(const LimitGrid &g, const double *cage, spia__tick_fn tick, void *user, float *out) {
-    const int threads = tick ? g.threads : 1;
-    GridEvaluation job = {&g, cage, out, threads > 1 ? nullptr : tick, user, false, nullptr};
-    const int stopped = spia__run_beside(threads, evaluate_grid, &job, tick, user);
-    if (job.failure) std::rethrow_exception(job.failure);
-    return stopped || job.cancelled || (tick && tick(user)) ? SPIA_ERROR_CANCELLED : SPIA_OK;
-}
-
 // Limit stencils at samples inside the faces: per ptex face (a quad, or each
 // corner's sub-quad of another polygon), samples_per_edge^2 points at the
 // centres of a regular grid over (s, t), in t, then s order, on Blender's
@@ -2273,11 +2160,13 @@ struct FaceBlocks {
 struct SampleGrid {
     int per_face = 0;
     std::vector<double> s, t;
-    explicit SampleGrid(int per_edge) : per_face(per_edge * per_edge), s((size_t)per_face), t((size_t)per_face) {
+    // The centres of per_edge^2 cells, or with `corners` per_edge points on
+    // each edge from 0 to 1 (at least 2).
+    SampleGrid(int per_edge, bool corners) : per_face(per_edge * per_edge), s((size_t)per_face), t((size_t)per_face) {
         for (int j = 0; j < per_edge; ++j)
             for (int i = 0; i < per_edge; ++i) {
-                s[(size_t)(j * per_edge + i)] = (i + 0.5) / per_edge;
-                t[(size_t)(j * per_edge + i)] = (j + 0.5) / per_edge;
+                s[(size_t)(j * per_edge + i)] = corners ? (double)i / (per_edge - 1) : (i + 0.5) / per_edge;
+                t[(size_t)(j * per_edge + i)] = corners ? (double)j / (per_edge - 1) : (j + 0.5) / per_edge;
             }
     }
 };
@@ -2414,11 +2303,11 @@ spia_result emit_stopped(int stop, spia_status *status) {
 }
 
 spia_result surface_blocks(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, int32_t per_edge,
-                           spia__sample_block_fn emit, void *user, spia_status *status) {
+                           bool corners, spia__sample_block_fn emit, void *user, spia_status *status) {
     Prepared p;
     spia_result r = prepare(m, adj, opt, p, status);
     if (r != SPIA_OK) return r;
-    const SampleGrid grid(per_edge);
+    const SampleGrid grid(per_edge, corners);
     const int per_face = grid.per_face;
 
     // The faces for OpenSubdiv's patch table, on their part of the mesh.
@@ -2539,7 +2428,7 @@ spia_result surface(const spia_mesh *m, const spia_adjacency *adj, const spia_op
     RowsOut o;
     o.per = per_edge * per_edge;
     o.offsets.reserve((size_t)rows + 1);
-    spia_result r = surface_blocks(m, adj, opt, per_edge, RowsOut::add, &o, status);
+    spia_result r = surface_blocks(m, adj, opt, per_edge, false, RowsOut::add, &o, status);
     if (r != SPIA_OK) return r;
     if ((int64_t)o.offsets.size() != rows + 1)
         return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "OpenSubdiv made %lld sample stencils for %lld samples",
@@ -2599,50 +2488,15 @@ extern "C" spia_result spia__osd_surface_stencils(const spia_mesh *mesh, const s
 
 extern "C" spia_result spia__osd_surface_blocks(const spia_mesh *mesh, const spia_adjacency *adj,
                                                 const spia_options *options, int32_t samples_per_edge,
-                                                spia__sample_block_fn emit, void *user, spia_status *status) {
+                                                int32_t corners, spia__sample_block_fn emit, void *user,
+                                                spia_status *status) {
+    if (corners && samples_per_edge < 2)
+        return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "a grid with corners needs two points an edge");
     try {
-        return surface_blocks(mesh, adj, options, samples_per_edge, emit, user, status);
+        return surface_blocks(mesh, adj, options, samples_per_edge, corners != 0, emit, user, status);
     } catch (const std::bad_alloc &) {
         return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory computing sample stencils");
     } catch (...) {
         return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "unexpected failure computing sample stencils");
     }
 }
-
-struct spia__limit_grid {
-    LimitGrid g;
-};
-
-extern "C" spia_result spia__osd_limit_grid_create(const spia_mesh *mesh, const spia_adjacency *adj,
-                                                   const spia_options *options, int32_t levels,
-                                                   spia__tick_fn tick, void *user, spia__limit_grid **out,
-                                                   spia_status *status) {
-    *out = nullptr;
-    try {
-        std::unique_ptr<spia__limit_grid> grid(new spia__limit_grid);
-        spia_result r = limit_grid(mesh, adj, options, levels, tick, user, grid->g, status);
-        if (r == SPIA_OK) *out = grid.release();
-        return r;
-    } catch (const std::bad_alloc &) {
-        return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory refining the limit surface");
-    } catch (...) {
-        return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "unexpected failure refining the limit surface");
-    }
-}
-
-extern "C" int32_t spia__limit_grid_vertex_count(const spia__limit_grid *grid) { return grid->g.vertex_count; }
-extern "C" int32_t spia__limit_grid_face_count(const spia__limit_grid *grid) { return grid->g.face_count; }
-extern "C" const int32_t *spia__limit_grid_quads(const spia__limit_grid *grid) { return grid->g.quads.data(); }
-
-extern "C" spia_result spia__limit_grid_evaluate(const spia__limit_grid *grid, const double *cage,
-                                                 spia__tick_fn tick, void *user, float *out, spia_status *status) {
-    try {
-        return limit_grid_evaluate(grid->g, cage, tick, user, out);
-    } catch (const std::bad_alloc &) {
-        return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory evaluating the limit surface");
-    } catch (...) {
-        return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "unexpected failure evaluating the limit surface");
-    }
-}
-
-extern "C" void spia__limit_grid_free(spia__limit_grid *grid) { delete grid; }

@@ -145,10 +145,6 @@ static int clock_tick(fit_clock *c) {
     return c->cancelled;
 }
 
-/* clock_tick for a caller that takes a plain tick function (the surface's
- * grid). */
-static int clock_tick_fn(void *user) { return clock_tick((fit_clock *)user); }
-
 /* The clock ticking from a build with a progress callback of its own (the
  * surface's grid as a scan): its phases and fractions are not passed on. */
 static int clock_scan_tick(void *user, int32_t phase, double fraction) {
@@ -267,9 +263,12 @@ static int block_sink_add(void *user, int64_t ptex, int32_t width, const int32_t
     return 0;
 }
 
-/* The sample blocks of the cage (per ptex face, per_edge^2 samples). */
+/* The sample blocks of the cage (per ptex face, per_edge^2 samples; with
+ * `corners`, a grid with per_edge points on each edge, from corner to
+ * corner). */
 static spia_result blocks_build(const spia_mesh *cage, const spia_adjacency *adj, const spia_options *opt,
-                                int32_t per_edge, sample_blocks *B, fit_clock *clock, spia_status *status) {
+                                int32_t per_edge, int corners, sample_blocks *B, fit_clock *clock,
+                                spia_status *status) {
     memset(B, 0, sizeof *B);
     B->per = per_edge * per_edge;
     B->columns = cage->vertex_count;
@@ -284,7 +283,7 @@ static spia_result blocks_build(const spia_mesh *cage, const spia_adjacency *adj
         return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the sample stencils");
     }
     block_sink sink = {B, 0, NULL, 0, 0, clock};
-    spia_result r = spia__osd_surface_blocks(cage, adj, opt, per_edge, block_sink_add, &sink, status);
+    spia_result r = spia__osd_surface_blocks(cage, adj, opt, per_edge, corners, block_sink_add, &sink, status);
     free(sink.order);
     if (r == SPIA_OK && sink.next != B->groups)
         r = spia__fail(status, SPIA_ERROR_INTERNAL, -1, "the sample stencils do not match the cage's faces");
@@ -443,10 +442,11 @@ static void blocks_run(const sample_blocks *B, block_piece_fn fn, const void *co
 #define PIECE(B, name) name
 #endif
 
-/* X = M x, 3 doubles per sample. */
+/* X = M x, 3 doubles per sample (or, into Xf, 3 floats). */
 typedef struct apply_context {
     const double *x;
     double *X;
+    float *Xf;
 } apply_context;
 
 ALWAYS_INLINE void positions_body(const void *context, const sample_blocks *B, int64_t begin, int64_t end,
@@ -456,6 +456,12 @@ ALWAYS_INLINE void positions_body(const void *context, const sample_blocks *B, i
     const int32_t per = B->per;
     for (int64_t g = begin; g < end; ++g) {
         block_forward(B, g, a->x, u);
+        if (a->Xf) {
+            float *X = a->Xf + 3 * g * per;
+            for (int32_t s = 0; s < per; ++s)
+                X[3 * s] = (float)u[s], X[3 * s + 1] = (float)u[per + s], X[3 * s + 2] = (float)u[2 * per + s];
+            continue;
+        }
         double *X = a->X + 3 * g * per;
         for (int32_t s = 0; s < per; ++s) X[3 * s] = u[s], X[3 * s + 1] = u[per + s], X[3 * s + 2] = u[2 * per + s];
     }
@@ -464,7 +470,12 @@ ALWAYS_INLINE void positions_body(const void *context, const sample_blocks *B, i
 DEFINE_PIECE(positions_piece, positions_body)
 
 static void blocks_apply(const sample_blocks *B, const double *x, double *X) {
-    apply_context a = {x, X};
+    apply_context a = {x, X, NULL};
+    blocks_run(B, PIECE(B, positions_piece), &a, NULL, 0);
+}
+
+static void blocks_apply_float(const sample_blocks *B, const double *x, float *X) {
+    apply_context a = {x, NULL, X};
     blocks_run(B, PIECE(B, positions_piece), &a, NULL, 0);
 }
 
@@ -917,12 +928,15 @@ typedef struct fit_buffers {
     float *dots;
     uint8_t *folded, *mark;
     double *hold, *smooth;
-    /* The scan side: the limit surface as a quad grid, its positions, its
-     * face sizes (all 4), and the scan vertices measured, in double. */
-    spia__limit_grid *grid;
+    /* The scan side: the limit surface as a quad grid (its points' blocks,
+     * their positions, its quads and their sizes, all 4), and the scan
+     * vertices measured, in double. */
+    sample_blocks grid;
+    int32_t grid_vertices, grid_faces;
+    double *grid_X;
     spia_scan *surface; /* the grid as a scan: built by the first measure, moved by later ones */
     float *grid_pos, *scan_d, *scan_scratch;
-    int32_t *grid_sizes, *scan_vertex, *scan_near;
+    int32_t *grid_sizes, *grid_quads, *scan_vertex, *scan_near;
     double *scan_pts;
     int64_t scan_count;
 } fit_buffers;
@@ -935,9 +949,10 @@ static void buffers_free(fit_buffers *b) {
     free(b->wts), free(b->on_boundary);
     free(b->nb_start), free(b->nb), free(b->free_vertex), free(b->sample_face);
     free(b->dots), free(b->folded), free(b->mark), free(b->hold), free(b->smooth);
-    if (b->grid) spia__limit_grid_free(b->grid);
+    blocks_free(&b->grid);
     spia_scan_free(b->surface);
-    free(b->grid_pos), free(b->scan_d), free(b->scan_scratch), free(b->grid_sizes), free(b->scan_vertex);
+    free(b->grid_X), free(b->grid_pos), free(b->scan_d), free(b->scan_scratch), free(b->grid_sizes);
+    free(b->grid_quads), free(b->scan_vertex);
     free(b->scan_near);
     free(b->scan_pts);
 }
@@ -1036,11 +1051,16 @@ static spia_result scan_side_cancelled(spia_status *status) {
     return spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled measuring the scan's distances to the surface");
 }
 
-/* The limit surface's grid and the scan vertices to measure.  The grid is
- * one level finer than the samples (ceil(log2 per_edge) + 1 levels), so
- * that its flat quads stay within a sixteenth of a sample spacing's
- * curvature sag of the surface, and one level coarser at a time while it
- * would have more than SCAN_GRID_FACES quads (at least one level). */
+/* The limit surface's grid and the scan vertices to measure.  The grid
+ * has 2^levels quads along each edge of a ptex face, levels one more than
+ * the samples' (ceil(log2 per_edge) + 1), so that its flat quads stay
+ * within a sixteenth of a sample spacing's curvature sag of the surface,
+ * and one fewer at a time while it would have more than SCAN_GRID_FACES
+ * quads (at least one level).  Its points are limit points of the cage, in
+ * blocks like the samples' (each ptex face's own, so the points along its
+ * edges repeat those of its neighbour: the grid is not welded, which a
+ * distance does not see), made face by face between progress calls; each
+ * cage's grid is then one pass over them. */
 #define SCAN_GRID_FACES (2 << 20)
 static spia_result scan_side_prepare(const spia_mesh *cage, const spia_adjacency *adj, const spia_options *opt,
                                      int32_t per_edge, const spia_scan *scan, fit_buffers *b, fit_clock *clock,
@@ -1048,14 +1068,31 @@ static spia_result scan_side_prepare(const spia_mesh *cage, const spia_adjacency
     int32_t levels = 1;
     while ((1 << levels) < per_edge) ++levels;
     ++levels;
-    int64_t quads = 0;
-    for (int32_t f = 0; f < cage->face_count; ++f) quads += cage->face_sizes[f]; /* quads after one level */
-    while (levels > 1 && (quads << (2 * (levels - 1))) > SCAN_GRID_FACES) --levels;
-    spia_result r = spia__osd_limit_grid_create(cage, adj, opt, levels, clock_tick_fn, clock, &b->grid, status);
-    if (r == SPIA_ERROR_CANCELLED) return scan_side_cancelled(status);
-    if (r != SPIA_OK) return r;
+    const int64_t ptex = spia_surface_sample_count(cage, 1);
+    while (levels > 1 && (ptex << (2 * levels)) > SCAN_GRID_FACES) --levels;
+    const int32_t side = (1 << levels) + 1; /* points along a ptex face's edge */
+    if (ptex * side * side > INT32_MAX)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1,
+                          "the cage has too many faces (%lld ptex faces) to measure the scan's distances to its "
+                          "surface; leave that measure out (SPIA_FIT_NO_SCAN_DISTANCES)",
+                          (long long)ptex);
+    spia_result r = blocks_build(cage, adj, opt, side, 1, &b->grid, clock, status);
+    if (r != SPIA_OK) return r == SPIA_ERROR_CANCELLED ? scan_side_cancelled(status) : r;
     if (clock_tick(clock)) return scan_side_cancelled(status);
-    const int32_t gv = spia__limit_grid_vertex_count(b->grid), gf = spia__limit_grid_face_count(b->grid);
+    const int32_t gv = (int32_t)(ptex * side * side), gf = (int32_t)(ptex << (2 * levels));
+    b->grid_vertices = gv, b->grid_faces = gf;
+    b->grid_quads = malloc(sizeof(int32_t) * 4 * (size_t)gf);
+    if (!b->grid_quads) return SPIA_ERROR_OUT_OF_MEMORY;
+    {
+        int32_t *q = b->grid_quads;
+        for (int64_t g = 0; g < ptex; ++g)
+            for (int32_t j = 0; j + 1 < side; ++j)
+                for (int32_t i = 0; i + 1 < side; ++i) {
+                    const int32_t v = (int32_t)(g * side * side) + j * side + i;
+                    q[0] = v, q[1] = v + 1, q[2] = v + side + 1, q[3] = v + side;
+                    q += 4;
+                }
+    }
     int32_t scan_n = 0;
     const int32_t *original = NULL;
     const float *P = spia__scan_positions(scan, &scan_n, &original);
@@ -1093,26 +1130,25 @@ static spia_result scan_side_prepare(const spia_mesh *cage, const spia_adjacency
 
 /* The distances of the scan vertices to the limit surface of cage V.  The
  * first measure builds the grid's hierarchy and keeps each vertex's closest
- * grid triangle; a later one moves the grid (refitting the hierarchy: a
- * build took 0.75 s of the 50k-vertex cage's 0.8M quads, a refit about
- * 0.05) and starts each search from that triangle on the new surface,
+ * grid triangle; a later one moves the grid (refitting the hierarchy: on
+ * the 50k-vertex cage's 0.8M quads a build took 0.64 s, a move 0.16) and
+ * starts each search from that triangle on the new surface,
  * whose distance prunes most of the hierarchy. */
 static spia_result scan_side_measure(fit_buffers *b, const double *V, double cutoff_abs, double diagonal, int threads,
                                      int warm, fit_clock *clock, spia_fit_distances *out, spia_status *status) {
-    spia_result r = spia__limit_grid_evaluate(b->grid, V, clock_tick_fn, clock, b->grid_pos, status);
-    if (r == SPIA_ERROR_CANCELLED) return scan_side_cancelled(status);
-    if (r != SPIA_OK) return r;
+    spia_result r;
+    blocks_apply_float(&b->grid, V, b->grid_pos);
     if (clock_tick(clock)) return scan_side_cancelled(status);
     if (!warm)
         for (int64_t k = 0; k < b->scan_count; ++k) b->scan_near[k] = -1;
     if (!b->surface) {
         spia_mesh view;
         memset(&view, 0, sizeof view);
-        view.vertex_count = spia__limit_grid_vertex_count(b->grid);
+        view.vertex_count = b->grid_vertices;
         view.positions = b->grid_pos;
-        view.face_count = spia__limit_grid_face_count(b->grid);
+        view.face_count = b->grid_faces;
         view.face_sizes = b->grid_sizes;
-        view.face_vertices = spia__limit_grid_quads(b->grid);
+        view.face_vertices = b->grid_quads;
         r = spia_scan_create_progress(&view, clock->fn ? clock_scan_tick : NULL, clock, &b->surface, status);
         if (r != SPIA_OK) return r == SPIA_ERROR_CANCELLED ? scan_side_cancelled(status) : r;
     } else if ((r = spia__scan_move(b->surface, b->grid_pos)) != SPIA_OK) {
@@ -1241,7 +1277,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
      * (VERTICES only) there are none, and the limit points are measured. */
     const int surface_samples = opt.scheme == SPIA_SCHEME_CATMULL_CLARK;
     if (surface_samples) {
-        r = blocks_build(cage, &adj, &surface_opt, fo.samples_per_edge, &b.blocks, &clock, status);
+        r = blocks_build(cage, &adj, &surface_opt, fo.samples_per_edge, 0, &b.blocks, &clock, status);
         if (r != SPIA_OK) goto done;
         S = b.blocks.groups * b.blocks.per;
     }
@@ -1464,7 +1500,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         report->after = distance_stats(b.d, S, cutoff_abs, diagonal, b.scratch);
         report->folded_after =
             fo.samples_per_edge < 2 ? -1 : find_folds(b.dots, b.d, b.on_boundary, S, cutoff_abs, sign, b.folded);
-        if (b.grid) {
+        if (b.grid.groups) {
             t0 = spia__now();
             if ((r = scan_side_measure(&b, b.best, cutoff_abs, diagonal, opt.threads, 1, &clock, &report->scan_after,
                                        status)) !=

@@ -315,33 +315,16 @@ spia_result spia__osd_surface_stencils(const spia_mesh *mesh, const spia_adjacen
                                        int32_t samples_per_edge, spia_stencils **out, spia_status *status);
 /* The same rows face by face: for each ptex face in order, emit gets its
  * columns (mesh numbering, each once) and its samples' weights over them,
- * samples_per_edge^2 rows of `width` (sample j's at weights + j * width);
+ * samples_per_edge^2 rows of `width` (sample j's at weights + j * width).
+ * With `corners`, the points are a grid over the whole ptex face instead,
+ * samples_per_edge (at least 2) on each edge from 0 to 1, corners included;
  * a nonzero return stops it: SPIA_ERROR_CANCELLED or SPIA_ERROR_INTERNAL
  * with that result, anything else with SPIA_ERROR_OUT_OF_MEMORY. */
 typedef int (*spia__sample_block_fn)(void *user, int64_t ptex, int32_t width, const int32_t *columns,
                                      const double *weights);
 spia_result spia__osd_surface_blocks(const spia_mesh *mesh, const spia_adjacency *adj, const spia_options *options,
-                                     int32_t samples_per_edge, spia__sample_block_fn emit, void *user,
-                                     spia_status *status);
-
-/* The Catmull-Clark limit surface as a quad mesh (catmark_osd.cpp): the
- * cage refined uniformly `levels` times with every vertex at its limit
- * position.  Create once per topology, evaluate for each cage (vertex_count
- * * 3 doubles of the original mesh; out: the grid's vertex count * 3).
- * Both call tick(user), when not NULL, between their OpenSubdiv steps (the
- * topology, the refinement; each level's interpolation, the limit); a
- * nonzero return stops them with SPIA_ERROR_CANCELLED (status not set). */
-typedef struct spia__limit_grid spia__limit_grid;
-typedef int (*spia__tick_fn)(void *user);
-spia_result spia__osd_limit_grid_create(const spia_mesh *mesh, const spia_adjacency *adj, const spia_options *options,
-                                        int32_t levels, spia__tick_fn tick, void *user, spia__limit_grid **out,
-                                        spia_status *status);
-int32_t spia__limit_grid_vertex_count(const spia__limit_grid *grid);
-int32_t spia__limit_grid_face_count(const spia__limit_grid *grid);
-const int32_t *spia__limit_grid_quads(const spia__limit_grid *grid);
-spia_result spia__limit_grid_evaluate(const spia__limit_grid *grid, const double *cage, spia__tick_fn tick,
-                                      void *user, float *out, spia_status *status);
-void spia__limit_grid_free(spia__limit_grid *grid);
+                                     int32_t samples_per_edge, int32_t corners, spia__sample_block_fn emit,
+                                     void *user, spia_status *status);
 
 /* The scan's own copy of its positions (scan.c), in its own order, with
  * (original, when not NULL) each vertex's index in the mesh it was made

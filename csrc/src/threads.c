@@ -6,7 +6,6 @@
 #include "threads.h"
 
 #include <stdlib.h>
-#include <time.h>
 
 #ifdef _WIN32
 #include <process.h>
@@ -127,53 +126,6 @@ void spia__parallel_for(int threads, int64_t count, int64_t grain, spia__range_f
     }
     work(&l, 0);
     for (int t = 0; t < started; ++t) thread_join(handles[t]);
-}
-
-typedef struct beside {
-    void (*work)(void *);
-    void *context;
-    spia__counter done;
-} beside;
-
-static void beside_piece(void *context, int64_t begin, int64_t end, int thread) {
-    (void)begin, (void)end, (void)thread;
-    beside *b = (beside *)context;
-    b->work(b->context);
-    spia__counter_set(&b->done, 1);
-}
-
-static void nap(void) {
-#ifdef _WIN32
-    Sleep(1);
-#else
-    const struct timespec ms = {0, 1000000};
-    nanosleep(&ms, NULL);
-#endif
-}
-
-int spia__run_beside(int threads, void (*work)(void *context), void *context, int (*poll)(void *user), void *user) {
-    beside b;
-    b.work = work;
-    b.context = context;
-    spia__counter_set(&b.done, 0);
-    loop l;
-    l.fn = beside_piece;
-    l.context = &b;
-    l.count = l.grain = l.pieces = 1;
-    counter_init(&l.next);
-    thread_handle handle;
-    worker w = {&l, 1};
-    if (threads < 2 || !poll || !thread_start(&handle, &w)) {
-        work(context);
-        return 0;
-    }
-    int stopped = 0;
-    while (!spia__counter_get(&b.done)) {
-        nap();
-        if (!stopped) stopped = poll(user) != 0;
-    }
-    thread_join(handle);
-    return stopped;
 }
 
 #if defined(_MSC_VER) && !defined(__clang__)

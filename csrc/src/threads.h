@@ -28,16 +28,6 @@ typedef void (*spia__range_fn)(void *context, int64_t begin, int64_t end, int th
  * the thread count. */
 void spia__parallel_for(int threads, int64_t count, int64_t grain, spia__range_fn fn, void *context);
 
-/* Calls work(context) on a thread of its own while the calling thread
- * calls poll(user) about every millisecond (sleeping in between; poll is
- * expected to rate-limit itself, as the progress clocks do), until work
- * has returned: for a long step that cannot poll itself (a call into
- * another library), so that progress still reaches the caller's callback,
- * on the caller's thread.  A nonzero poll only stops the polling; work runs
- * to its end either way.  With threads < 2, or when no thread can be
- * started, work runs on the calling thread and poll is not called.
- * Returns whether a poll returned nonzero. */
-int spia__run_beside(int threads, void (*work)(void *context), void *context, int (*poll)(void *user), void *user);
 /* The processors this process may run on (at least 1). */
 int spia__processor_count(void);
 

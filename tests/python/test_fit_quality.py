@@ -67,6 +67,55 @@ def test_scan_distances_on_the_sphere(native):
     assert rep.scan_before.max * diag == pytest.approx(radial.max(), rel=0.05)
 
 
+def _bumpy_open_cage(native):
+    """A 4 x 4 grid of unit quads over a gentle bump, one quad split into
+    two triangles and two merged into a hexagon: triangles, a hexagon and
+    boundary corners of one face (the faces OpenSubdiv's patch table
+    evaluates) besides plain quads."""
+    xs = np.arange(5.0)
+    P = np.array([[x, y, 0.15 * np.sin(0.7 * x) * np.cos(0.5 * y)] for y in xs for x in xs], np.float32)
+    quad = lambda i, j: [5 * j + i, 5 * j + i + 1, 5 * (j + 1) + i + 1, 5 * (j + 1) + i]
+    faces = [quad(i, j) for j in range(4) for i in range(4) if (i, j) not in ((1, 1), (2, 2), (3, 2))]
+    a, b, c, d = quad(1, 1)
+    faces += [[a, b, c], [a, c, d]]
+    faces.append([5 * 2 + 2, 5 * 2 + 3, 5 * 2 + 4, 5 * 3 + 4, 5 * 3 + 3, 5 * 3 + 2])
+    return native.Mesh.from_faces(P, faces)
+
+
+def test_scan_distances_over_every_kind_of_face(native):
+    """The scan-to-surface measure covers every face of the limit surface
+    and measures it where it is: a scan made of the cage's own limit
+    points (a 10 x 10 grid in each ptex face, triangulated), every other
+    one moved off the surface by delta along the surface's normal (numpy,
+    from differences on the grid).  The given cage's measure finds the
+    points on the surface and the moved ones delta away, each
+    within a tenth of delta, in quads, triangles, the hexagon and the
+    corners."""
+    cage = _bumpy_open_cage(native)
+    k = 10
+    X = native.surface_stencils(cage, k).apply(cage.positions).astype(np.float64)
+    G = X.reshape(-1, k, k, 3)
+    n = np.cross(np.gradient(G, axis=2), np.gradient(G, axis=1)).reshape(-1, 3)
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    moved = (np.arange(len(X)) % 2).astype(bool)
+    diag = np.linalg.norm(X.max(axis=0) - X.min(axis=0))
+    delta = 0.005 * diag
+    pts = X + delta * moved[:, None] * n
+    i, j = np.meshgrid(np.arange(k - 1), np.arange(k - 1))
+    v = (j * k + i).ravel()
+    local = np.concatenate([np.c_[v, v + 1, v + k + 1], np.c_[v, v + k + 1, v + k]])
+    tris = (np.arange(len(G))[:, None, None] * k * k + local[None]).reshape(-1, 3)
+    scan = native.Scan(native.Mesh.from_faces(pts.astype(np.float32), tris))
+    _, rep = native.fit(cage, scan, max_rounds=1)
+    assert rep.scan_point_count == len(X) and rep.scan_before.ignored == 0
+    # half the points at 0, half at delta: a face left out of the grid, or
+    # misplaced, would put points a face's size away, or off delta
+    unit = scan.diagonal
+    assert rep.scan_before.max * unit == pytest.approx(delta, rel=0.1)
+    assert rep.scan_before.p95 * unit == pytest.approx(delta, rel=0.1)
+    assert rep.scan_before.mean * unit == pytest.approx(0.5 * delta, rel=0.1)
+
+
 def _folded_share(native, cage, V, scan_mesh, scan, k=8, cutoff=0.02):
     """Share of the samples within the cut-off (a k x k grid per ptex face)
     whose normal, from differences on the grid, faces away from the normal
