@@ -1149,7 +1149,7 @@ static spia_result scan_side_measure(fit_buffers *b, const double *V, double cut
         view.face_count = b->grid_faces;
         view.face_sizes = b->grid_sizes;
         view.face_vertices = b->grid_quads;
-        r = spia_scan_create_progress(&view, clock->fn ? clock_scan_tick : NULL, clock, &b->surface, status);
+        r = spia__scan_create_bare(&view, clock->fn ? clock_scan_tick : NULL, clock, &b->surface, status);
         if (r != SPIA_OK) return r == SPIA_ERROR_CANCELLED ? scan_side_cancelled(status) : r;
     } else if ((r = spia__scan_move(b->surface, b->grid_pos)) != SPIA_OK) {
         return spia__fail(status, r, -1, "%s moving the surface's grid to the fitted cage",

@@ -332,9 +332,14 @@ spia_result spia__osd_surface_blocks(const spia_mesh *mesh, const spia_adjacency
 const float *spia__scan_positions(const spia_scan *scan, int32_t *vertex_count, const int32_t **original);
 void spia__scan_used_vertices(const spia_scan *scan, uint8_t *used);
 
+/* A scan for distances alone (scan.c): no normals, no boundary, so that
+ * only closest points, distances and faces may be asked of it. */
+spia_result spia__scan_create_bare(const spia_mesh *mesh, spia_progress_fn progress, void *progress_user_data,
+                                   spia_scan **out, spia_status *status);
+
 /* Moves the scan's vertices to `positions` (3 floats per vertex of the
  * mesh it was made from, in that mesh's order), its faces staying: its
- * normals, diagonal (over the vertices its triangles use) and hierarchy
+ * normals (when it has them), diagonal (over the vertices its triangles use) and hierarchy
  * (refitted, not rebuilt: spia__bvh_refit) follow.  Fails, changing
  * nothing, with SPIA_ERROR_NONFINITE or SPIA_ERROR_OUT_OF_MEMORY. */
 spia_result spia__scan_move(spia_scan *s, const float *positions);

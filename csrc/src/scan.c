@@ -174,10 +174,10 @@ static spia_result renumber_vertices(spia_scan *s, spia__build_progress *p) {
     const int32_t n = s->vertex_count;
     const int64_t m = 3 * s->triangle_count;
     int32_t *new_id = malloc(sizeof(int32_t) * (size_t)n);
-    float *positions = malloc(sizeof(float) * 3 * (size_t)n), *normals = malloc(sizeof(float) * 3 * (size_t)n);
+    float *positions = malloc(sizeof(float) * 3 * (size_t)n);
     s->original = malloc(sizeof(int32_t) * (size_t)n);
-    if (!new_id || !positions || !normals || !s->original) {
-        free(new_id), free(positions), free(normals);
+    if (!new_id || !positions || !s->original) {
+        free(new_id), free(positions);
         return SPIA_ERROR_OUT_OF_MEMORY;
     }
     for (int32_t v = 0; v < n; ++v) new_id[v] = -1;
@@ -188,18 +188,17 @@ static spia_result renumber_vertices(spia_scan *s, spia__build_progress *p) {
         s->triangles[i] = new_id[v];
     }
     if (spia__build_poll(p, 0, 0.5)) { /* the triangles are the scan's own: freed with it */
-        free(new_id), free(positions), free(normals);
+        free(new_id), free(positions);
         return SPIA_ERROR_CANCELLED;
     }
     for (int32_t v = 0; v < n; ++v) {
         if (new_id[v] < 0) new_id[v] = next++;
         s->original[new_id[v]] = v;
         memcpy(positions + 3 * (int64_t)new_id[v], s->positions + 3 * (int64_t)v, sizeof(float) * 3);
-        memcpy(normals + 3 * (int64_t)new_id[v], s->normals + 3 * (int64_t)v, sizeof(float) * 3);
     }
     free(new_id);
-    free(s->positions), free(s->normals);
-    s->positions = positions, s->normals = normals;
+    free(s->positions);
+    s->positions = positions;
     s->bvh.positions = positions;
     return SPIA_OK;
 }
@@ -319,8 +318,8 @@ spia_result spia_scan_create(const spia_mesh *mesh, spia_scan **out, spia_status
     return spia_scan_create_progress(mesh, NULL, NULL, out, status);
 }
 
-spia_result spia_scan_create_progress(const spia_mesh *mesh, spia_progress_fn progress, void *progress_user_data,
-                                      spia_scan **out, spia_status *status) {
+static spia_result scan_create(const spia_mesh *mesh, spia_progress_fn progress, void *progress_user_data, int bare,
+                               spia_scan **out, spia_status *status) {
     spia__build_progress pr;
     memset(&pr, 0, sizeof pr);
     pr.fn = progress;
@@ -404,23 +403,21 @@ spia_result spia_scan_create_progress(const spia_mesh *mesh, spia_progress_fn pr
     t0 = spia__now();
     phase(&pr, 1);
     s->positions = malloc(sizeof(float) * 3 * (size_t)n);
-    s->normals = calloc(3 * (size_t)n, sizeof(float));
     s->triangles = malloc(sizeof(int32_t) * 3 * (size_t)tris);
     s->polygon_of = malloc(sizeof(int32_t) * (size_t)tris);
-    double *acc = calloc(3 * (size_t)n, sizeof(double));
-    if (!s->positions || !s->normals || !s->triangles || !s->polygon_of || !acc) {
-        free(acc), free(piece_start);
+    if (!s->positions || !s->triangles || !s->polygon_of) {
+        free(piece_start);
         scan_release(s);
         return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the scan");
     }
     memcpy(s->positions, mesh->positions, sizeof(float) * 3 * (size_t)n);
 
     /* The fans and the bounding box of the vertices faces use, piece by
-     * piece on threads; then the normals. */
+     * piece on threads. */
     const int threads = spia__processor_count();
     double *piece_box = malloc(sizeof(double) * 6 * (size_t)(pieces > 0 ? pieces : 1));
     if (!piece_box) {
-        free(acc), free(piece_start);
+        free(piece_start);
         scan_release(s);
         return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the scan");
     }
@@ -436,8 +433,6 @@ spia_result spia_scan_create_progress(const spia_mesh *mesh, spia_progress_fn pr
     free(piece_box);
     s->diagonal = sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
                        (hi[2] - lo[2]) * (hi[2] - lo[2]));
-    if (!build_cancelled(p)) vertex_normals(s, acc, threads, p);
-    free(acc);
     if (build_cancelled(p)) {
         scan_release(s);
         return cancelled(status, "making the scan's triangles");
@@ -482,10 +477,28 @@ spia_result spia_scan_create_progress(const spia_mesh *mesh, spia_progress_fn pr
                                              : spia__fail(status, r, -1, "out of memory for the scan");
         }
     }
+    /* The normals once the vertices follow the triangles' leaf order: each
+     * thread's vertices are then together in memory, as are the triangles
+     * that use them (0.36 s against 0.48 s on the 7.27M-triangle dragon). */
+    if (!bare) {
+        s->normals = malloc(sizeof(float) * 3 * (size_t)n);
+        double *acc = calloc(3 * (size_t)n, sizeof(double));
+        if (!s->normals || !acc) {
+            free(acc);
+            scan_release(s);
+            return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the scan's normals");
+        }
+        vertex_normals(s, acc, threads, p);
+        free(acc);
+        if (build_cancelled(p)) {
+            scan_release(s);
+            return cancelled(status, "making the scan's normals");
+        }
+    }
     s->seconds[2] = spia__now() - t0;
     t0 = spia__now();
     phase(&pr, 3);
-    {
+    if (!bare) {
         const spia_result r = mark_boundary(s, spia__processor_count(), p);
         if (r != SPIA_OK) {
             scan_release(s);
@@ -503,6 +516,16 @@ spia_result spia_scan_create_progress(const spia_mesh *mesh, spia_progress_fn pr
     *out = s;
     spia__ok(status);
     return SPIA_OK;
+}
+
+spia_result spia_scan_create_progress(const spia_mesh *mesh, spia_progress_fn progress, void *progress_user_data,
+                                      spia_scan **out, spia_status *status) {
+    return scan_create(mesh, progress, progress_user_data, 0, out, status);
+}
+
+spia_result spia__scan_create_bare(const spia_mesh *mesh, spia_progress_fn progress, void *progress_user_data,
+                                   spia_scan **out, spia_status *status) {
+    return scan_create(mesh, progress, progress_user_data, 1, out, status);
 }
 
 /* Whether barycentric weights (of corners 0, 1, 2) put a point on the scan's
@@ -539,8 +562,9 @@ static void closest_one(const spia_scan *s, const double p[3], float radius, int
         for (int c = 0; c < 3; ++c) closest[3 * i + c] = (float)q.point[c];
     if (distances) distances[i] = (float)sqrt(q.d2);
     if (faces) faces[i] = s->polygon_of[q.triangle];
-    if (on_boundary) on_boundary[i] = (uint8_t)on_scan_boundary(s->boundary_bits[q.triangle], q.bary);
-    if (normals) {
+    /* (a bare scan has neither: spia__scan_create_bare) */
+    if (on_boundary) on_boundary[i] = s->boundary_bits && on_scan_boundary(s->boundary_bits[q.triangle], q.bary);
+    if (normals && s->normals) {
         const int32_t *tri = s->triangles + 3 * q.triangle;
         double nrm[3] = {0.0, 0.0, 0.0};
         for (int k = 0; k < 3; ++k)
@@ -662,8 +686,8 @@ spia_result spia__scan_move(spia_scan *s, const float *positions) {
     const int32_t n = s->vertex_count;
     for (int64_t i = 0; i < 3 * (int64_t)n; ++i)
         if (!isfinite(positions[i])) return SPIA_ERROR_NONFINITE;
-    double *acc = calloc(3 * (size_t)n, sizeof(double));
-    if (!acc) return SPIA_ERROR_OUT_OF_MEMORY;
+    double *acc = s->normals ? calloc(3 * (size_t)n, sizeof(double)) : NULL;
+    if (s->normals && !acc) return SPIA_ERROR_OUT_OF_MEMORY;
     double lo[3] = {DBL_MAX, DBL_MAX, DBL_MAX}, hi[3] = {-DBL_MAX, -DBL_MAX, -DBL_MAX};
     for (int32_t v = 0; v < n; ++v) {
         const float *from = positions + 3 * (int64_t)(s->original ? s->original[v] : v);
@@ -678,7 +702,7 @@ spia_result spia__scan_move(spia_scan *s, const float *positions) {
     }
     s->diagonal = sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
                        (hi[2] - lo[2]) * (hi[2] - lo[2]));
-    vertex_normals(s, acc, spia__processor_count(), NULL);
+    if (s->normals) vertex_normals(s, acc, spia__processor_count(), NULL);
     free(acc);
     spia__bvh_refit(&s->bvh);
     return SPIA_OK;
