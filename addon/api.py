@@ -59,6 +59,8 @@ DEFAULT_SETTINGS = {
     "fit_cutoff": 0.02,
     "fit_smoothing": 1e-5,
     "fit_samples": 4,
+    # Write each scan vertex's distance to the fitted surface onto the scan.
+    "fit_paint_scan": False,
     # Catmull-Clark: the OpenSubdiv version whose rules the modifier follows,
     # e.g. "3.7.0" or (3, 7, 0); empty: this Blender's (bpy.app.opensubdiv).
     "opensubdiv_version": "",
@@ -73,6 +75,11 @@ FIT_NAMES = {'SURFACE': "Surface", 'VERTICES': "Vertices"}
 HEAT_SCALE = 1e-3
 DISTANCE_ATTRIBUTE = "pia_distance"
 COLOR_ATTRIBUTE = "pia_distance_color"
+# On the scan (fit_paint_scan): its vertices' distances to the fitted surface.
+SCAN_DISTANCE_ATTRIBUTE = "pia_scan_distance"
+SCAN_COLOR_ATTRIBUTE = "pia_scan_distance_color"
+# The heat map's colour of scan vertices no face uses (not measured).
+UNMEASURED_COLOR = (0.5, 0.5, 0.5, 1.0)
 FIT_SETTINGS = ("target", "fit", "fit_cutoff", "fit_smoothing", "fit_samples")
 
 SCHEMES = ('CATMULL_CLARK', 'LOOP', 'DOO_SABIN')
@@ -177,6 +184,7 @@ def check_settings(settings):
     s["tolerance"] = float(s["tolerance"])
     s["use_creases"] = bool(s["use_creases"])
     s["cleanup"] = bool(s["cleanup"])
+    s["fit_paint_scan"] = bool(s["fit_paint_scan"])
     try:
         s["cleanup_distance"] = float(s["cleanup_distance"])
     except (TypeError, ValueError):
@@ -1114,18 +1122,49 @@ def store_fit(obj, report, settings):
     obj["pia_distance_scale"] = HEAT_SCALE
     mesh = obj.data
     distances = np.ascontiguousarray(report.vertex_distances, np.float32)
-    for name in (DISTANCE_ATTRIBUTE, COLOR_ATTRIBUTE):
+    write_heat_map(mesh, DISTANCE_ATTRIBUTE, COLOR_ATTRIBUTE, distances, heat_colors(distances))
+
+
+def write_heat_map(mesh, distance_name, color_name, distances, colors):
+    """The point attribute distance_name (float) and the colour attribute
+    color_name (the active one, and the one rendered) on mesh, replacing
+    attributes of those names."""
+    for name in (distance_name, color_name):
         old = mesh.attributes.get(name)
         if old is not None:
             mesh.attributes.remove(old)
-    attr = mesh.attributes.new(DISTANCE_ATTRIBUTE, 'FLOAT', 'POINT')
-    attr.data.foreach_set("value", distances)
-    colors = mesh.color_attributes.new(COLOR_ATTRIBUTE, 'FLOAT_COLOR', 'POINT')
-    colors.data.foreach_set("color", heat_colors(distances).ravel())
-    mesh.color_attributes.active_color = colors
+    attr = mesh.attributes.new(distance_name, 'FLOAT', 'POINT')
+    attr.data.foreach_set("value", np.ascontiguousarray(distances, np.float32))
+    color = mesh.color_attributes.new(color_name, 'FLOAT_COLOR', 'POINT')
+    color.data.foreach_set("color", np.ascontiguousarray(colors, np.float32).ravel())
+    mesh.color_attributes.active_color = color
     if hasattr(mesh.color_attributes, "render_color_index"):
         mesh.color_attributes.render_color_index = mesh.color_attributes.active_color_index
     mesh.update()
+
+
+def paint_scan(target, report):
+    """Writes report's scan distances onto the target's mesh: the point
+    attribute pia_scan_distance (relative to the scan's diagonal; -1 for
+    vertices no face uses) and its heat map pia_scan_distance_color (the
+    active colour attribute; grey where not measured).  The scan changes in
+    nothing else.  Returns None when painted, else why not (the scan is left
+    as it was)."""
+    distances = getattr(report, "scan_distances", None)
+    if distances is None:
+        return "no distances from the scan were measured (Catmull-Clark fits measure them)"
+    mesh = target.data
+    if mesh.library is not None:
+        return "the scan's mesh is linked from a library"
+    if target.mode == 'EDIT' or mesh.is_editmode:
+        return "the scan is in Edit Mode"
+    if len(mesh.vertices) != len(distances):
+        return ("its modifiers change its vertices (%d measured, the mesh has %d)"
+                % (len(distances), len(mesh.vertices)))
+    colors = heat_colors(np.maximum(distances, 0.0))
+    colors[distances < 0.0] = UNMEASURED_COLOR
+    write_heat_map(mesh, SCAN_DISTANCE_ATTRIBUTE, SCAN_COLOR_ATTRIBUTE, distances, colors)
+    return None
 
 
 def build_object(source, cage, report, settings, context=None, name=None, mesh=None, limit=None):
@@ -1238,6 +1277,12 @@ def interpolate(obj, *, context=None, name=None, progress=None, live=False, **se
     (before/after distances relative to the target's diagonal), and the new
     object has the point attributes pia_distance (per vertex, relative) and
     pia_distance_color (heat map, the active colour attribute).
+    fit_paint_scan=True also writes each scan vertex's distance to the
+    fitted surface onto the target's mesh (paint_scan: pia_scan_distance and
+    its heat map pia_scan_distance_color), which changes the target in
+    nothing else; pia_fit_scan_painted on the new object says whether it
+    could (not through modifiers that change the scan's vertices, nor in
+    Edit Mode), pia_fit_scan_not_painted why not.
 
     progress(iteration, relative_error) -> bool: return True to cancel
     (for a Surface fit: progress(round, mean relative distance)).
@@ -1293,6 +1338,11 @@ def interpolate(obj, *, context=None, name=None, progress=None, live=False, **se
     new_obj = build_object(obj, cage, report, s, context=context, name=name, mesh=mesh, limit=limit)
     if stats is not None:
         store_cleanup(new_obj, stats)
+    if target is not None and s["fit_paint_scan"]:
+        why_not = paint_scan(target, report)
+        new_obj["pia_fit_scan_painted"] = why_not is None
+        if why_not is not None:
+            new_obj["pia_fit_scan_not_painted"] = "The scan '%s' was not painted: %s" % (target.name, why_not)
     if live:
         from . import live as live_module
         live_module.set_live(new_obj, True, source=obj)

@@ -154,6 +154,10 @@ def parse_args(argv):
                      help="samples farther than this from the scan do not pull (default 0.02)")
     fit.add_argument("--fit-smoothing", type=float, help="fairness weight (default 1e-5)")
     fit.add_argument("--fit-samples", type=int, help="samples per face edge (default 4)")
+    fit.add_argument("--fit-paint-scan", action="store_true",
+                     help="also write each scan vertex's distance to the fitted surface onto the "
+                          "target (attributes pia_scan_distance and pia_scan_distance_color), saved "
+                          "with it in OUTPUT")
     return parser.parse_args(argv)
 
 
@@ -286,6 +290,8 @@ def main(argv):
         value = getattr(args, name)
         if value is not None:
             settings[name] = value
+    if args.fit_paint_scan:
+        settings["fit_paint_scan"] = True
 
     progress = None
     if sys.stdout.isatty():
@@ -307,6 +313,11 @@ def main(argv):
     cleaned = package.api.format_cleanup(new_obj)
     if cleaned:
         print("subdiv_pia: %s" % cleaned)
+    if new_obj.get("pia_fit_scan_painted"):
+        print("subdiv_pia: distances to the surface written onto '%s' (%s, %s)"
+              % (settings["target"], package.api.SCAN_DISTANCE_ATTRIBUTE, package.api.SCAN_COLOR_ATTRIBUTE))
+    elif new_obj.get("pia_fit_scan_not_painted"):
+        print("subdiv_pia: %s" % new_obj["pia_fit_scan_not_painted"])
     limit = package.api.find_limit_object(new_obj)
     if limit is not None:
         print("subdiv_pia: limit surface %s: %d vertices, %d faces"

@@ -52,7 +52,9 @@ def result_line(new_obj, report, settings):
     else:
         line = api.format_report(report)
     cleaned = api.format_cleanup(new_obj)
-    return "%s: %s%s" % (new_obj.name, line, "; " + cleaned if cleaned else "")
+    not_painted = new_obj.get("pia_fit_scan_not_painted")
+    return "%s: %s%s%s" % (new_obj.name, line, "; " + cleaned if cleaned else "",
+                           "; " + not_painted if not_painted else "")
 
 
 def draw_settings(layout, settings, from_modifier=False):
@@ -111,6 +113,7 @@ def draw_fit_settings(layout, settings, has_target):
     sub.enabled = settings.fit == 'SURFACE'
     sub.prop(settings, "fit_smoothing")
     sub.prop(settings, "fit_samples")
+    col.prop(settings, "fit_paint_scan")
 
 
 class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
@@ -178,8 +181,8 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
             return {'CANCELLED'}
         finally:
             progress.end()
-        self.report({'INFO'} if api.report_converged(report) else {'WARNING'},
-                    result_line(new_obj, report, settings))
+        fine = api.report_converged(report) and not new_obj.get("pia_fit_scan_not_painted")
+        self.report({'INFO'} if fine else {'WARNING'}, result_line(new_obj, report, settings))
         return {'FINISHED'}
 
 

@@ -133,6 +133,13 @@ def settings_annotations():
                                    soft_max=8,
                                    description="Surface fit: samples per face edge (the square "
                                                "per quad, or per corner of another polygon)"),
+        "fit_paint_scan": BoolProperty(name="Paint Scan", default=d["fit_paint_scan"],
+                                       description="Write each target vertex's distance to the fitted "
+                                                   "surface onto the target: the point attribute "
+                                                   "pia_scan_distance and its heat map, the colour "
+                                                   "attribute pia_scan_distance_color (Catmull-Clark; "
+                                                   "not through modifiers that change the target's "
+                                                   "vertices)"),
     }
 
 

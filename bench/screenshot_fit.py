@@ -10,6 +10,9 @@ as the panel's Target with a Surface fit, runs the add-on's operator on the
 cage, hides the scan and the cage, and shows the new `<cage>_pia` object
 coloured by its `pia_distance_color` heat map (Solid shading, colour
 Attribute) beside the Modifiers tab with the panel and its "Last fit" box.
+With --paint-scan (after the output path) the fit runs with Paint Scan on
+and the scan is shown instead, coloured by its pia_scan_distance_color:
+where the surface does not reach the scan.
 The window layout, the screenshot and the crop are those of
 screenshot_panel.py, whose functions this script loads and runs with its
 own scene; the whole window is kept as subdiv_pia_panel_full.png in the
@@ -54,9 +57,13 @@ panel_arrange_steps = panel.arrange_steps
 panel.OUTLINER_HEIGHT = 26
 
 
+ARGV = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
+PAINT_SCAN = "--paint-scan" in ARGV
+
+
 def output_path():
-    argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
-    return os.path.abspath(argv[0] if argv else os.path.join(ROOT, "docs", "panel_fit.png"))
+    paths = [a for a in ARGV if not a.startswith("--")]
+    return os.path.abspath(paths[0] if paths else os.path.join(ROOT, "docs", "panel_fit.png"))
 
 
 def setup_scene():
@@ -69,7 +76,8 @@ def setup_scene():
     settings = bpy.context.scene.subdiv_pia
     settings.target_object = scan
     settings.fit = 'SURFACE'
-    result = bpy.ops.object.subdiv_pia_interpolate(target=scan.name, fit='SURFACE')
+    settings.fit_paint_scan = PAINT_SCAN
+    result = bpy.ops.object.subdiv_pia_interpolate(target=scan.name, fit='SURFACE', fit_paint_scan=PAINT_SCAN)
     if result != {'FINISHED'}:
         raise RuntimeError("operator returned %s" % result)
     new_obj = bpy.context.view_layer.objects.active
@@ -77,8 +85,9 @@ def setup_scene():
         raise RuntimeError("expected a fitted %s_pia, got %s" % (cage.name, new_obj.name))
     for obj in bpy.context.view_layer.objects:
         obj.select_set(False)
-    scan.hide_set(True)
+    scan.hide_set(not PAINT_SCAN)
     cage.hide_set(True)
+    new_obj.hide_set(PAINT_SCAN)
     new_obj.select_set(True)
     bpy.context.view_layer.objects.active = new_obj
     # The modifier's own panel folded to its header, so that little is left

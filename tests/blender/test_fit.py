@@ -318,6 +318,77 @@ def test_scan_to_surface_distances_are_blenders():
     assert new_obj["pia_fit_scan_mean_before"] > 4 * new_obj["pia_fit_scan_mean_after"]
 
 
+def _attribute(mesh, name, width=1):
+    values = np.empty(len(mesh.vertices) * width, np.float32)
+    mesh.attributes[name].data.foreach_get("color" if width == 4 else "value", values)
+    return values.reshape(-1, width) if width > 1 else values
+
+
+def test_paint_scan_writes_blenders_distances():
+    """fit_paint_scan writes onto the scan each vertex's distance to the
+    fitted surface, as mathutils' BVH tree over Blender's own level-3
+    surface measures it, and its heat map (the active colour attribute);
+    the scan changes in nothing else."""
+    scan = import_obj(os.path.join(DATA, "bun_zipper.obj"))
+    cage = import_obj(os.path.join(DATA, "bun_zipper_quadriflow_cage.obj"))
+    before = snapshot(scan)
+    names = set(scan.data.attributes.keys())
+    new_obj = fit(cage, scan, fit='SURFACE', levels=3, quality=3, fit_paint_scan=True)
+    assert new_obj["pia_fit_scan_painted"] and "pia_fit_scan_not_painted" not in new_obj
+    assert set(scan.data.attributes.keys()) - names == {api.SCAN_DISTANCE_ATTRIBUTE, api.SCAN_COLOR_ATTRIBUTE}
+    assert scan.data.color_attributes.active_color.name == api.SCAN_COLOR_ATTRIBUTE
+    assert_unchanged(scan, before)
+    painted = _attribute(scan.data, api.SCAN_DISTANCE_ATTRIBUTE)
+    colors = _attribute(scan.data, api.SCAN_COLOR_ATTRIBUTE, 4)
+
+    points, _, faces = _level3_surface(new_obj)
+    vertices, polygons = scan_in_cage_space(scan, cage)
+    diag = used_diagonal(vertices, polygons)
+    used = np.unique(np.fromiter((v for p in polygons for v in p), np.int64))
+    d = bvh_distances(bvh_of(points, faces), vertices[used]) / diag
+    gap = np.abs(painted[used] - d)
+    print("painted against Blender's level-3 surface: median %.3g, 99th percentile %.3g, max %.3g of the "
+          "diagonal (distances: median %.3g)" % (np.median(gap), np.percentile(gap, 99), gap.max(), np.median(d)))
+    # The library's grid and Blender's level 3 are the same points of the
+    # limit surface, their quads split into triangles their own ways: most
+    # vertices agree to a few percent of a typical distance (distances
+    # written to the wrong vertices would not), a few by a quad's twist.
+    assert np.median(gap) < 0.1 * np.median(d)
+    assert np.percentile(gap, 99) < 0.5 * np.median(d)
+    assert gap.max() < 2e-4
+    np.testing.assert_allclose(colors[used], api.heat_colors(painted[used]), atol=1e-6)
+    unused = np.setdiff1d(np.arange(len(painted)), used)
+    assert (painted[unused] == -1.0).all()
+
+
+def test_paint_scan_leaves_the_scan_alone_otherwise():
+    """Without fit_paint_scan the scan gets nothing; with it, a vertex no
+    face uses gets -1 and grey, and a scan whose modifiers change its
+    vertices is left as it was, the new object saying why."""
+    scan = fine_sphere(segments=32, rings=16)
+    cage = quad_sphere(cuts=1)
+    scan.data.vertices.add(1)  # a loose vertex: not measured
+    scan.data.vertices[-1].co = (3.0, 0.0, 0.0)
+    names = set(scan.data.attributes.keys())
+    new_obj = fit(cage, scan, fit_cutoff=0.2)
+    assert set(scan.data.attributes.keys()) == names and "pia_fit_scan_painted" not in new_obj
+
+    new_obj = fit(cage, scan, fit_cutoff=0.2, fit_paint_scan=True)
+    assert new_obj["pia_fit_scan_painted"]
+    painted = _attribute(scan.data, api.SCAN_DISTANCE_ATTRIBUTE)
+    colors = _attribute(scan.data, api.SCAN_COLOR_ATTRIBUTE, 4)
+    assert painted[-1] == -1.0 and tuple(colors[-1]) == pytest.approx(api.UNMEASURED_COLOR)
+    assert (painted[:-1] >= 0.0).all() and (painted[:-1] < 0.2).all()
+
+    other = fine_sphere("Scan2", segments=32, rings=16)
+    other.modifiers.new("Subdivision", 'SUBSURF').levels = 1
+    names = set(other.data.attributes.keys())
+    new_obj = fit(cage, other, fit_cutoff=0.2, fit_paint_scan=True)
+    assert not new_obj["pia_fit_scan_painted"]
+    assert "modifiers change its vertices" in new_obj["pia_fit_scan_not_painted"]
+    assert set(other.data.attributes.keys()) == names
+
+
 # --- bad input ------------------------------------------------------------------------
 
 def _missing(cage):
@@ -511,7 +582,7 @@ def test_panel_passes_the_target():
     cage = quad_sphere(cuts=1)
     settings = bpy.context.scene.subdiv_pia
     log = draw_panel()
-    for name in ("target_object", "fit", "fit_cutoff", "fit_smoothing", "fit_samples"):
+    for name in ("target_object", "fit", "fit_cutoff", "fit_smoothing", "fit_samples", "fit_paint_scan"):
         assert ("prop", name) in log, name
     settings.target_object = scan
     # a one-cut cube around the sphere is farther from it than the default cut-off
@@ -531,12 +602,17 @@ def test_cli_fits_to_a_target(tmp_path):
     bpy.ops.wm.save_as_mainfile(filepath=path, copy=True)
     output = str(tmp_path / "out.blend")
     result = run_cli(path, output, "--object", "Cage", "--target", "Scan", "--fit", "SURFACE",
-                     "--fit-cutoff", "0.05", "--fit-samples", "3")
+                     "--fit-cutoff", "0.05", "--fit-samples", "3", "--fit-paint-scan")
     assert result.returncode == 0, result.stdout + result.stderr
     assert "Surface fit to 'Scan'" in result.stdout
+    assert "distances to the surface written onto 'Scan'" in result.stdout
     with bpy.data.libraries.load(output) as (data_from, data_to):
-        data_to.objects = ["Cage_pia"]
-    new_obj = data_to.objects[0]
+        data_to.objects = ["Cage_pia", "Scan"]
+    new_obj, scan = data_to.objects
+    assert new_obj["pia_fit_scan_painted"]
+    painted = np.empty(len(scan.data.vertices), np.float32)
+    scan.data.attributes[api.SCAN_DISTANCE_ATTRIBUTE].data.foreach_get("value", painted)
+    assert (painted >= 0.0).all() and painted.max() < 0.05
     assert new_obj["pia_fit_samples"] == 3
     assert new_obj["pia_fit_sample_count"] == 6 * 3 * 3 * 3 * 3  # 54 quads, 9 samples each
     assert new_obj["pia_fit_cutoff"] == pytest.approx(0.05)
