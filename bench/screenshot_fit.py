@@ -88,7 +88,8 @@ def setup_scene():
     scan.hide_set(not PAINT_SCAN)
     cage.hide_set(True)
     new_obj.hide_set(PAINT_SCAN)
-    new_obj.select_set(True)
+    # The view frames what is selected; the panel shows the active object's fit.
+    (scan if PAINT_SCAN else new_obj).select_set(True)
     bpy.context.view_layer.objects.active = new_obj
     # The modifier's own panel folded to its header, so that little is left
     # below the add-on's panel when the editor is scrolled to its end.
