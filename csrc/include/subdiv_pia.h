@@ -618,7 +618,7 @@ typedef enum spia_fit_flags {
      * within it, 0 beyond), with no robust kernel. */
     SPIA_FIT_HARD_CUTOFF = 2,
     /* Leave out the scan-to-surface distances (scan_before, scan_after),
-     * which cost a hierarchy over the refined limit surface and a query
+     * which cost a grid of limit points, a hierarchy over it and a query
      * per scan vertex. */
     SPIA_FIT_NO_SCAN_DISTANCES = 4
 } spia_fit_flags;
@@ -659,9 +659,10 @@ typedef struct spia_fit_report {
      * the cage given agrees on; -1 when samples_per_edge is 1. */
     int64_t folded_before, folded_after;
     /* Distances the other way: from each scan vertex that a face uses to
-     * the limit surface (refined one level finer than the samples,
-     * ceil(log2 samples_per_edge) + 1 levels, and coarser while that would
-     * make more than 2M quads), relative to the scan's
+     * the limit surface (as a grid of its points with 2^levels quads along
+     * each ptex face's edge, levels = ceil(log2 samples_per_edge) + 1, one
+     * fewer at a time while that would make more than 2M quads), relative
+     * to the scan's
      * diagonal, for the cage given and the cage written.  `ignored` counts
      * the scan vertices farther than the cut-off: scan parts the surface
      * does not reach.  Catmull-Clark only; all zero with
