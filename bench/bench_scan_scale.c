@@ -130,7 +130,7 @@ int main(int argc, char **argv) {
         t0 = spia__now();
         spia_scan_free(scan);
         const double freed = spia__now() - t0;
-        printf("rep %d: create %.3f s (checks %.3f, fans and normals %.3f, hierarchy %.3f, boundary %.3f), cold queries %.3f s, warm queries %.3f s, free %.3f s; checksum %.9g, "
+        printf("rep %d: create %.3f s (checks %.3f, fans %.3f, hierarchy and normals %.3f, boundary %.3f), cold queries %.3f s, warm queries %.3f s, free %.3f s; checksum %.9g, "
                "%lld on the rim\n",
                rep, create, phase[0], phase[1], phase[2], phase[3], cold, warm, freed, sum, rim);
         fflush(stdout);

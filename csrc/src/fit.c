@@ -933,7 +933,6 @@ typedef struct fit_buffers {
      * vertices measured, in double. */
     sample_blocks grid;
     int32_t grid_vertices, grid_faces;
-    double *grid_X;
     spia_scan *surface; /* the grid as a scan: built by the first measure, moved by later ones */
     float *grid_pos, *scan_d, *scan_scratch;
     int32_t *grid_sizes, *grid_quads, *scan_vertex, *scan_near;
@@ -951,7 +950,7 @@ static void buffers_free(fit_buffers *b) {
     free(b->dots), free(b->folded), free(b->mark), free(b->hold), free(b->smooth);
     blocks_free(&b->grid);
     spia_scan_free(b->surface);
-    free(b->grid_X), free(b->grid_pos), free(b->scan_d), free(b->scan_scratch), free(b->grid_sizes);
+    free(b->grid_pos), free(b->scan_d), free(b->scan_scratch), free(b->grid_sizes);
     free(b->grid_quads), free(b->scan_vertex);
     free(b->scan_near);
     free(b->scan_pts);
