@@ -212,7 +212,7 @@ static int face_repeats_vertex(const int32_t *fv, int32_t size) {
 }
 
 /* The area-weighted vertex normals: each triangle's cross product added to
- * its corners in triangle order (acc: 3 zeroed doubles per vertex), then
+ * its corners in triangle order (acc: 3 doubles per vertex, zeroed here), then
  * made unit (zero where they cancel or no triangle is).  On threads, each
  * taking a range of the vertices and every triangle with a corner in it:
  * each vertex's sum is in triangle order whatever the threads. */
@@ -225,6 +225,11 @@ typedef struct normals_job {
 static void normals_range(void *context, int64_t begin, int64_t end, int thread) {
     const normals_job *j = context;
     const spia_scan *s = j->s;
+    /* Zeroed here, not by calloc: a fresh page that is read first maps the
+     * shared zero page, and the first add then copies it and flushes the
+     * other threads' TLBs (0.2 s on 7.27M triangles); written first, it
+     * takes one fault. */
+    memset(j->acc + 3 * begin, 0, sizeof(double) * 3 * (size_t)(end - begin));
     for (int64_t t = 0; t < s->triangle_count; ++t) {
         if (POLL_EVERY(t) && spia__build_poll(j->p, thread, 0.5 + 0.5 * (double)t / (double)s->triangle_count))
             return;
@@ -486,7 +491,7 @@ static spia_result scan_create(const spia_mesh *mesh, spia_progress_fn progress,
      * that use them (0.36 s against 0.48 s on the 7.27M-triangle dragon). */
     if (!bare) {
         s->normals = malloc(sizeof(float) * 3 * (size_t)n);
-        double *acc = calloc(3 * (size_t)n, sizeof(double));
+        double *acc = malloc(sizeof(double) * 3 * (size_t)n);
         if (!s->normals || !acc) {
             free(acc);
             scan_release(s);
@@ -690,7 +695,7 @@ spia_result spia__scan_move(spia_scan *s, const float *positions) {
     const int32_t n = s->vertex_count;
     for (int64_t i = 0; i < 3 * (int64_t)n; ++i)
         if (!isfinite(positions[i])) return SPIA_ERROR_NONFINITE;
-    double *acc = s->normals ? calloc(3 * (size_t)n, sizeof(double)) : NULL;
+    double *acc = s->normals ? malloc(sizeof(double) * 3 * (size_t)n) : NULL;
     if (s->normals && !acc) return SPIA_ERROR_OUT_OF_MEMORY;
     double lo[3] = {DBL_MAX, DBL_MAX, DBL_MAX}, hi[3] = {-DBL_MAX, -DBL_MAX, -DBL_MAX};
     for (int32_t v = 0; v < n; ++v) {
