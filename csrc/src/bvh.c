@@ -804,6 +804,14 @@ spia_result spia__bvh_build(spia__bvh *bvh, const float *positions, int32_t *tri
 spia_result spia__bvh_build_progress(spia__bvh *bvh, const float *positions, int32_t *triangles,
                                      int64_t triangle_count, int threads, spia__build_progress *progress,
                                      spia_status *status) {
+    return spia__bvh_build_keep(bvh, positions, triangles, triangle_count, threads, progress, NULL, NULL, status);
+}
+
+spia_result spia__bvh_build_keep(spia__bvh *bvh, const float *positions, int32_t *triangles, int64_t triangle_count,
+                                 int threads, spia__build_progress *progress, void **scratch, size_t *scratch_bytes,
+                                 spia_status *status) {
+    if (scratch) *scratch = NULL;
+    if (scratch_bytes) *scratch_bytes = 0;
     memset(bvh, 0, sizeof *bvh);
     if (triangle_count < 1 || triangle_count > (int64_t)(UINT32_MAX / 3))
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "cannot build a hierarchy of %lld triangles",
@@ -976,7 +984,12 @@ done:
     free(top.v);
     free(order);
     free(piece_box);
-    free(b.refs);
+    if (result == SPIA_OK && scratch && scratch_bytes) {
+        *scratch = b.refs;
+        *scratch_bytes = sizeof(prim_ref) * (size_t)n;
+    } else {
+        free(b.refs);
+    }
     if (result != SPIA_OK) spia__bvh_free(bvh);
     return result;
 }

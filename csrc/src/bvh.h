@@ -92,6 +92,14 @@ int spia__scan_closest_points_polled(const spia_scan *s, int64_t count, const do
 spia_result spia__bvh_build_progress(spia__bvh *bvh, const float *positions, int32_t *triangles,
                                      int64_t triangle_count, int threads, spia__build_progress *progress,
                                      spia_status *status);
+
+/* spia__bvh_build_progress handing the build's working memory (28 bytes a
+ * triangle, its pages already faulted in) to the caller instead of freeing
+ * it: *scratch (the caller frees it) of *scratch_bytes bytes, NULL and 0
+ * when the build fails. */
+spia_result spia__bvh_build_keep(spia__bvh *bvh, const float *positions, int32_t *triangles, int64_t triangle_count,
+                                 int threads, spia__build_progress *progress, void **scratch, size_t *scratch_bytes,
+                                 spia_status *status);
 void spia__bvh_free(spia__bvh *bvh);
 
 /* After the borrowed positions have moved (the triangles and their order
