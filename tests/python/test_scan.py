@@ -132,6 +132,38 @@ def test_vertex_normals_match_numpy(native):
     assert np.abs(normals - want[pick]).max() < 1e-6
 
 
+def test_many_loose_vertices(native):
+    """A scan with 30 times more vertices than triangles (points no face
+    uses, as a point cloud merged into a scan leaves them): the build's
+    steps then need more memory than its hierarchy worked in and take
+    fresh memory instead.  Boundary, vertex normals and closest points are
+    those of numpy all the same."""
+    pos, tris = grid(12, 20, seed=7)
+    rng = np.random.default_rng(8)
+    loose = rng.uniform(-50, 50, (30 * len(tris), 3))
+    pos = np.concatenate([loose[: len(loose) // 2], pos, loose[len(loose) // 2:]])
+    tris = tris + len(loose) // 2
+    used, rim = flagged_vertices(native, pos, tris)
+    assert rim.tolist() == boundary_vertices(tris, len(pos))[used].tolist()
+    scan = native.Scan(native.Mesh(pos.astype(np.float32), np.full(len(tris), 3, np.int32),
+                                   tris.astype(np.int32).ravel()))
+    p = pos.astype(np.float32).astype(np.float64)
+    cross = np.cross(p[tris[:, 1]] - p[tris[:, 0]], p[tris[:, 2]] - p[tris[:, 0]])
+    acc = np.zeros_like(p)
+    for k in range(3):
+        np.add.at(acc, tris[:, k], cross)
+    _, normals, d, _ = scan.closest_points(pos[used].astype(np.float32))
+    assert d.max() == 0.0
+    assert np.abs(normals - acc[used] / np.linalg.norm(acc[used], axis=1, keepdims=True)).max() < 1e-6
+    q = (pos[used][rng.integers(0, len(used), 200)] + rng.normal(0, 0.5, (200, 3))).astype(np.float32)
+    _, _, d, faces = scan.closest_points(q)
+    a, b, c = p[tris[:, 0]], p[tris[:, 1]], p[tris[:, 2]]
+    for i in range(len(q)):
+        best = brute_force_distance(q[i].astype(np.float64), a, b, c)
+        assert abs(d[i] - best.min()) <= 1e-5 * (1 + best.min())
+        assert abs(best[faces[i]] - best.min()) <= 1e-6 * (1 + best.min())
+
+
 def brute_force_distance(p, a, b, c):
     """Distances from p to every triangle (a, b, c: (T, 3)), by dense
     sampling-free projection: the least of the plane distance (inside) and
