@@ -361,7 +361,6 @@ static spia_result blocks_build(const spia_mesh *cage, const spia_adjacency *adj
     return SPIA_OK;
 }
 
-
 /* The block products four samples at a time, in GCC's and Clang's vector
  * types: two SSE2 registers each by default, one AVX register in the
  * kernels compiled for AVX (SPIA_AVX_KERNELS).  Every lane does the

@@ -148,7 +148,8 @@ static spia_result mark_boundary(spia_scan *s, int threads, spia__build_progress
     /* The entries in the hierarchy's memory (24 of its 28 bytes a
      * triangle), the buckets' starts after them when they fit (4 bytes a
      * vertex: a mesh has fewer vertices than triangles unless many are
-     * loose).  The starts count edges: at most 3 * UINT32_MAX / 3. */
+     * loose).  The starts count edges, three a triangle: they fit in 32
+     * bits, the scan having fewer than 2^32 / 3 triangles. */
     const size_t e_bytes = sizeof(edge_entry) * (size_t)m, begin_bytes = sizeof(uint32_t) * ((size_t)n + 1);
     int fresh_e, fresh_begin = 1;
     edge_entry *e = phase_memory(s, e_bytes, &fresh_e);
