@@ -107,6 +107,18 @@ def test_renumbered_vertices_give_the_same_closest_points(native):
     assert np.allclose(np.linalg.norm(normals, axis=1), 1, atol=1e-5)
 
 
+def numpy_vertex_normals(pos, tris):
+    """Area-weighted vertex normals in double from the float32 positions
+    (NaN where no triangle is)."""
+    p = pos.astype(np.float32).astype(np.float64)
+    cross = np.cross(p[tris[:, 1]] - p[tris[:, 0]], p[tris[:, 2]] - p[tris[:, 0]])
+    acc = np.zeros_like(p)
+    for k in range(3):
+        np.add.at(acc, tris[:, k], cross)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return acc / np.linalg.norm(acc, axis=1, keepdims=True)
+
+
 def test_vertex_normals_match_numpy(native):
     """At a scan vertex the closest point's normal is the vertex's
     area-weighted normal: the triangles' cross products summed (numpy, in
@@ -120,12 +132,7 @@ def test_vertex_normals_match_numpy(native):
     rest = np.concatenate([tris[half:cells], tris[cells + half:]])
     sizes = np.r_[np.full(half, 4), np.full(len(rest), 3)].astype(np.int32)
     scan = native.Scan(native.Mesh(pos.astype(np.float32), sizes, np.r_[quads.ravel(), rest.ravel()].astype(np.int32)))
-    p = pos.astype(np.float32).astype(np.float64)
-    cross = np.cross(p[tris[:, 1]] - p[tris[:, 0]], p[tris[:, 2]] - p[tris[:, 0]])
-    acc = np.zeros_like(p)
-    for k in range(3):
-        np.add.at(acc, tris[:, k], cross)
-    want = acc / np.linalg.norm(acc, axis=1, keepdims=True)
+    want = numpy_vertex_normals(pos, tris)
     pick = np.arange(0, len(pos), 37)
     _, normals, d, _ = scan.closest_points(pos[pick].astype(np.float32))
     assert d.max() == 0.0
@@ -147,14 +154,10 @@ def test_many_loose_vertices(native):
     assert rim.tolist() == boundary_vertices(tris, len(pos))[used].tolist()
     scan = native.Scan(native.Mesh(pos.astype(np.float32), np.full(len(tris), 3, np.int32),
                                    tris.astype(np.int32).ravel()))
-    p = pos.astype(np.float32).astype(np.float64)
-    cross = np.cross(p[tris[:, 1]] - p[tris[:, 0]], p[tris[:, 2]] - p[tris[:, 0]])
-    acc = np.zeros_like(p)
-    for k in range(3):
-        np.add.at(acc, tris[:, k], cross)
     _, normals, d, _ = scan.closest_points(pos[used].astype(np.float32))
     assert d.max() == 0.0
-    assert np.abs(normals - acc[used] / np.linalg.norm(acc[used], axis=1, keepdims=True)).max() < 1e-6
+    assert np.abs(normals - numpy_vertex_normals(pos, tris)[used]).max() < 1e-6
+    p = pos.astype(np.float32).astype(np.float64)
     q = (pos[used][rng.integers(0, len(used), 200)] + rng.normal(0, 0.5, (200, 3))).astype(np.float32)
     _, _, d, faces = scan.closest_points(q)
     a, b, c = p[tris[:, 0]], p[tris[:, 1]], p[tris[:, 2]]
