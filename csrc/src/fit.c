@@ -178,7 +178,7 @@ static int clock_forward(void *user, int32_t iteration, double value) {
  * Blocks with equal weights share one copy of them.  Every regular face
  * has its patch points in the same order and the same weights, so a
  * quad-dominant cage has few distinct blocks: 170 for the 50k-vertex
- * voxel-remeshed dragon's 50,416 ptex faces (0.3 MB of weights against
+ * voxel-remeshed dragon's 50,416 ptex faces (0.2 MB of weights against
  * 56 MB).  The products then read the columns and little else: its nine
  * rounds' solves took 1.9 s against 2.5 s, and the fit's peak fell by
  * 135 MB.
