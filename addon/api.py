@@ -80,7 +80,6 @@ SCAN_DISTANCE_ATTRIBUTE = "pia_scan_distance"
 SCAN_COLOR_ATTRIBUTE = "pia_scan_distance_color"
 # The heat map's colour of scan vertices no face uses (not measured).
 UNMEASURED_COLOR = (0.5, 0.5, 0.5, 1.0)
-FIT_SETTINGS = ("target", "fit", "fit_cutoff", "fit_smoothing", "fit_samples", "fit_paint_scan")
 
 SCHEMES = ('CATMULL_CLARK', 'LOOP', 'DOO_SABIN')
 # Schemes Blender's modifier cannot show: a `_limit` child shows the surface.
