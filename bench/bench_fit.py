@@ -161,6 +161,58 @@ def scan_to_surface(obj, scan):
     return float(d[kept].mean()), float(np.percentile(d[kept], 95)), float(d[kept].max()), float(1 - kept.mean())
 
 
+def turned_triangles(verts, tris):
+    """Scan triangles whose normal is against the sum of their corners'
+    area-weighted vertex normals: where the scan folds on itself."""
+    fn = np.cross(verts[tris[:, 1]] - verts[tris[:, 0]], verts[tris[:, 2]] - verts[tris[:, 0]])
+    vn = np.zeros_like(verts)
+    for k in range(3):
+        np.add.at(vn, tris[:, k], fn)
+    return np.einsum("ij,ij->i", fn, vn[tris].sum(axis=1)) < 0
+
+
+def triangle_areas(verts, tris):
+    return 0.5 * np.linalg.norm(np.cross(verts[tris[:, 1]] - verts[tris[:, 0]], verts[tris[:, 2]] - verts[tris[:, 0]]),
+                                axis=1)
+
+
+def patches(mask, tris):
+    """Labels of the connected patches of the vertices in mask (joined by
+    the edges of tris between two of them); -1 outside mask."""
+    label = np.where(mask, np.arange(len(mask)), -1)
+    edges = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
+    edges = edges[mask[edges[:, 0]] & mask[edges[:, 1]]]
+    while len(edges):
+        low = np.minimum(label[edges[:, 0]], label[edges[:, 1]])
+        new = label.copy()
+        np.minimum.at(new, edges[:, 0], low)
+        np.minimum.at(new, edges[:, 1], low)
+        new[mask] = new[new[mask]]  # jump to the label's own label
+        if np.array_equal(new, label):
+            break
+        label = new
+    return label
+
+
+def fold_breakdown(r, pts, verts, tris, turned):
+    """Where the points facing away are: on scan triangles turned against
+    their own corners (the scan folded on itself), and the rest's largest
+    connected patch on the surface with its extent."""
+    away = r["facing_away"]
+    on_turned = away & turned[r["nearest_triangle"]]
+    rest = away & ~on_turned
+    text = "%d facing away, %d of them closest to scan triangles turned against their own corners' normals" % (
+        away.sum(), on_turned.sum())
+    if rest.any():
+        label = patches(rest, r["surface_triangles"])
+        ids, counts = np.unique(label[rest], return_counts=True)
+        big = label == ids[np.argmax(counts)]
+        extent = np.linalg.norm(pts[big].max(axis=0) - pts[big].min(axis=0)) / fit_cases.diagonal(verts)
+        text += ("; the other %d in %d patches on the surface, the largest %d points across %s of the diagonal"
+                 % (rest.sum(), len(ids), counts.max(), sci(extent)))
+    return text
+
+
 def sci(x, digits=2):
     """1.21e-3 style; 0 as 0."""
     if x == 0:
@@ -257,6 +309,11 @@ def main(argv):
         if args.export_test_data:
             shutil.copyfile(cache_path(case), os.path.join(fit_cases.DATA, test_file))
         label = "%s, %d v, %d quads" % (scan_file, info["vertices"], info["faces"])
+        verts, tris = fit_cases.scan_geometry(scan)
+        turned = turned_triangles(verts, tris)
+        notes.append("%s: %d of %d triangles (%.2f%% of the area) turned against their own corners' normals"
+                     % (scan_file, turned.sum(), len(tris), 100 * triangle_areas(verts, tris)[turned].sum()
+                        / triangle_areas(verts, tris).sum()))
         for name, method in METHODS:
             work = fresh_copy(cage, "%s %s" % (case, name))
             t0 = time.perf_counter()
@@ -269,6 +326,7 @@ def main(argv):
                              "add-on reading the scan and making the object"
                              % (scan_file, name, library, seconds, rounds))
             r = fit_cases.measure(result, scan, levels=LEVELS, cutoff=CUTOFF)
+            pts = fit_cases.evaluated_surface(result)[0]
             back = scan_to_surface(result, scan)
             row = ("| %s | %s | %s | %s | %s | %.3f%% | %s | %s | %s | %.2f%% | %.2f |"
                    % (name, label, sci(r["mean"]), sci(r["p95"]), sci(r["max"]), 100 * r["flipped"],
@@ -279,6 +337,7 @@ def main(argv):
                          "%.1f deg, samples beyond the cut-off %s; %s"
                          % (scan_file, name, r["samples"], r["method"], r["seconds"], r["angle_deg"],
                             sci(r["ignored"], 1), off_rim_mean(result, scan)))
+            notes.append("%s, %s, folds: %s" % (scan_file, name, fold_breakdown(r, pts, verts, tris, turned)))
         if args.check:
             notes.append("%s check: %s" % (scan_file, check_closest(fresh_copy(cage, "check"), scan)))
     text = "\n".join(

@@ -429,7 +429,9 @@ def measure(cage_obj, scan_obj, levels=3, cutoff=0.02, method="bvh"):
     signed angle exceeds 90 degrees), ignored (fraction of samples farther
     than cutoff x diagonal, i.e. over the scan's holes), samples, distances
     (per evaluated vertex, relative, also the ignored ones), kept (bool
-    mask), seconds (closest-point time), method.
+    mask), facing_away (bool mask of the flipped ones), nearest_triangle
+    (per evaluated vertex, its closest scan triangle), surface_triangles
+    (the evaluated surface's), seconds (closest-point time), method.
 
     method 'bvh' (default) calls BVHTree.find_nearest once per point; 'kdtree'
     is the vectorized TriangleSampler.  Measured side by side (Blender
@@ -440,7 +442,7 @@ def measure(cage_obj, scan_obj, levels=3, cutoff=0.02, method="bvh"):
     of the diagonal).  So the exact BVH is the default; bench_fit.py
     --check compares the two again on a subset."""
     subdivide(cage_obj, levels)
-    pts, nrm, _ = evaluated_surface(cage_obj)
+    pts, nrm, surface_tris = evaluated_surface(cage_obj)
     verts, tris = scan_geometry(scan_obj)
     diag = diagonal(verts)
     t0 = time.perf_counter()
@@ -471,6 +473,9 @@ def measure(cage_obj, scan_obj, levels=3, cutoff=0.02, method="bvh"):
         "samples": int(len(dist)),
         "distances": dist,
         "kept": kept,
+        "facing_away": valid & (signed > 90),
+        "nearest_triangle": idx,
+        "surface_triangles": surface_tris,
         "seconds": seconds,
         "method": method,
     }
