@@ -2,7 +2,7 @@
 """How close a subdivided cage comes to the scan it was made from.
 
     blender -b --factory-startup --python-exit-code 1 --python bench/bench_fit.py -- \
-        [--cases bunny dragon] [--force] [--check] [--export-test-data]
+        [--cases bunny dragon armadillo chinese_dragon] [--force] [--check] [--export-test-data]
 
 For each case (a scan in tests/data and a QuadriFlow face count) the cage
 is QuadriFlow + shrinkwrap (fit_cases.make_cage), cached as OBJ in
@@ -41,6 +41,8 @@ SEED = 0
 CASES = {
     "bunny": ("bun_zipper.obj", 3000, "bun_zipper_quadriflow_cage.obj"),
     "dragon": ("dragon_res2.obj", 10000, "dragon_res2_quadriflow_cage.obj"),
+    "armadillo": ("armadillo.obj", 3000, "armadillo_quadriflow_cage.obj"),
+    "chinese_dragon": ("ChineseDragon-10kv.obj", 3000, "ChineseDragon-10kv_quadriflow_cage.obj"),
 }
 
 
