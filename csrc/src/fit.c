@@ -1211,11 +1211,13 @@ static int barrier_pairs(const double *X, const float *N, const float *d, const 
             for (int m = 0; m < 2; ++m) {
                 if (!on_scan(d, on_boundary, base + pa[m], reach) || !on_scan(d, on_boundary, base + pb[m], reach))
                     continue;
-                const double el = sqrt(e[m][0] * e[m][0] + e[m][1] * e[m][1] + e[m][2] * e[m][2]);
-                const double dl = sqrt(D[m][0] * D[m][0] + D[m][1] * D[m][1] + D[m][2] * D[m][2]);
-                if (!(el > 0.0) || !(dl > 0.0)) continue;
-                const double along = (double)sign * (e[m][0] * D[m][0] + e[m][1] * D[m][1] + e[m][2] * D[m][2]) / el;
-                if (along >= FOLD_BARRIER_SHEAR * dl) continue;
+                /* along = sign e . D / |e| below FOLD_BARRIER_SHEAR |D|, squared where it is positive */
+                const double e2 = e[m][0] * e[m][0] + e[m][1] * e[m][1] + e[m][2] * e[m][2];
+                const double d2 = D[m][0] * D[m][0] + D[m][1] * D[m][1] + D[m][2] * D[m][2];
+                const double ed = (double)sign * (e[m][0] * D[m][0] + e[m][1] * D[m][1] + e[m][2] * D[m][2]);
+                if (!(e2 > 0.0) || !(d2 > 0.0)) continue;
+                if (ed > 0.0 && ed * ed >= FOLD_BARRIER_SHEAR * FOLD_BARRIER_SHEAR * e2 * d2) continue;
+                const double el = sqrt(e2), dl = sqrt(d2);
                 if (count == *capacity) {
                     const int64_t grown = *capacity > 0 ? 2 * *capacity : 4096;
                     fold_pair *more = realloc(*bar, sizeof(fold_pair) * (size_t)grown);
