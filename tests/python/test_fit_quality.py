@@ -227,7 +227,7 @@ def test_a_base_plate_does_not_pull(native, bunny):
     plate (measured against that scan, over the samples within the cut-off
     of it).  A plate facing down, as the bunny's bottom does, is the hard
     case: the normals agree, the robust kernel alone holds it to about a
-    sixth, and the hard cut-off lets it drag the bottom down."""
+    tenth more, and the hard cut-off lets it drag the bottom down."""
     scan_mesh, cage = bunny
     clean = native.Scan(scan_mesh)
     P = scan_mesh.positions.astype(np.float64)
