@@ -612,7 +612,9 @@ typedef enum spia_fit_flags {
      * away from the scan's normal at its closest point (a fold, or a
      * sample caught by the wrong side of a thin part) does not pull, and
      * the cage around it is smoothed, twice as firmly for every round in
-     * which it stays folded. */
+     * which it stays folded; and neighbouring samples on the scan whose
+     * grid starts to turn over (one sliding past the other along the
+     * scan) are pushed apart by a small extra term. */
     SPIA_FIT_ALLOW_FOLDS = 1,
     /* SURFACE: the cut-off alone decides which samples pull (weight 1
      * within it, 0 beyond), with no robust kernel. */

@@ -1167,9 +1167,10 @@ static void stiffen(const spia_mesh *cage, const spia_adjacency *adj, const uint
  * Measured on bench_fit.py's four scans (share of Blender's level-3
  * points facing away; mean distance): the guard alone left 0.065%, 0.211%,
  * 0.269% and 0.204% (bunny, dragon, armadillo, Chinese dragon); with the
- * barrier 0.032%, 0.181%, 0.081% and 0.081%, the means within 0.5% except
- * the bunny's (+5%, all of it the surface over the scan's holes, which no
- * longer curls onto their rims: tests/python/test_fit_quality.py).
+ * barrier 0.032%, 0.181%, 0.081% and 0.081%, the means within 0.6% except
+ * the bunny's (+5%, all of it from the surface over the scan's holes,
+ * which reaches farther out: tests/python/test_fit_quality.py compares the
+ * means off the rims).
  * Weights 0.005 to 0.03 and shares 0.45 to 0.6 gave 0.08% to 0.13% on the
  * two new scans; 0.1 and more fight the samples' pull (more folds).  A
  * reach of 4 left the armadillo 0.12%, 6 and 8 0.08%; at 16 the base plate
@@ -1641,7 +1642,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
                 if (barrier_pairs(b.X, b.N, b.d, b.on_boundary, S, fo.samples_per_edge, sign, reach, &b.bar,
                                   &b.bar_capacity, b.bar_start))
                     goto oom;
-                f.bar = b.bar ? b.bar : NULL, f.bar_start = b.bar_start;
+                f.bar = b.bar, f.bar_start = b.bar_start;
             }
             report->iterations +=
                 least_squares_round(&f, b.T, b.V0, b.V, fo.solver_iterations, b.work, b.precond, &clock);
