@@ -196,7 +196,7 @@ def patches(mask, tris):
     return label
 
 
-def fold_breakdown(r, pts, verts, tris, turned):
+def fold_breakdown(r, verts, turned):
     """Where the points facing away are: on scan triangles turned against
     their own corners (the scan folded on itself), and the rest's largest
     connected patch on the surface with its extent."""
@@ -209,7 +209,8 @@ def fold_breakdown(r, pts, verts, tris, turned):
         label = patches(rest, r["surface_triangles"])
         ids, counts = np.unique(label[rest], return_counts=True)
         big = label == ids[np.argmax(counts)]
-        extent = np.linalg.norm(pts[big].max(axis=0) - pts[big].min(axis=0)) / fit_cases.diagonal(verts)
+        pts = r["points"][big]
+        extent = np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)) / fit_cases.diagonal(verts)
         text += ("; the other %d in %d patches on the surface, the largest %d points across %s of the diagonal"
                  % (rest.sum(), len(ids), counts.max(), sci(extent)))
     return text
@@ -313,9 +314,9 @@ def main(argv):
         label = "%s, %d v, %d quads" % (scan_file, info["vertices"], info["faces"])
         verts, tris = fit_cases.scan_geometry(scan)
         turned = turned_triangles(verts, tris)
+        area = triangle_areas(verts, tris)
         notes.append("%s: %d of %d triangles (%.2f%% of the area) turned against their own corners' normals"
-                     % (scan_file, turned.sum(), len(tris), 100 * triangle_areas(verts, tris)[turned].sum()
-                        / triangle_areas(verts, tris).sum()))
+                     % (scan_file, turned.sum(), len(tris), 100 * area[turned].sum() / area.sum()))
         for name, method in METHODS:
             work = fresh_copy(cage, "%s %s" % (case, name))
             t0 = time.perf_counter()
@@ -328,7 +329,6 @@ def main(argv):
                              "add-on reading the scan and making the object"
                              % (scan_file, name, library, seconds, rounds))
             r = fit_cases.measure(result, scan, levels=LEVELS, cutoff=CUTOFF)
-            pts = fit_cases.evaluated_surface(result)[0]
             back = scan_to_surface(result, scan)
             row = ("| %s | %s | %s | %s | %s | %.3f%% | %s | %s | %s | %.2f%% | %.2f |"
                    % (name, label, sci(r["mean"]), sci(r["p95"]), sci(r["max"]), 100 * r["flipped"],
@@ -339,7 +339,7 @@ def main(argv):
                          "%.1f deg, samples beyond the cut-off %s; %s"
                          % (scan_file, name, r["samples"], r["method"], r["seconds"], r["angle_deg"],
                             sci(r["ignored"], 1), off_rim_mean(result, scan)))
-            notes.append("%s, %s, folds: %s" % (scan_file, name, fold_breakdown(r, pts, verts, tris, turned)))
+            notes.append("%s, %s, folds: %s" % (scan_file, name, fold_breakdown(r, verts, turned)))
         if args.check:
             notes.append("%s check: %s" % (scan_file, check_closest(fresh_copy(cage, "check"), scan)))
     text = "\n".join(

@@ -430,8 +430,9 @@ def measure(cage_obj, scan_obj, levels=3, cutoff=0.02, method="bvh"):
     than cutoff x diagonal, i.e. over the scan's holes), samples, distances
     (per evaluated vertex, relative, also the ignored ones), kept (bool
     mask), facing_away (bool mask of the flipped ones), nearest_triangle
-    (per evaluated vertex, its closest scan triangle), surface_triangles
-    (the evaluated surface's), seconds (closest-point time), method.
+    (per evaluated vertex, its closest scan triangle), points and
+    surface_triangles (the evaluated surface's), seconds (closest-point
+    time), method.
 
     method 'bvh' (default) calls BVHTree.find_nearest once per point; 'kdtree'
     is the vectorized TriangleSampler.  Measured side by side (Blender
@@ -475,6 +476,7 @@ def measure(cage_obj, scan_obj, levels=3, cutoff=0.02, method="bvh"):
         "kept": kept,
         "facing_away": valid & (signed > 90),
         "nearest_triangle": idx,
+        "points": pts,
         "surface_triangles": surface_tris,
         "seconds": seconds,
         "method": method,
