@@ -1068,6 +1068,18 @@ static void buffers_free(fit_buffers *b) {
  * to the neighbours along the ptex face's sample grid (central inside,
  * one-sided at the grid's edge); 0 where it or the scan's normal vanishes,
  * and everywhere when the grid is a single sample. */
+/* The neighbours of sample l (of k x k in rows) along u and v, a[m] minus
+ * b[m] (central, one-sided at the grid's edges), and the differences D[m]
+ * of their positions in X from the block at `base`. */
+static void grid_differences(const double *X, int64_t base, int32_t l, int32_t k, int32_t a[2], int32_t b[2],
+                             double D[2][3]) {
+    const int32_t i = l % k, j = l / k;
+    a[0] = j * k + (i < k - 1 ? i + 1 : i), b[0] = j * k + (i > 0 ? i - 1 : i);
+    a[1] = (j < k - 1 ? j + 1 : j) * k + i, b[1] = (j > 0 ? j - 1 : j) * k + i;
+    for (int m = 0; m < 2; ++m)
+        for (int c = 0; c < 3; ++c) D[m][c] = X[3 * (base + a[m]) + c] - X[3 * (base + b[m]) + c];
+}
+
 static void normal_agreement(const double *X, const float *N, int64_t S, int32_t k, float *dots) {
     if (k < 2) {
         memset(dots, 0, sizeof(float) * (size_t)S);
@@ -1075,14 +1087,10 @@ static void normal_agreement(const double *X, const float *N, int64_t S, int32_t
     }
     const int64_t per_face = (int64_t)k * k;
     for (int64_t s = 0; s < S; ++s) {
-        const int64_t base = s - s % per_face, local = s % per_face;
-        const int32_t i = (int32_t)(local % k), j = (int32_t)(local / k);
-        const int32_t i0 = i > 0 ? i - 1 : i, i1 = i < k - 1 ? i + 1 : i;
-        const int32_t j0 = j > 0 ? j - 1 : j, j1 = j < k - 1 ? j + 1 : j;
-        const double *a = X + 3 * (base + (int64_t)j * k + i1), *b = X + 3 * (base + (int64_t)j * k + i0);
-        const double *c = X + 3 * (base + (int64_t)j1 * k + i), *e = X + 3 * (base + (int64_t)j0 * k + i);
-        const double du[3] = {a[0] - b[0], a[1] - b[1], a[2] - b[2]};
-        const double dv[3] = {c[0] - e[0], c[1] - e[1], c[2] - e[2]};
+        int32_t a[2], b[2];
+        double D[2][3];
+        grid_differences(X, s - s % per_face, (int32_t)(s % per_face), k, a, b, D);
+        const double *du = D[0], *dv = D[1];
         const double n[3] = {du[1] * dv[2] - du[2] * dv[1], du[2] * dv[0] - du[0] * dv[2], du[0] * dv[1] - du[1] * dv[0]};
         const float *m = N + 3 * s;
         const double len = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
@@ -1199,12 +1207,9 @@ static int barrier_pairs(const double *X, const float *N, const float *d, const 
         for (int32_t l = 0; l < per; ++l) {
             const int64_t q = base + l;
             if (!on_scan(d, on_boundary, q, reach)) continue;
-            const int32_t i = l % k, j = l / k;
-            const int32_t pa[2] = {j * k + (i < k - 1 ? i + 1 : i), (j < k - 1 ? j + 1 : j) * k + i};
-            const int32_t pb[2] = {j * k + (i > 0 ? i - 1 : i), (j > 0 ? j - 1 : j) * k + i};
+            int32_t pa[2], pb[2];
             double D[2][3];
-            for (int m = 0; m < 2; ++m)
-                for (int c = 0; c < 3; ++c) D[m][c] = X[3 * (base + pa[m]) + c] - X[3 * (base + pb[m]) + c];
+            grid_differences(X, base, l, k, pa, pb, D);
             const float *n = N + 3 * q;
             const double e[2][3] = {
                 {D[1][1] * n[2] - D[1][2] * n[1], D[1][2] * n[0] - D[1][0] * n[2], D[1][0] * n[1] - D[1][1] * n[0]},
