@@ -1195,7 +1195,11 @@ static int on_scan(const float *d, const uint8_t *on_boundary, int64_t q, double
 }
 
 /* Fills bar (growing it as needed) and bar_start (groups + 1) for the
- * samples X with closest-point normals N; returns 0, or 1 out of memory. */
+ * samples X with closest-point normals N; returns 0, or 1 out of memory.
+ * No pairs in a ptex face with a sample over a hole of the scan: there the
+ * barrier pushed the surface out over the hole (bunny, mean 1.387e-4 with
+ * them, 1.353e-4 without, and 0.032% against 0.019% of the level-3 points
+ * facing away; the other three scans' fits are the same to the bit). */
 static int barrier_pairs(const double *X, const float *N, const float *d, const uint8_t *on_boundary, int64_t S,
                          int32_t k, int sign, double reach, fold_pair **bar, int64_t *capacity,
                          int64_t *bar_start) {
@@ -1204,6 +1208,9 @@ static int barrier_pairs(const double *X, const float *N, const float *d, const 
     for (int64_t g = 0; g * per < S; ++g) {
         bar_start[g] = count;
         const int64_t base = g * per;
+        int over_hole = 0;
+        for (int32_t l = 0; l < per && !over_hole; ++l) over_hole = on_boundary[base + l];
+        if (over_hole) continue;
         for (int32_t l = 0; l < per; ++l) {
             const int64_t q = base + l;
             if (!on_scan(d, on_boundary, q, reach)) continue;
