@@ -122,6 +122,8 @@ METHODS = [
     ("SURFACE without fold guard and robust kernel", _native_fit(allow_folds=True, hard_cutoff=True)),
     ("SURFACE long run: 60 rounds, smoothing 1e-6, no fold guard",
      _native_fit(allow_folds=True, max_rounds=60, round_tolerance=1e-4, smoothing=1e-6)),
+    ("SURFACE long run with the fold guard: 60 rounds, smoothing 1e-6",
+     _native_fit(max_rounds=60, round_tolerance=1e-4, smoothing=1e-6)),
 ]
 
 
