@@ -1175,9 +1175,9 @@ static void stiffen(const spia_mesh *cage, const spia_adjacency *adj, const uint
  * Measured on bench_fit.py's four scans (share of Blender's level-3
  * points facing away; mean distance): the guard alone left 0.065%, 0.211%,
  * 0.269% and 0.204% (bunny, dragon, armadillo, Chinese dragon); with the
- * barrier 0.032%, 0.181%, 0.081% and 0.081%, the means within 0.6% except
- * the bunny's (+5%, all of it from the surface over the scan's holes,
- * which reaches farther out: tests/python/test_fit_quality.py compares the
+ * barrier 0.019%, 0.181%, 0.081% and 0.081%, the means within 0.6% except
+ * the bunny's (+2.5%, from the surface over the scan's holes, which
+ * reaches farther out: tests/python/test_fit_quality.py compares the
  * means off the rims).
  * Weights 0.005 to 0.03 and shares 0.45 to 0.6 gave 0.08% to 0.13% on the
  * two new scans; 0.1 and more fight the samples' pull (more folds).  A
