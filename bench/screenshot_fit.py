@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Screenshot of the add-on's panel after fitting a cage to a scan (for the README).
 
-    xvfb-run -a -s "-screen 0 1600x900x24" blender --factory-startup \
+    xvfb-run -a -s "-screen 0 1600x1100x24" blender --factory-startup \
         --python bench/screenshot_fit.py -- docs/panel_fit.png
 
 Imports the Stanford bunny scan (tests/data/bun_zipper.obj) and its
@@ -33,7 +33,7 @@ from fit_cases import import_obj  # noqa: E402
 
 SCAN = os.path.join(ROOT, "tests", "data", "bun_zipper.obj")
 CAGE = os.path.join(ROOT, "tests", "data", "bun_zipper_quadriflow_cage.obj")
-VIEW_DISTANCE_SCALE = 0.8  # on top of screenshot_panel's framing: a larger bunny
+VIEW_DISTANCE_SCALE = 0.95  # on top of screenshot_panel's framing: a larger bunny
 
 
 def load_panel_script():
