@@ -1190,10 +1190,6 @@ static void stiffen(const spia_mesh *cage, const spia_adjacency *adj, const uint
 #define FOLD_BARRIER_SHEAR 0.5
 #define FOLD_BARRIER_REACH 6.0
 
-static int on_scan(const float *d, const uint8_t *on_boundary, int64_t q, double reach) {
-    return d[q] <= reach && !on_boundary[q];
-}
-
 /* Fills bar (growing it as needed) and bar_start (groups + 1) for the
  * samples X with closest-point normals N; returns 0, or 1 out of memory.
  * No pairs in a ptex face with a sample over a hole of the scan: there the
@@ -1213,7 +1209,7 @@ static int barrier_pairs(const double *X, const float *N, const float *d, const 
         if (over_hole) continue;
         for (int32_t l = 0; l < per; ++l) {
             const int64_t q = base + l;
-            if (!on_scan(d, on_boundary, q, reach)) continue;
+            if (!(d[q] <= reach)) continue;
             int32_t pa[2], pb[2];
             double D[2][3];
             grid_differences(X, base, l, k, pa, pb, D);
@@ -1222,8 +1218,7 @@ static int barrier_pairs(const double *X, const float *N, const float *d, const 
                 {D[1][1] * n[2] - D[1][2] * n[1], D[1][2] * n[0] - D[1][0] * n[2], D[1][0] * n[1] - D[1][1] * n[0]},
                 {n[1] * D[0][2] - n[2] * D[0][1], n[2] * D[0][0] - n[0] * D[0][2], n[0] * D[0][1] - n[1] * D[0][0]}};
             for (int m = 0; m < 2; ++m) {
-                if (!on_scan(d, on_boundary, base + pa[m], reach) || !on_scan(d, on_boundary, base + pb[m], reach))
-                    continue;
+                if (!(d[base + pa[m]] <= reach) || !(d[base + pb[m]] <= reach)) continue;
                 /* along = sign e . D / |e| below FOLD_BARRIER_SHEAR |D|, squared where it is positive */
                 const double e2 = e[m][0] * e[m][0] + e[m][1] * e[m][1] + e[m][2] * e[m][2];
                 const double d2 = D[m][0] * D[m][0] + D[m][1] * D[m][1] + D[m][2] * D[m][2];
