@@ -1063,11 +1063,6 @@ static void buffers_free(fit_buffers *b) {
 
 /* ---- folds ---------------------------------------------------------------- */
 
-/* Per sample, the cosine between its limit normal and the scan's normal at
- * its closest point.  The normal is the cross product of the differences
- * to the neighbours along the ptex face's sample grid (central inside,
- * one-sided at the grid's edge); 0 where it or the scan's normal vanishes,
- * and everywhere when the grid is a single sample. */
 /* The neighbours of sample l (of k x k in rows) along u and v, a[m] minus
  * b[m] (central, one-sided at the grid's edges), and the differences D[m]
  * of their positions in X from the block at `base`. */
@@ -1080,6 +1075,11 @@ static void grid_differences(const double *X, int64_t base, int32_t l, int32_t k
         for (int c = 0; c < 3; ++c) D[m][c] = X[3 * (base + a[m]) + c] - X[3 * (base + b[m]) + c];
 }
 
+/* Per sample, the cosine between its limit normal and the scan's normal at
+ * its closest point.  The normal is the cross product of the differences
+ * to the neighbours along the ptex face's sample grid (grid_differences);
+ * 0 where it or the scan's normal vanishes, and everywhere when the grid is
+ * a single sample. */
 static void normal_agreement(const double *X, const float *N, int64_t S, int32_t k, float *dots) {
     if (k < 2) {
         memset(dots, 0, sizeof(float) * (size_t)S);
