@@ -30,6 +30,7 @@ any transforms. The new object carries the distances as a point attribute
 import ctypes
 import os
 import sys
+import threading
 
 import bmesh
 import numpy as np
@@ -670,11 +671,18 @@ def make_scan(target, cage_obj, context=None, progress=None):
     (0, 0.0) while the scan is read and through the build (seconds for a
     scan of millions of triangles) and once at its end; True cancels
     (native.PiaCancelled)."""
+    return scan_work(target, cage_obj, context, progress)()
+
+
+def scan_work(target, cage_obj, context=None, progress=None):
+    """make_scan in two halves: reads the scan here (Blender's data) and
+    returns the library's share, a function that builds the native.Scan and
+    touches nothing of Blender's (InterpolateJob runs it on another thread)."""
     _require_library()
     tick = None if progress is None else (lambda: progress(0, 0.0))
     positions, face_sizes, face_vertices = scan_arrays(target, cage_obj, context, tick=tick)
     building = None if progress is None else (lambda _phase, _fraction: progress(0, 0.0))
-    return native.Scan(native.Mesh(positions, face_sizes, face_vertices), progress=building)
+    return lambda: native.Scan(native.Mesh(positions, face_sizes, face_vertices), progress=building)
 
 
 def machine_memory():
@@ -742,6 +750,22 @@ def compute_cage(obj, settings, progress=None, mesh=None, scan=None, measure_sca
     measure_scan=False leaves out the scan-to-surface distances).
 
     Returns (cage, report): a native.Report, or a native.FitReport for a fit."""
+    run, explain = prepare_cage(obj, settings, progress=progress, mesh=mesh, scan=scan, measure_scan=measure_scan)
+    try:
+        return run()
+    except native.PiaError as error:
+        named = explain(error)
+        if named is None:
+            raise
+        raise named from None
+
+
+def prepare_cage(obj, settings, progress=None, mesh=None, scan=None, measure_scan=True):
+    """compute_cage in two halves: reads the mesh here (Blender's data) and
+    returns (run, explain).  run() calls the library and touches nothing of
+    Blender's (InterpolateJob runs it on another thread); explain(error), for
+    a native.PiaError that run raised, returns the error to raise instead (in
+    the mesh's terms), or None for the error itself."""
     scheme = settings["scheme"]
     _require_library()
     data = mesh if mesh is not None else obj.data
@@ -760,21 +784,25 @@ def compute_cage(obj, settings, progress=None, mesh=None, scan=None, measure_sca
                    opensubdiv_version=opensubdiv_version_of(settings), **shapes)
     cage_mesh = native_mesh(data)
     check_memory(cage_mesh, settings, scan)
-    try:
+    non_triangles = non_triangle_count(data) if scheme == 'LOOP' and not settings["triangulate"] else 0
+
+    def run():
         if scan is not None:
             return native.fit(cage_mesh, scan, mode=settings["fit"],
                               samples_per_edge=settings["fit_samples"], cutoff=settings["fit_cutoff"],
                               smoothing=settings["fit_smoothing"], measure_scan=measure_scan, **options)
         return native.interpolate(cage_mesh, **options)
-    except native.PiaError as error:
+
+    def explain(error):
         named = _shape_error(error, values, settings)
         if named is not None:
-            raise named from None
-        if (settings["scheme"] == 'LOOP' and not settings["triangulate"]
-                and error.code == 'TOPOLOGY' and non_triangle_count(data)):
-            raise type(error)(error.code, "%s, or turn on Triangulate to use a triangulated copy"
-                              % error.message, error.index) from None
-        raise
+            return named
+        if non_triangles and error.code == 'TOPOLOGY':
+            return type(error)(error.code, "%s, or turn on Triangulate to use a triangulated copy"
+                               % error.message, error.index)
+        return None
+
+    return run, explain
 
 
 _LOOP_TOTAL_READ_ONLY = bpy.types.MeshPolygon.bl_rna.properties["loop_total"].is_readonly
@@ -1294,6 +1322,34 @@ def interpolate(obj, *, context=None, name=None, progress=None, live=False, **se
     native.PiaError on bad input, RuntimeError if the library is missing;
     nothing is created then and obj is never changed.
     """
+    return run_steps(interpolate_steps(obj, context=context, name=name, progress=progress, live=live, **settings))
+
+
+def run_steps(steps):
+    """Drives a generator of interpolate_steps' kind on this thread: each
+    function it yields is called at once and its result (or exception) sent
+    back; returns what the generator returns."""
+    try:
+        work = next(steps)
+        while True:
+            try:
+                result = work()
+            except BaseException as error:  # into the steps, which clean up and re-raise
+                work = steps.throw(error)
+            else:
+                work = steps.send(result)
+    except StopIteration as stop:
+        return stop.value
+
+
+def interpolate_steps(obj, *, context=None, name=None, progress=None, live=False, **settings):
+    """interpolate as a generator: Blender's data is read and written in the
+    generator itself; the library's work (building the scan, solving or
+    fitting: all of the time that grows with the mesh) is yielded as
+    functions that touch nothing of Blender's, whose results (or exceptions)
+    the driver sends back.  run_steps calls them at once (interpolate);
+    InterpolateJob calls them on another thread so that Blender's window
+    stays live and Esc can cancel.  Returns (new_object, report)."""
     check_source(obj)
     _require_library()
     if obj.mode == 'EDIT':  # edits live in the edit-mesh until synced
@@ -1307,7 +1363,7 @@ def interpolate(obj, *, context=None, name=None, progress=None, live=False, **se
     loop = s["scheme"] == 'LOOP'
     separate_limit = s["scheme"] in LIMIT_SCHEMES
     target = find_target(obj, s)
-    scan = make_scan(target, obj, context, progress) if target is not None else None
+    scan = (yield scan_work(target, obj, context, progress)) if target is not None else None
     mesh = None
     made = []  # meshes made here: removed again on failure
     stats = None
@@ -1321,7 +1377,14 @@ def interpolate(obj, *, context=None, name=None, progress=None, live=False, **se
             made.append(mesh)
             data = mesh
         try:
-            cage, report = compute_cage(obj, s, progress=progress, mesh=mesh, scan=scan)
+            run, explain = prepare_cage(obj, s, progress=progress, mesh=mesh, scan=scan)
+            try:
+                cage, report = yield run
+            except native.PiaError as error:
+                named = explain(error)
+                if named is None:
+                    raise
+                raise named from None
             limit = limit_arrays(data, s, cage) if separate_limit else None
         except native.PiaError as error:
             hinted = cleanup_hint(error, data, s)
@@ -1346,6 +1409,116 @@ def interpolate(obj, *, context=None, name=None, progress=None, live=False, **se
         from . import live as live_module
         live_module.set_live(new_obj, True, source=obj)
     return new_obj, report
+
+
+class InterpolateJob:
+    """interpolate with the library's work on a thread of its own, for a
+    caller that must stay responsive (the operator's modal run in Blender's
+    window): Blender's data is read and written only on the caller's thread,
+    in the constructor (bad input raises there, as interpolate does) and in
+    poll().  cancel() makes the library stop at its next progress call
+    (within a few tenths of a second at any scale); poll() then raises
+    native.PiaCancelled, and nothing is made.  A cancel that comes after the
+    library has finished, but before poll() saw it, cancels as well.
+
+    progress (optional), as interpolate's, is called on the library's thread
+    too: it must not touch Blender's data.  iteration and value hold the last
+    progress call's arguments.  There is no context argument: an operator's
+    context lasts only as long as the call it was given to, so each step
+    reads bpy.context as it runs."""
+
+    def __init__(self, obj, *, name=None, progress=None, live=False, **settings):
+        self.iteration = 0
+        self.value = 0.0
+        self.calls = 0
+        self._user_progress = progress
+        self._cancel = threading.Event()
+        self._thread = None
+        self._outcome = None
+        self._done = False
+        self._result = None
+        self._steps = interpolate_steps(obj, name=name, progress=self._progress, live=live, **settings)
+        self._advance(lambda: next(self._steps))
+
+    def _progress(self, iteration, value):
+        self.iteration, self.value = iteration, value
+        self.calls += 1
+        if self._user_progress is not None and self._user_progress(iteration, value):
+            self._cancel.set()
+        return self._cancel.is_set()
+
+    def _advance(self, step):
+        """Runs step() (a move of the generator, here) and starts the work it yields."""
+        try:
+            work = step()
+        except StopIteration as stop:
+            self._done, self._result = True, stop.value
+            return
+        except BaseException:
+            self._done = True
+            raise
+
+        def target():
+            try:
+                self._outcome = (True, work())
+            except BaseException as error:  # handed to the generator by poll()
+                self._outcome = (False, error)
+        self._thread = threading.Thread(target=target, name="subdiv_pia", daemon=True)
+        self._thread.start()
+
+    def cancel(self):
+        self._cancel.set()
+
+    @property
+    def cancelled(self):
+        return self._cancel.is_set()
+
+    @property
+    def done(self):
+        return self._done
+
+    def working(self):
+        """True while the library's thread runs."""
+        return self._thread is not None and self._thread.is_alive()
+
+    def poll(self):
+        """None while the library works; then (new_object, report), or the
+        exception interpolate would raise.  Call it on Blender's thread."""
+        if self._done:
+            return self._result
+        if self.working():
+            return None
+        self._thread.join()
+        self._thread = None
+        ok, value = self._outcome
+        self._outcome = None
+        if ok and self._cancel.is_set():
+            ok, value = False, native.PiaCancelled("CANCELLED", "cancelled")
+        if ok:
+            self._advance(lambda: self._steps.send(value))
+        else:
+            self._advance(lambda: self._steps.throw(value))
+        return self._result if self._done else None
+
+    def wait(self, interval=0.01):
+        """poll() until the job is done; returns its result."""
+        while True:
+            result = self.poll()
+            if self._done:
+                return result
+            if self._thread is not None:
+                self._thread.join(interval)
+
+    def close(self):
+        """Abandons the job (waiting for the library to stop): what it made
+        so far (a cleaned copy of the mesh) is removed."""
+        self._cancel.set()
+        if self._thread is not None:
+            self._thread.join()
+            self._thread = None
+        if not self._done:
+            self._done = True
+            self._steps.close()
 
 
 def refresh_limit(obj, context=None):

@@ -1,0 +1,123 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""api.InterpolateJob, what the operator runs in Blender's window: the
+library's work on a thread of its own, Blender's data only on the caller's
+thread, the same result as interpolate, and a cancel that leaves nothing."""
+
+import threading
+
+import bpy
+import numpy as np
+import pytest
+
+import shapes
+from subdiv_pia import api, native
+from test_fit import fine_sphere, quad_sphere
+
+
+def positions(obj):
+    return api.read_positions(obj.data).astype(np.float64)
+
+
+def counts():
+    return len(bpy.data.objects), len(bpy.data.meshes)
+
+
+def test_job_makes_what_interpolate_makes():
+    source = shapes.open_grid()
+    before = positions(source)
+    plain, plain_report = api.interpolate(source, method='PIA', name="Plain")
+    job = api.InterpolateJob(source, method='PIA', name="Job")
+    new_obj, report = job.wait()
+    assert job.done and not job.cancelled
+    assert new_obj.name == "Job" and new_obj is not plain
+    assert np.array_equal(positions(new_obj), positions(plain))
+    assert (report.iterations, report.status) == (plain_report.iterations, plain_report.status)
+    assert new_obj["pia_status"] == plain["pia_status"]
+    assert np.array_equal(positions(source), before)
+
+
+def test_job_fit_runs_the_library_off_this_thread_and_matches():
+    scan = fine_sphere(segments=64, rings=32)
+    cage = quad_sphere(cuts=2)
+    plain, plain_report = api.interpolate(cage, target=scan, fit='SURFACE', name="Plain")
+    threads = []
+    job = api.InterpolateJob(cage, target=scan.name, fit='SURFACE', name="Job",
+                             progress=lambda r, d: threads.append((r, threading.get_ident())) and False)
+    new_obj, report = job.wait()
+    main = threading.get_ident()
+    # The scan is read here (the calls before its build), built and fitted there.
+    assert any(t == main for _, t in threads) and any(t != main for _, t in threads), threads
+    assert all(t != main for r, t in threads if r >= 1)
+    assert job.iteration == report.rounds
+    assert np.array_equal(positions(new_obj), positions(plain))
+    assert report.after.mean == plain_report.after.mean
+    assert report.scan_after.mean == plain_report.scan_after.mean
+    assert new_obj["pia_fit_mean_after"] == plain["pia_fit_mean_after"]
+
+
+def test_job_cancel_during_the_fit_makes_nothing():
+    scan = fine_sphere(segments=64, rings=32)
+    cage = quad_sphere(cuts=2)
+    before = positions(cage), positions(scan)
+    count = counts()
+    seen = []
+
+    def progress(round_, mean):
+        seen.append(round_)
+        if round_ >= 1:
+            job.cancel()  # as Esc does: from the window's thread in the operator, here from the library's
+        return False
+    job = api.InterpolateJob(cage, target=scan, fit='SURFACE', cleanup=True, progress=progress)
+    with pytest.raises(native.PiaCancelled) as e:
+        job.wait()
+    assert "round 1" in str(e.value), str(e.value)
+    assert job.done and job.cancelled and max(seen) == 1
+    # the cleaned copy made before the fit is removed again
+    assert counts() == count
+    assert np.array_equal(positions(cage), before[0]) and np.array_equal(positions(scan), before[1])
+
+
+def test_job_cancel_after_the_library_finished_makes_nothing():
+    source = shapes.open_grid()
+    count = counts()
+    job = api.InterpolateJob(source, method='PIA')
+    while job.working():
+        threading.Event().wait(0.01)
+    job.cancel()
+    with pytest.raises(native.PiaCancelled):
+        job.poll()
+    assert job.done and counts() == count
+
+
+def test_job_close_removes_what_it_made():
+    scan = fine_sphere(segments=64, rings=32)
+    cage = quad_sphere(cuts=2)
+    count = counts()
+    started = threading.Event()
+    release = threading.Event()
+
+    def progress(round_, mean):
+        if round_ >= 1:
+            started.set()
+            release.wait(10.0)
+        return False
+    job = api.InterpolateJob(cage, target=scan, fit='SURFACE', cleanup=True, progress=progress)
+    # poll() moves the job on (the scan built, the cage cleaned, the fit
+    # started) until the fit's first round is done
+    while not started.is_set():
+        assert job.poll() is None
+        started.wait(0.01)
+    # the fit under way: the cleaned copy of the cage exists
+    assert len(bpy.data.meshes) == count[1] + 1
+    release.set()
+    job.close()
+    assert job.done and counts() == count
+
+
+def test_job_bad_input_raises_at_once():
+    cage = quad_sphere(cuts=2)
+    count = counts()
+    with pytest.raises(ValueError) as e:
+        api.InterpolateJob(cage, target="No such scan")
+    assert "not found" in str(e.value)
+    assert counts() == count
