@@ -99,6 +99,8 @@ def draw_settings(layout, settings, from_modifier=False):
 
 # native.fit's default number of least-squares rounds: the progress bar's length.
 FIT_ROUNDS = 20
+# How often (seconds) the running operator looks at the library's thread.
+MODAL_INTERVAL = 0.05
 
 
 def draw_fit_settings(layout, settings, has_target):
@@ -139,7 +141,98 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
 
     def invoke(self, context, event):
         self._defaults_from_modifier(context)
-        return self.execute(context)
+        if bpy.app.background or context.window is None or not native.available():
+            return self.execute(context)
+        # In Blender's window the library works on a thread of its own: the
+        # window stays live, shows the progress, and Esc cancels.
+        settings = {name: getattr(self, name) for name in SETTING_NAMES}
+        self._settings = settings
+        self._fit = bool(settings["target"])
+        self._total = FIT_ROUNDS if self._fit and settings["fit"] == 'SURFACE' else settings["max_iterations"]
+        try:
+            obj = context.active_object
+            api.check_source(obj)
+            self._source_name = obj.name
+            if obj.mode == 'EDIT':
+                bpy.ops.object.mode_set(mode='OBJECT')
+            self._job = api.InterpolateJob(obj, live=self.live, **settings)
+        except native.PiaError as error:
+            self.report({'ERROR'}, "'%s': %s" % (context.active_object.name, error))
+            return {'CANCELLED'}
+        except (ValueError, RuntimeError) as error:
+            self.report({'ERROR'}, str(error))
+            return {'CANCELLED'}
+        if self._job.done:
+            return self._finish(context)
+        wm = context.window_manager
+        wm.progress_begin(0, max(int(self._total), 1))
+        self._timer = wm.event_timer_add(MODAL_INTERVAL, window=context.window)
+        wm.modal_handler_add(self)
+        self._show_status(context)
+        return {'RUNNING_MODAL'}
+
+    def _show_status(self, context):
+        job = self._job
+        what = "Fitting" if self._fit else "Solving"
+        if job.cancelled:
+            text = "%s '%s': cancelling" % (what, self._source_name)
+        elif job.iteration <= 0:
+            text = "%s '%s': %s" % (what, self._source_name,
+                                    "reading and preparing the scan" if self._fit else "preparing")
+        elif self._fit:
+            text = "%s '%s': round %d, mean distance %.3g of the scan's diagonal" % (
+                what, self._source_name, job.iteration, job.value)
+        else:
+            text = "%s '%s': iteration %d, error %.3g" % (what, self._source_name, job.iteration, job.value)
+        context.workspace.status_text_set(text + ("" if job.cancelled else "   (Esc to cancel)"))
+        context.window_manager.progress_update(min(max(job.iteration, 0), max(int(self._total), 1)))
+
+    def _end_modal(self, context):
+        wm = context.window_manager
+        wm.event_timer_remove(self._timer)
+        wm.progress_end()
+        if context.workspace is not None:
+            context.workspace.status_text_set(None)
+
+    def modal(self, context, event):
+        if event.type == 'ESC' and event.value == 'PRESS':
+            self._job.cancel()
+        elif event.type != 'TIMER':
+            return {'RUNNING_MODAL'}  # nothing else while the mesh is being worked on
+        try:
+            self._job.poll()
+        except native.PiaCancelled:
+            self._end_modal(context)
+            self.report({'WARNING'}, "Cancelled: '%s' is unchanged and nothing was made" % self._source_name)
+            return {'CANCELLED'}
+        except native.PiaError as error:
+            self._end_modal(context)
+            self.report({'ERROR'}, "'%s': %s" % (self._source_name, error))
+            return {'CANCELLED'}
+        except (ValueError, RuntimeError) as error:
+            self._end_modal(context)
+            self.report({'ERROR'}, str(error))
+            return {'CANCELLED'}
+        if not self._job.done:
+            self._show_status(context)
+            return {'RUNNING_MODAL'}
+        self._end_modal(context)
+        return self._finish(context)
+
+    def cancel(self, context):
+        # Blender ends the operator (the window closes): stop the library,
+        # remove what was made so far.
+        job = getattr(self, "_job", None)
+        if job is not None:
+            job.close()
+        self._end_modal(context)
+
+    def _finish(self, context):
+        new_obj, report = self._job.poll()
+        settings = self._settings
+        fine = api.report_converged(report) and not new_obj.get("pia_fit_scan_not_painted")
+        self.report({'INFO'} if fine else {'WARNING'}, result_line(new_obj, report, settings))
+        return {'FINISHED'}
 
     def draw(self, context):
         layout = self.layout

@@ -5,6 +5,7 @@ suite (tests/blender) run in each of them against the package.
 
     python3 tools/blenders.py list
     python3 tools/blenders.py test PACKAGE.zip [-j 2] [--only NAME ...] [-- PYTEST ARGS]
+    python3 tools/blenders.py window PACKAGE.zip
 
 The Blenders:
 - Debian's `blender` on the machine (3.4.1 on Debian 12, 4.3.2 on 13);
@@ -19,6 +20,10 @@ Each suite runs with SUBDIV_PIA_PACKAGE=PACKAGE.zip: tests/blender/run.py
 installs the zip the way a user does and the tests use that copy.  Prints a
 table of Blender (and how it was installed) against passed, failed,
 skipped, and exits 1 if any suite failed or did not run.
+
+`window` runs tests/window/modal_fit.py (the operator in Blender's window:
+modal, Esc cancels) with the package's add-on, under Xvfb, in the Blenders
+that have a window: Debian's two (the bpy module has none).
 """
 import argparse
 import concurrent.futures
@@ -31,6 +36,7 @@ import sys
 import threading
 import time
 import xml.etree.ElementTree as ElementTree
+import zipfile
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import debian  # noqa: E402
@@ -43,6 +49,9 @@ FIRST_BPY = (4, 2)  # the first release with extensions; older bpy wheels are go
 # Python minor version each bpy release needs.
 PYTHON_OF_BPY = [((5, 1), "3.13"), ((4, 1), "3.11")]
 RUN_PY = "tests/blender/run.py"
+WINDOW_PY = "tests/window/modal_fit.py"
+WINDOW_ADDON = os.path.join(BUILD, "window", "addon")
+XVFB_RUN = 'xvfb-run -a -s "-screen 0 1600x900x24"'
 
 
 def python_for(release):
@@ -152,7 +161,9 @@ def prepare_venv(python, venv, version, numpy_requirement):
 
 def prepare_chroot(name, suite):
     # Debian's blender only recommends numpy, which the add-on needs.
-    path = debian.chroot(name, suite, ["blender", "python3-numpy", "python3-pytest"])
+    # Xvfb and Mesa's software OpenGL: Blender's window (`window`).
+    path = debian.chroot(name, suite, ["blender", "python3-numpy", "python3-pytest", "xvfb", "xauth",
+                                       "libgl1-mesa-dri"])
     return path
 
 
@@ -310,6 +321,38 @@ def test(package, jobs, only, extra, discard):
     return 1 if failed or not rows else 0
 
 
+def window(package):
+    """tests/window/modal_fit.py with the package's add-on, in a window under
+    Xvfb, in each Blender that has one; 0 when it passed in all of them."""
+    blenders, notes = discover()
+    shutil.rmtree(WINDOW_ADDON, ignore_errors=True)
+    os.makedirs(WINDOW_ADDON)
+    with zipfile.ZipFile(package) as z:
+        z.extractall(WINDOW_ADDON)
+    results = []
+    for b in blenders:
+        if b.prepare:
+            continue  # the bpy module: no window
+        addon = WINDOW_ADDON
+        command = "%s blender --factory-startup --enable-event-simulate --python %s" % (XVFB_RUN, WINDOW_PY)
+        if b.root:
+            b.chroot_path = prepare_chroot(*b.root)
+            v = debian_blender_version(["chroot", b.chroot_path])
+            b.name = "Blender %s" % v if v else b.name
+            addon = "/src/" + os.path.relpath(WINDOW_ADDON, ROOT)
+            print("the window test in %s (%s)" % (b.name, b.how), flush=True)
+            code = debian.in_chroot(b.chroot_path, "cd /src && " + command, binds=[(ROOT, "/src")],
+                                    env={"SUBDIV_PIA_ADDON_DIR": addon}, check=False).returncode
+        else:
+            print("the window test in %s (%s)" % (b.name, b.how), flush=True)
+            code = subprocess.call(command, shell=True, cwd=ROOT,
+                                   env=dict(clean_environment(), SUBDIV_PIA_ADDON_DIR=addon))
+        results.append((b, code))
+    for b, code in results:
+        print("%s (%s): %s" % (b.name, b.how, "passed" if code == 0 else "FAILED (exit %s)" % code))
+    return 0 if results and all(code == 0 for _, code in results) else 1
+
+
 def main(argv):
     parser = argparse.ArgumentParser(description="The Blender suite in every Blender this machine has.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -320,6 +363,8 @@ def main(argv):
     t.add_argument("--only", action="append", default=[], help="only Blenders whose name or origin contains this")
     t.add_argument("--discard-venvs", action="store_true",
                    help="remove each bpy venv after its suite (default: keep them for the next run)")
+    w = sub.add_parser("window")
+    w.add_argument("package")
     extra = argv[argv.index("--") + 1:] if "--" in argv else []
     args = parser.parse_args(argv[:argv.index("--")] if "--" in argv else argv)
     if args.command == "list":
@@ -329,6 +374,8 @@ def main(argv):
         for note in notes:
             print("not tested: " + note)
         return 0
+    if args.command == "window":
+        return window(os.path.abspath(args.package))
     return test(os.path.abspath(args.package), args.jobs, args.only, extra, args.discard_venvs)
 
 

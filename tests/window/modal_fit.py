@@ -1,0 +1,262 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The operator in Blender's window, as an artist runs it (Make Interpolating
+Cage from the panel or the menu): the fit works on a thread of its own, the
+window stays live, the status bar says what it does, Esc cancels and leaves
+nothing, and a fit let run makes the cage interpolate() makes.
+
+    xvfb-run -a -s "-screen 0 1600x900x24" blender --factory-startup --enable-event-simulate \\
+        --python tests/window/modal_fit.py [-- --screenshot out/modal_fit.png]
+
+(--enable-event-simulate: Blender takes its input from the script only, so
+the Esc here is the only one.)  The add-on comes from SUBDIV_PIA_ADDON_DIR
+(default build/addon).  Prints what it checked and exits 0, or 1 with the
+first failure: a script in a window cannot end Blender with an exception's
+status, so it leaves with os._exit.
+"""
+
+import os
+import sys
+import time
+import traceback
+
+import bmesh
+import bpy
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+sys.path.insert(0, os.environ.get("SUBDIV_PIA_ADDON_DIR", os.path.join(ROOT, "build", "addon")))
+import subdiv_pia  # noqa: E402
+from subdiv_pia import api  # noqa: E402
+from subdiv_pia.properties import SETTING_NAMES  # noqa: E402
+
+ARGS = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
+SCREENSHOT = ARGS[ARGS.index("--screenshot") + 1] if "--screenshot" in ARGS else None
+LIMIT = 60.0  # seconds any one wait may take before the check fails
+
+
+T0 = time.perf_counter()
+
+
+def say(text):
+    print("modal_fit: %6.2f s: %s" % (time.perf_counter() - T0, text), flush=True)
+
+
+def finish(code):
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
+
+
+# Every job the operator starts, to see its progress from here.
+JOBS = []
+
+
+class RecordedJob(api.InterpolateJob):
+    """The operator's job, seen from here; with `pause` set, each progress
+    call from a fitting round waits that long on the library's thread (a fit
+    that takes its time, so that Esc comes while it works)."""
+    pause = 0.0
+
+    def __init__(self, *args, **kwargs):
+        JOBS.append(self)
+        super().__init__(*args, **kwargs)
+
+    def _progress(self, iteration, value):
+        if iteration >= 1 and RecordedJob.pause:
+            time.sleep(RecordedJob.pause)
+        return super()._progress(iteration, value)
+
+
+api.InterpolateJob = RecordedJob
+
+
+def make_scene():
+    """A fine UV sphere (the scan, 0.5M faces) and a 5.6k-vertex quad sphere
+    on it (the cage), the cage active."""
+    for obj in list(bpy.data.objects):
+        bpy.data.objects.remove(obj)
+    scan_mesh = uv_sphere("Scan", 1024, 512)
+    cage_mesh = bpy.data.meshes.new("Cage")
+    bm = bmesh.new()
+    bmesh.ops.create_cube(bm, size=2.0)
+    bmesh.ops.subdivide_edges(bm, edges=bm.edges[:], cuts=30, use_grid_fill=True)
+    for vert in bm.verts:
+        vert.co = vert.co.normalized()
+    bm.to_mesh(cage_mesh)
+    bm.free()
+    scene = bpy.context.scene
+    scan = bpy.data.objects.new("Scan", scan_mesh)
+    scan.display_type = 'BOUNDS'  # software OpenGL draws half a million faces slowly
+    cage = bpy.data.objects.new("Cage", cage_mesh)
+    scene.collection.objects.link(scan)
+    scene.collection.objects.link(cage)
+    for obj in scene.objects:
+        obj.select_set(obj is cage)
+    bpy.context.view_layer.objects.active = cage
+    return cage, scan
+
+
+def uv_sphere(name, segments, rings):
+    """A unit UV sphere's mesh: quads, and triangle fans at the poles."""
+    theta = np.pi * np.arange(1, rings) / rings
+    phi = 2.0 * np.pi * np.arange(segments) / segments
+    ring = np.stack([np.outer(np.sin(theta), np.cos(phi)), np.outer(np.sin(theta), np.sin(phi)),
+                     np.repeat(np.cos(theta)[:, None], segments, 1)], -1).reshape(-1, 3)
+    points = np.concatenate([[[0.0, 0.0, 1.0]], ring, [[0.0, 0.0, -1.0]]])
+    south = len(points) - 1
+    at = lambda r, s: 1 + r * segments + s % segments  # noqa: E731
+    faces = [(0, at(0, s + 1), at(0, s)) for s in range(segments)]
+    faces += [(at(r, s), at(r, s + 1), at(r + 1, s + 1), at(r + 1, s))
+              for r in range(rings - 2) for s in range(segments)]
+    faces += [(at(rings - 2, s), at(rings - 2, s + 1), south) for s in range(segments)]
+    mesh = bpy.data.meshes.new(name)
+    mesh.from_pydata(points.tolist(), [], faces)
+    return mesh
+
+
+def window_context():
+    window = bpy.context.window_manager.windows[0]
+    area = next(a for a in window.screen.areas if a.type == 'VIEW_3D')
+    region = next(r for r in area.regions if r.type == 'WINDOW')
+    return dict(window=window, area=area, region=region)
+
+
+def invoke(**settings):
+    with bpy.context.temp_override(**window_context()):
+        return bpy.ops.object.subdiv_pia_interpolate('INVOKE_DEFAULT', **settings)
+
+
+def reports():
+    """The session's reports, as the Info editor copies them."""
+    window = window_context()["window"]
+    area = next(a for a in window.screen.areas if a.type not in ('VIEW_3D', 'STATUSBAR', 'TOPBAR'))
+    old = area.type
+    area.type = 'INFO'
+    region = next(r for r in area.regions if r.type == 'WINDOW')
+    with bpy.context.temp_override(window=window, area=area, region=region):
+        bpy.ops.info.select_all(action='SELECT')
+        bpy.ops.info.report_copy()
+    area.type = old
+    return bpy.context.window_manager.clipboard
+
+
+def positions(obj):
+    return api.read_positions(obj.data).astype(np.float64)
+
+
+def script():
+    """The steps, as a generator: each yield waits (seconds) with Blender's
+    window running, so the operator's modal run goes on meanwhile."""
+    subdiv_pia.register()
+    cage, scan = make_scene()
+    before = positions(cage), positions(scan)
+    count = len(bpy.data.objects), len(bpy.data.meshes)
+
+    # 1. Started from the window, the operator runs modal: it returns at once.
+    RecordedJob.pause = 0.5
+    result = invoke(target=scan.name, fit='SURFACE')
+    assert result == {'RUNNING_MODAL'}, result
+    assert len(JOBS) == 1
+    job = JOBS[0]
+    started = time.perf_counter()
+    while job.iteration < 1 and not job.done and time.perf_counter() - started < LIMIT:
+        yield 0.01
+    # This script's timer ran (the window's main loop went on) while the
+    # library's thread fitted.
+    assert not job.done and job.working(), "the fit ended before its first round was seen"
+    say("fit under way (round %d) while the window runs this script's timer" % job.iteration)
+    if SCREENSHOT:
+        with bpy.context.temp_override(window=window_context()["window"]):
+            bpy.ops.screen.screenshot(filepath=SCREENSHOT)
+        say("screenshot written to %s" % SCREENSHOT)
+
+    # 2. Esc cancels within the fit: nothing made, nothing changed.
+    window = window_context()["window"]
+    pressed = time.perf_counter()
+    window.event_simulate(type='ESC', value='PRESS')
+    window.event_simulate(type='ESC', value='RELEASE')
+    while not job.done and time.perf_counter() - pressed < LIMIT:
+        yield 0.01
+    assert job.done and job.cancelled, "Esc did not end the fit"
+    say("Esc at round %d: the operator ended %.2f s later" % (job.iteration, time.perf_counter() - pressed))
+    yield 0.1
+    assert (len(bpy.data.objects), len(bpy.data.meshes)) == count, "something was made"
+    assert np.array_equal(positions(cage), before[0]) and np.array_equal(positions(scan), before[1])
+    text = reports()
+    assert "Cancelled: 'Cage' is unchanged and nothing was made" in text, text
+    say("cancelled: nothing made, the cage and scan unchanged, the report says so")
+
+    # 3. Let run, it makes what interpolate() makes, with its report.
+    RecordedJob.pause = 0.0
+    result = invoke(target=scan.name, fit='SURFACE')
+    assert result == {'RUNNING_MODAL'}, result
+    job = JOBS[1]
+    started = time.perf_counter()
+    while not job.done and time.perf_counter() - started < LIMIT:
+        yield 0.02
+    assert job.done and not job.cancelled
+    yield 0.1
+    made = bpy.data.objects.get("Cage_pia")
+    assert made is not None, [o.name for o in bpy.data.objects]
+    assert made.modifiers[0].type == 'SUBSURF'
+    assert bpy.context.view_layer.objects.active == made
+    # the settings as the operator passed them (its float properties are single precision)
+    operator = bpy.context.window_manager.operators[-1]
+    assert operator.bl_idname == "OBJECT_OT_subdiv_pia_interpolate", operator.bl_idname
+    settings = {name: getattr(operator.properties, name) for name in SETTING_NAMES}
+    plain, report = api.interpolate(cage, name="Cage_script", **settings)
+    if not np.array_equal(positions(made), positions(plain)):
+        keys = sorted(set(made.keys()) | set(plain.keys()))
+        say("differ: %s" % [(k, made.get(k), plain.get(k)) for k in keys if made.get(k) != plain.get(k)])
+        say("max diff %g" % np.abs(positions(made) - positions(plain)).max())
+    assert np.array_equal(positions(made), positions(plain)), "the window's cage differs from interpolate()'s"
+    assert made["pia_fit_mean_after"] == report.after.mean
+    text = reports()
+    assert "Cage_pia: Surface fit to 'Scan'" in text, text
+    say("let run: the cage made is interpolate()'s (%d rounds, mean %.3g), reported" % (
+        report.rounds, report.after.mean))
+
+    # 4. Without a target (interpolating the cage's own vertices), from Edit
+    # Mode: the same, the source left in Object Mode as the menu leaves it.
+    for obj in bpy.context.scene.objects:
+        obj.select_set(obj is cage)
+    bpy.context.view_layer.objects.active = cage
+    with bpy.context.temp_override(**window_context()):
+        bpy.ops.object.mode_set(mode='EDIT')
+    result = invoke(target="")
+    assert result == {'RUNNING_MODAL'}, result
+    job = JOBS[2]
+    started = time.perf_counter()
+    while not job.done and time.perf_counter() - started < LIMIT:
+        yield 0.02
+    yield 0.1
+    assert cage.mode == 'OBJECT'
+    made = bpy.data.objects.get("Cage_pia.001")
+    assert made is not None, [o.name for o in bpy.data.objects]
+    operator = bpy.context.window_manager.operators[-1]
+    settings = {name: getattr(operator.properties, name) for name in SETTING_NAMES}
+    plain, report = api.interpolate(cage, name="Cage_plain", **settings)
+    assert np.array_equal(positions(made), positions(plain))
+    assert made["pia_status"] == report.status == "CONVERGED"
+    assert np.array_equal(positions(cage), before[0])
+    say("interpolating from Edit Mode: the cage made is interpolate()'s (%s, %d iterations)" % (
+        report.status, report.iterations))
+
+
+def main():
+    steps = script()
+
+    def advance():
+        try:
+            return next(steps)
+        except StopIteration:
+            say("all passed")
+            finish(0)
+        except BaseException:
+            traceback.print_exc()
+            say("FAILED")
+            finish(1)
+    bpy.app.timers.register(advance, first_interval=0.5)
+
+
+main()
