@@ -999,6 +999,13 @@ def limit_arrays(mesh, settings, positions=None):
 
     positions replaces the mesh's vertex positions (the solved cage) if given.
     """
+    return limit_work(mesh, settings, positions)()
+
+
+def limit_work(mesh, settings, positions=None):
+    """limit_arrays in two halves: reads the mesh here and returns the
+    library's share, a function that refines and touches nothing of
+    Blender's (InterpolateJob runs it on another thread)."""
     doo_sabin = settings["scheme"] == 'DOO_SABIN'
     _require_library()
     arrays = mesh_arrays(mesh)
@@ -1008,20 +1015,23 @@ def limit_arrays(mesh, settings, positions=None):
                        edges=arrays["edges"], edge_creases=arrays["edge_creases"],
                        vertex_creases=arrays["vertex_creases"])
     if not doo_sabin:
-        return native.refine(cage, int(settings["levels"]), scheme='LOOP',
-                             boundary_rule=settings["boundary_rule"],
-                             boundary_smooth=settings["boundary_smooth"],
-                             use_creases=bool(settings["use_creases"]))
+        return lambda: native.refine(cage, int(settings["levels"]), scheme='LOOP',
+                                     boundary_rule=settings["boundary_rule"],
+                                     boundary_smooth=settings["boundary_smooth"],
+                                     use_creases=bool(settings["use_creases"]))
     values = face_shape_parameters(mesh, settings)
-    try:
-        return native.refine(cage, int(settings["levels"]), scheme='DOO_SABIN', use_creases=False,
-                             shape_parameter=float(settings["shape_parameter"]),
-                             face_shape_parameters=values)
-    except native.PiaError as error:
-        named = _shape_error(error, values, settings)
-        if named is not None:
-            raise named from None
-        raise
+
+    def run():
+        try:
+            return native.refine(cage, int(settings["levels"]), scheme='DOO_SABIN', use_creases=False,
+                                 shape_parameter=float(settings["shape_parameter"]),
+                                 face_shape_parameters=values)
+        except native.PiaError as error:
+            named = _shape_error(error, values, settings)
+            if named is not None:
+                raise named from None
+            raise
+    return run
 
 
 def limit_mesh(name, points, face_sizes, face_vertices, materials=()):
@@ -1385,7 +1395,7 @@ def interpolate_steps(obj, *, context=None, name=None, progress=None, live=False
                 if named is None:
                     raise
                 raise named from None
-            limit = limit_arrays(data, s, cage) if separate_limit else None
+            limit = (yield limit_work(data, s, cage)) if separate_limit else None
         except native.PiaError as error:
             hinted = cleanup_hint(error, data, s)
             if hinted is not None:

@@ -36,6 +36,20 @@ def test_job_makes_what_interpolate_makes():
     assert np.array_equal(positions(source), before)
 
 
+@pytest.mark.parametrize("scheme", ['LOOP', 'DOO_SABIN'])
+def test_job_limit_schemes_make_what_interpolate_makes(scheme):
+    # the limit surface's preview is refined on the job's thread too
+    source = shapes.ico_sphere() if scheme == 'LOOP' else shapes.cube()
+    plain, _ = api.interpolate(source, scheme=scheme, levels=2, name="Plain")
+    job = api.InterpolateJob(source, scheme=scheme, levels=2, name="Job")
+    new_obj, report = job.wait()
+    assert np.array_equal(positions(new_obj), positions(plain))
+    limit, plain_limit = api.find_limit_object(new_obj), api.find_limit_object(plain)
+    assert limit is not None and plain_limit is not None
+    assert len(limit.data.vertices) > len(new_obj.data.vertices)
+    assert np.array_equal(positions(limit), positions(plain_limit))
+
+
 def test_job_fit_runs_the_library_off_this_thread_and_matches():
     scan = fine_sphere(segments=64, rings=32)
     cage = quad_sphere(cuts=2)
