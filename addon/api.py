@@ -1403,7 +1403,10 @@ def interpolate_steps(obj, *, context=None, name=None, progress=None, live=False
             raise
     except BaseException:
         for made_mesh in made:
-            bpy.data.meshes.remove(made_mesh)
+            try:
+                bpy.data.meshes.remove(made_mesh)
+            except ReferenceError:  # gone already (an undo while a job worked)
+                pass
         raise
     for made_mesh in made[:-1]:  # the cleaned copy, once triangulated
         bpy.data.meshes.remove(made_mesh)
@@ -1421,15 +1424,55 @@ def interpolate_steps(obj, *, context=None, name=None, progress=None, live=False
     return new_obj, report
 
 
+class _JobProgress:
+    """What an InterpolateJob's steps and its library thread share: the last
+    progress call and the cancel flag (apart from the job, so that a job
+    dropped by its caller is freed, and its steps closed, at once and on the
+    caller's thread)."""
+
+    def __init__(self, user_progress):
+        self.iteration = 0
+        self.value = 0.0
+        self.calls = 0
+        self.user_progress = user_progress
+        self.cancel = threading.Event()
+
+    def __call__(self, iteration, value):
+        self.iteration, self.value = iteration, value
+        self.calls += 1
+        if self.user_progress is not None and self.user_progress(iteration, value):
+            self.cancel.set()
+        return self.cancel.is_set()
+
+
+def _id_key(obj):
+    """(name, address) of a Blender object, to tell later that it is still the same one."""
+    return (obj.name, obj.as_pointer()) if obj is not None else None
+
+
+def _same_id(key):
+    if key is None:
+        return True
+    found = bpy.data.objects.get(key[0])
+    return found is not None and found.as_pointer() == key[1]
+
+
 class InterpolateJob:
     """interpolate with the library's work on a thread of its own, for a
     caller that must stay responsive (the operator's modal run in Blender's
     window): Blender's data is read and written only on the caller's thread,
     in the constructor (bad input raises there, as interpolate does) and in
-    poll().  cancel() makes the library stop at its next progress call
-    (within a few tenths of a second at any scale); poll() then raises
-    native.PiaCancelled, and nothing is made.  A cancel that comes after the
-    library has finished, but before poll() saw it, cancels as well.
+    poll().
+
+    cancel() makes the library stop at its next progress call (a fit's or
+    solve's: a few tenths of a second apart at any scale; a Loop or
+    Doo-Sabin preview's refinement has none and runs to its end); poll()
+    then raises native.PiaCancelled, and nothing is made.  A cancel that
+    comes after the library has finished, but before poll() saw it, cancels
+    as well; so does a change of the source or the scan beneath the job (an
+    undo, a deletion), found when poll() resumes it.  close() abandons a job
+    that has not finished (waiting for the library to stop): what it made
+    so far is removed; call it, or poll() to the end, before dropping a job.
 
     progress (optional), as interpolate's, is called on the library's thread
     too: it must not touch Blender's data.  iteration and value hold the last
@@ -1438,50 +1481,57 @@ class InterpolateJob:
     reads bpy.context as it runs."""
 
     def __init__(self, obj, *, name=None, progress=None, live=False, **settings):
-        self.iteration = 0
-        self.value = 0.0
-        self.calls = 0
-        self._user_progress = progress
-        self._cancel = threading.Event()
+        self._state = _JobProgress(progress)
         self._thread = None
         self._outcome = None
         self._done = False
         self._result = None
-        self._steps = interpolate_steps(obj, name=name, progress=self._progress, live=live, **settings)
+        self._error = None
+        target = settings.get("target")
+        if isinstance(target, str):
+            target = bpy.data.objects.get(target) if target else None
+        self._watched = [_id_key(obj), _id_key(target if isinstance(target, bpy.types.Object) else None)]
+        self._steps = interpolate_steps(obj, name=name, progress=self._state, live=live, **settings)
         self._advance(lambda: next(self._steps))
 
-    def _progress(self, iteration, value):
-        self.iteration, self.value = iteration, value
-        self.calls += 1
-        if self._user_progress is not None and self._user_progress(iteration, value):
-            self._cancel.set()
-        return self._cancel.is_set()
+    @property
+    def iteration(self):
+        return self._state.iteration
+
+    @property
+    def value(self):
+        return self._state.value
+
+    @property
+    def calls(self):
+        return self._state.calls
 
     def _advance(self, step):
-        """Runs step() (a move of the generator, here) and starts the work it yields."""
+        """Runs step() (a move of the steps, here) and starts the work it yields."""
         try:
             work = step()
         except StopIteration as stop:
             self._done, self._result = True, stop.value
             return
-        except BaseException:
-            self._done = True
+        except BaseException as error:
+            self._done, self._error = True, error
             raise
+        outcome = self._outcome = [None]  # the thread holds this, not the job
 
         def target():
             try:
-                self._outcome = (True, work())
-            except BaseException as error:  # handed to the generator by poll()
-                self._outcome = (False, error)
+                outcome[0] = (True, work())
+            except BaseException as error:  # handed to the steps by poll()
+                outcome[0] = (False, error)
         self._thread = threading.Thread(target=target, name="subdiv_pia", daemon=True)
         self._thread.start()
 
     def cancel(self):
-        self._cancel.set()
+        self._state.cancel.set()
 
     @property
     def cancelled(self):
-        return self._cancel.is_set()
+        return self._state.cancel.is_set()
 
     @property
     def done(self):
@@ -1493,17 +1543,24 @@ class InterpolateJob:
 
     def poll(self):
         """None while the library works; then (new_object, report), or the
-        exception interpolate would raise.  Call it on Blender's thread."""
+        exception interpolate would raise (again at every later call).  Call
+        it on Blender's thread."""
         if self._done:
+            if self._error is not None:
+                raise self._error
             return self._result
         if self.working():
             return None
         self._thread.join()
         self._thread = None
-        ok, value = self._outcome
+        ok, value = self._outcome[0]
         self._outcome = None
-        if ok and self._cancel.is_set():
+        if ok and self.cancelled:
             ok, value = False, native.PiaCancelled("CANCELLED", "cancelled")
+        if not all(_same_id(key) for key in self._watched):
+            ok, value = False, native.PiaCancelled(
+                "CANCELLED", "cancelled: the source or the scan was changed (undone, deleted or renamed) "
+                "while the library worked")
         if ok:
             self._advance(lambda: self._steps.send(value))
         else:
@@ -1522,13 +1579,19 @@ class InterpolateJob:
     def close(self):
         """Abandons the job (waiting for the library to stop): what it made
         so far (a cleaned copy of the mesh) is removed."""
-        self._cancel.set()
+        self._state.cancel.set()
         if self._thread is not None:
             self._thread.join()
             self._thread = None
         if not self._done:
             self._done = True
             self._steps.close()
+
+    def __del__(self):
+        # Dropped unfinished: the library stops at its next progress call.
+        state = getattr(self, "_state", None)
+        if state is not None:
+            state.cancel.set()
 
 
 def refresh_limit(obj, context=None):

@@ -201,9 +201,10 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
             return {'RUNNING_MODAL'}  # nothing else while the mesh is being worked on
         try:
             self._job.poll()
-        except native.PiaCancelled:
+        except native.PiaCancelled as error:
             self._end_modal(context)
-            self.report({'WARNING'}, "Cancelled: '%s' is unchanged and nothing was made" % self._source_name)
+            self.report({'WARNING'}, "Cancelled: '%s' is unchanged and nothing was made" % self._source_name
+                        if self._job.cancelled else "'%s': %s" % (self._source_name, error))
             return {'CANCELLED'}
         except native.PiaError as error:
             self._end_modal(context)
@@ -212,6 +213,10 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
         except (ValueError, RuntimeError) as error:
             self._end_modal(context)
             self.report({'ERROR'}, str(error))
+            return {'CANCELLED'}
+        except Exception as error:  # whatever it is, the window must not stay in the run
+            self._end_modal(context)
+            self.report({'ERROR'}, "'%s': %s: %s" % (self._source_name, type(error).__name__, error))
             return {'CANCELLED'}
         if not self._job.done:
             self._show_status(context)

@@ -3,6 +3,7 @@
 library's work on a thread of its own, Blender's data only on the caller's
 thread, the same result as interpolate, and a cancel that leaves nothing."""
 
+import gc
 import threading
 
 import bpy
@@ -135,3 +136,54 @@ def test_job_bad_input_raises_at_once():
         api.InterpolateJob(cage, target="No such scan")
     assert "not found" in str(e.value)
     assert counts() == count
+
+
+def fit_under_way(**settings):
+    """A job fitting the quad sphere to the fine one (a cleaned copy of the
+    cage made), held at its first round until the returned event is set."""
+    scan = fine_sphere(segments=64, rings=32)
+    cage = quad_sphere(cuts=2)
+    started, release = threading.Event(), threading.Event()
+
+    def progress(round_, mean):
+        if round_ >= 1:
+            started.set()
+            release.wait(10.0)
+        return False
+    job = api.InterpolateJob(cage, target=scan, fit='SURFACE', cleanup=True, progress=progress, **settings)
+    while not started.is_set():
+        assert job.poll() is None
+        started.wait(0.01)
+    return job, cage, scan, release
+
+
+def test_job_whose_source_is_deleted_meanwhile_cancels():
+    count = counts()
+    job, cage, scan, release = fit_under_way()
+    bpy.data.objects.remove(cage)
+    release.set()
+    with pytest.raises(native.PiaCancelled) as e:
+        job.wait()
+    assert "changed" in str(e.value) and not job.cancelled
+    # the scan, and its mesh and the cage's (now without an object); the cleaned copy removed
+    assert counts() == (count[0] + 1, count[1] + 2)
+    # a later poll says the same again
+    with pytest.raises(native.PiaCancelled):
+        job.poll()
+
+
+def test_job_dropped_unfinished_cleans_up_here_and_stops_the_library():
+    count = counts()
+    job, cage, scan, release = fit_under_way()
+    state = job._state
+    made = len(bpy.data.meshes)
+    assert made == count[1] + 3  # scan, cage, the cleaned copy
+    thread = job._thread
+    del job  # no close(): freed at once, on this thread
+    assert len(bpy.data.meshes) == made - 1
+    assert state.cancel.is_set()
+    release.set()
+    thread.join(60.0)
+    assert not thread.is_alive()
+    gc.collect()
+    assert counts() == (count[0] + 2, count[1] + 2)

@@ -60,12 +60,13 @@ class RecordedJob(api.InterpolateJob):
 
     def __init__(self, *args, **kwargs):
         JOBS.append(self)
-        super().__init__(*args, **kwargs)
+        pause = RecordedJob.pause
 
-    def _progress(self, iteration, value):
-        if iteration >= 1 and RecordedJob.pause:
-            time.sleep(RecordedJob.pause)
-        return super()._progress(iteration, value)
+        def progress(iteration, value):
+            if iteration >= 1 and pause:
+                time.sleep(pause)
+            return False
+        super().__init__(*args, progress=progress, **kwargs)
 
 
 api.InterpolateJob = RecordedJob
