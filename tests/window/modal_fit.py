@@ -175,7 +175,7 @@ def script():
     count = len(bpy.data.objects), len(bpy.data.meshes)
 
     # 1. Started from the window, the operator runs modal: it returns at once.
-    RecordedJob.pause = 0.5
+    RecordedJob.pause = 1.0
     result = invoke(target=scan.name, fit='SURFACE')
     assert result == {'RUNNING_MODAL'}, result
     assert len(JOBS) == 1
