@@ -150,26 +150,41 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
         self._fit = bool(settings["target"])
         self._total = FIT_ROUNDS if self._fit and settings["fit"] == 'SURFACE' else settings["max_iterations"]
         try:
-            obj = context.active_object
-            api.check_source(obj)
+            obj = self._source(context)
             self._source_name = obj.name
-            if obj.mode == 'EDIT':
-                bpy.ops.object.mode_set(mode='OBJECT')
             self._job = api.InterpolateJob(obj, live=self.live, **settings)
-        except native.PiaError as error:
-            self.report({'ERROR'}, "'%s': %s" % (context.active_object.name, error))
-            return {'CANCELLED'}
-        except (ValueError, RuntimeError) as error:
-            self.report({'ERROR'}, str(error))
-            return {'CANCELLED'}
-        if self._job.done:
-            return self._finish(context)
+        except (native.PiaError, ValueError, RuntimeError) as error:
+            return self._failed(context.active_object, error)
         wm = context.window_manager
         wm.progress_begin(0, max(int(self._total), 1))
         self._timer = wm.event_timer_add(MODAL_INTERVAL, window=context.window)
         wm.modal_handler_add(self)
         self._show_status(context)
         return {'RUNNING_MODAL'}
+
+    def _source(self, context):
+        """The active object, checked, and out of Edit Mode (the new object becomes active)."""
+        obj = context.active_object
+        api.check_source(obj)
+        if obj.mode == 'EDIT':
+            bpy.ops.object.mode_set(mode='OBJECT')
+        return obj
+
+    def _failed(self, source, error):
+        """Reports why nothing was made; {'CANCELLED'}."""
+        if isinstance(error, native.PiaError):  # the library's words, with the object named
+            self.report({'ERROR'}, "'%s': %s" % (getattr(source, "name", source), error))
+        elif isinstance(error, (ValueError, RuntimeError)):  # already in the user's terms
+            self.report({'ERROR'}, str(error))
+        else:
+            self.report({'ERROR'}, "'%s': %s: %s" % (getattr(source, "name", source), type(error).__name__, error))
+        return {'CANCELLED'}
+
+    def _made(self, new_obj, report, settings):
+        """Reports the new object; {'FINISHED'}."""
+        fine = api.report_converged(report) and not new_obj.get("pia_fit_scan_not_painted")
+        self.report({'INFO'} if fine else {'WARNING'}, result_line(new_obj, report, settings))
+        return {'FINISHED'}
 
     def _show_status(self, context):
         job = self._job
@@ -200,29 +215,18 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
         elif event.type != 'TIMER':
             return {'RUNNING_MODAL'}  # nothing else while the mesh is being worked on
         try:
-            self._job.poll()
-        except native.PiaCancelled as error:
-            self._end_modal(context)
-            self.report({'WARNING'}, "Cancelled: '%s' is unchanged and nothing was made" % self._source_name
-                        if self._job.cancelled else "'%s': %s" % (self._source_name, error))
-            return {'CANCELLED'}
-        except native.PiaError as error:
-            self._end_modal(context)
-            self.report({'ERROR'}, "'%s': %s" % (self._source_name, error))
-            return {'CANCELLED'}
-        except (ValueError, RuntimeError) as error:
-            self._end_modal(context)
-            self.report({'ERROR'}, str(error))
-            return {'CANCELLED'}
+            result = self._job.poll()
         except Exception as error:  # whatever it is, the window must not stay in the run
             self._end_modal(context)
-            self.report({'ERROR'}, "'%s': %s: %s" % (self._source_name, type(error).__name__, error))
-            return {'CANCELLED'}
+            if isinstance(error, native.PiaCancelled) and self._job.cancelled:
+                self.report({'WARNING'}, "Cancelled: '%s' is unchanged and nothing was made" % self._source_name)
+                return {'CANCELLED'}
+            return self._failed(self._source_name, error)
         if not self._job.done:
             self._show_status(context)
             return {'RUNNING_MODAL'}
         self._end_modal(context)
-        return self._finish(context)
+        return self._made(*result, self._settings)
 
     def cancel(self, context):
         # Blender ends the operator (the window closes): stop the library,
@@ -231,13 +235,6 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
         if job is not None:
             job.close()
         self._end_modal(context)
-
-    def _finish(self, context):
-        new_obj, report = self._job.poll()
-        settings = self._settings
-        fine = api.report_converged(report) and not new_obj.get("pia_fit_scan_not_painted")
-        self.report({'INFO'} if fine else {'WARNING'}, result_line(new_obj, report, settings))
-        return {'FINISHED'}
 
     def draw(self, context):
         layout = self.layout
@@ -265,23 +262,14 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
         surface_fit = bool(settings["target"]) and settings["fit"] == 'SURFACE'
         progress = _Progress(context, FIT_ROUNDS if surface_fit else settings["max_iterations"])
         try:
-            obj = context.active_object
-            api.check_source(obj)
-            if obj.mode == 'EDIT':  # the new object becomes active: leave edit mode first
-                bpy.ops.object.mode_set(mode='OBJECT')
+            obj = self._source(context)
             new_obj, report = api.interpolate(obj, context=context, progress=progress, live=self.live,
                                               **settings)
-        except native.PiaError as error:  # the library's words, with the object named
-            self.report({'ERROR'}, "'%s': %s" % (context.active_object.name, error))
-            return {'CANCELLED'}
-        except (ValueError, RuntimeError) as error:
-            self.report({'ERROR'}, str(error))
-            return {'CANCELLED'}
+        except (native.PiaError, ValueError, RuntimeError) as error:
+            return self._failed(context.active_object, error)
         finally:
             progress.end()
-        fine = api.report_converged(report) and not new_obj.get("pia_fit_scan_not_painted")
-        self.report({'INFO'} if fine else {'WARNING'}, result_line(new_obj, report, settings))
-        return {'FINISHED'}
+        return self._made(new_obj, report, settings)
 
 
 class OBJECT_OT_subdiv_pia_refresh_limit(bpy.types.Operator):

@@ -16,6 +16,7 @@ status, so it leaves with os._exit.
 """
 
 import os
+import re
 import sys
 import time
 import traceback
@@ -207,11 +208,27 @@ def script():
     assert "Cancelled: 'Cage' is unchanged and nothing was made" in text, text
     say("cancelled: nothing made, the cage and scan unchanged, the report says so")
 
-    # 3. Let run, it makes what interpolate() makes, with its report.
+    # 3. The library refusing the fit (nothing within the cut-off) on its
+    # thread: the run ends with the library's words, nothing made.
     RecordedJob.pause = 0.0
-    result = invoke(target=scan.name, fit='SURFACE')
+    result = invoke(target=scan.name, fit='SURFACE', fit_cutoff=1e-6)
     assert result == {'RUNNING_MODAL'}, result
     job = JOBS[1]
+    started = time.perf_counter()
+    while not job.done and time.perf_counter() - started < LIMIT:
+        yield 0.02
+    yield 0.1
+    assert job.done and not job.cancelled
+    assert (len(bpy.data.objects), len(bpy.data.meshes)) == count, "something was made"
+    text = reports()
+    assert re.search(r"'Cage': no .* within the cut-off .* nothing to fit", text), text
+    say("refused by the library: reported, nothing made")
+
+    # 4. Let run, it makes what interpolate() makes, with its report.
+    RecordedJob.pause = 0.0
+    result = invoke(target=scan.name, fit='SURFACE', fit_cutoff=0.02)
+    assert result == {'RUNNING_MODAL'}, result
+    job = JOBS[2]
     started = time.perf_counter()
     while not job.done and time.perf_counter() - started < LIMIT:
         yield 0.02
@@ -237,7 +254,7 @@ def script():
     say("let run: the cage made is interpolate()'s (%d rounds, mean %.3g), reported" % (
         report.rounds, report.after.mean))
 
-    # 4. Without a target (interpolating the cage's own vertices), from Edit
+    # 5. Without a target (interpolating the cage's own vertices), from Edit
     # Mode: the same, the source left in Object Mode as the menu leaves it.
     for obj in bpy.context.scene.objects:
         obj.select_set(obj is cage)
@@ -246,7 +263,7 @@ def script():
         bpy.ops.object.mode_set(mode='EDIT')
     result = invoke(target="")
     assert result == {'RUNNING_MODAL'}, result
-    job = JOBS[2]
+    job = JOBS[3]
     started = time.perf_counter()
     while not job.done and time.perf_counter() - started < LIMIT:
         yield 0.02
