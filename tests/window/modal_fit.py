@@ -163,6 +163,28 @@ def status_bar_picture(path, width=640, height=24):
     os.remove(full)
 
 
+def run_to_end(**settings):
+    """Starts the operator with settings and waits (window running) until its
+    run ends; returns its job."""
+    result = invoke(**settings)
+    assert result == {'RUNNING_MODAL'}, result
+    job = JOBS[-1]
+    started = time.perf_counter()
+    while not job.done and time.perf_counter() - started < LIMIT:
+        yield 0.02
+    assert job.done, "the run did not end"
+    yield 0.1
+    return job
+
+
+def last_settings():
+    """The settings the last finished run of the operator passed on (its
+    float properties are single precision)."""
+    operator = bpy.context.window_manager.operators[-1]
+    assert operator.bl_idname == "OBJECT_OT_subdiv_pia_interpolate", operator.bl_idname
+    return {name: getattr(operator.properties, name) for name in SETTING_NAMES}
+
+
 def positions(obj):
     return api.read_positions(obj.data).astype(np.float64)
 
@@ -211,42 +233,21 @@ def script():
     # 3. The library refusing the fit (nothing within the cut-off) on its
     # thread: the run ends with the library's words, nothing made.
     RecordedJob.pause = 0.0
-    result = invoke(target=scan.name, fit='SURFACE', fit_cutoff=1e-6)
-    assert result == {'RUNNING_MODAL'}, result
-    job = JOBS[1]
-    started = time.perf_counter()
-    while not job.done and time.perf_counter() - started < LIMIT:
-        yield 0.02
-    yield 0.1
-    assert job.done and not job.cancelled
+    job = yield from run_to_end(target=scan.name, fit='SURFACE', fit_cutoff=1e-6)
+    assert not job.cancelled
     assert (len(bpy.data.objects), len(bpy.data.meshes)) == count, "something was made"
     text = reports()
     assert re.search(r"'Cage': no .* within the cut-off .* nothing to fit", text), text
     say("refused by the library: reported, nothing made")
 
     # 4. Let run, it makes what interpolate() makes, with its report.
-    RecordedJob.pause = 0.0
-    result = invoke(target=scan.name, fit='SURFACE', fit_cutoff=0.02)
-    assert result == {'RUNNING_MODAL'}, result
-    job = JOBS[2]
-    started = time.perf_counter()
-    while not job.done and time.perf_counter() - started < LIMIT:
-        yield 0.02
-    assert job.done and not job.cancelled
-    yield 0.1
+    job = yield from run_to_end(target=scan.name, fit='SURFACE', fit_cutoff=0.02)
+    assert not job.cancelled
     made = bpy.data.objects.get("Cage_pia")
     assert made is not None, [o.name for o in bpy.data.objects]
     assert made.modifiers[0].type == 'SUBSURF'
     assert bpy.context.view_layer.objects.active == made
-    # the settings as the operator passed them (its float properties are single precision)
-    operator = bpy.context.window_manager.operators[-1]
-    assert operator.bl_idname == "OBJECT_OT_subdiv_pia_interpolate", operator.bl_idname
-    settings = {name: getattr(operator.properties, name) for name in SETTING_NAMES}
-    plain, report = api.interpolate(cage, name="Cage_script", **settings)
-    if not np.array_equal(positions(made), positions(plain)):
-        keys = sorted(set(made.keys()) | set(plain.keys()))
-        say("differ: %s" % [(k, made.get(k), plain.get(k)) for k in keys if made.get(k) != plain.get(k)])
-        say("max diff %g" % np.abs(positions(made) - positions(plain)).max())
+    plain, report = api.interpolate(cage, name="Cage_script", **last_settings())
     assert np.array_equal(positions(made), positions(plain)), "the window's cage differs from interpolate()'s"
     assert made["pia_fit_mean_after"] == report.after.mean
     text = reports()
@@ -261,19 +262,11 @@ def script():
     bpy.context.view_layer.objects.active = cage
     with bpy.context.temp_override(**window_context()):
         bpy.ops.object.mode_set(mode='EDIT')
-    result = invoke(target="")
-    assert result == {'RUNNING_MODAL'}, result
-    job = JOBS[3]
-    started = time.perf_counter()
-    while not job.done and time.perf_counter() - started < LIMIT:
-        yield 0.02
-    yield 0.1
+    yield from run_to_end(target="")
     assert cage.mode == 'OBJECT'
     made = bpy.data.objects.get("Cage_pia.001")
     assert made is not None, [o.name for o in bpy.data.objects]
-    operator = bpy.context.window_manager.operators[-1]
-    settings = {name: getattr(operator.properties, name) for name in SETTING_NAMES}
-    plain, report = api.interpolate(cage, name="Cage_plain", **settings)
+    plain, report = api.interpolate(cage, name="Cage_plain", **last_settings())
     assert np.array_equal(positions(made), positions(plain))
     assert made["pia_status"] == report.status == "CONVERGED"
     assert np.array_equal(positions(cage), before[0])
