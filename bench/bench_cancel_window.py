@@ -20,7 +20,6 @@ import os
 import sys
 import threading
 import time
-import traceback
 
 import bpy
 
@@ -29,6 +28,9 @@ ROOT = os.path.dirname(HERE)
 sys.path.insert(0, os.environ.get("SUBDIV_PIA_ADDON_DIR", os.path.join(ROOT, "build", "addon")))
 import subdiv_pia  # noqa: E402
 from subdiv_pia import api  # noqa: E402
+
+sys.path.insert(0, os.path.join(ROOT, "tests", "window"))
+from window import invoke_interpolate, run_steps, window_context  # noqa: E402
 
 ARGS = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
 
@@ -64,12 +66,6 @@ class WatchedJob(api.InterpolateJob):
 api.InterpolateJob = WatchedJob
 
 
-def finish(code):
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(code)
-
-
 def load(path, name):
     with bpy.data.libraries.load(path) as (src, dst):
         dst.objects = [name]
@@ -77,13 +73,6 @@ def load(path, name):
     bpy.context.scene.collection.objects.link(obj)
     obj.display_type = 'BOUNDS'  # software OpenGL draws millions of faces slowly
     return obj
-
-
-def window_context():
-    window = bpy.context.window_manager.windows[0]
-    area = next(a for a in window.screen.areas if a.type == 'VIEW_3D')
-    region = next(r for r in area.regions if r.type == 'WINDOW')
-    return dict(window=window, area=area, region=region)
 
 
 class Watcher(threading.Thread):
@@ -124,9 +113,7 @@ def script():
     yield 3.0  # the window draws the loaded scene first (a scene an artist already has on screen)
     rows = []
     for delay in DELAYS:
-        with bpy.context.temp_override(**window_context()):
-            result = bpy.ops.object.subdiv_pia_interpolate('INVOKE_DEFAULT', target=scan.name, fit='SURFACE',
-                                                           levels=1)
+        result = invoke_interpolate(target=scan.name, fit='SURFACE', levels=1)
         returned = time.perf_counter()
         assert result == {'RUNNING_MODAL'}, result
         job = JOBS[-1]
@@ -156,18 +143,4 @@ def script():
         print("| %.1f s | %d | %.3f s | +%.3f s | +%.3f s | %.3f s |" % (delay, round_, seen, stopped, ended, total))
 
 
-def main():
-    steps = script()
-
-    def advance():
-        try:
-            return next(steps)
-        except StopIteration:
-            finish(0)
-        except BaseException:
-            traceback.print_exc()
-            finish(1)
-    bpy.app.timers.register(advance, first_interval=0.5)
-
-
-main()
+run_steps(script())

@@ -19,7 +19,6 @@ import os
 import re
 import sys
 import time
-import traceback
 
 import bmesh
 import bpy
@@ -31,6 +30,9 @@ import subdiv_pia  # noqa: E402
 from subdiv_pia import api  # noqa: E402
 from subdiv_pia.properties import SETTING_NAMES  # noqa: E402
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from window import invoke_interpolate as invoke, run_steps, window_context  # noqa: E402
+
 ARGS = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
 SCREENSHOT = ARGS[ARGS.index("--screenshot") + 1] if "--screenshot" in ARGS else None
 LIMIT = 60.0  # seconds any one wait may take before the check fails
@@ -41,12 +43,6 @@ T0 = time.perf_counter()
 
 def say(text):
     print("modal_fit: %6.2f s: %s" % (time.perf_counter() - T0, text), flush=True)
-
-
-def finish(code):
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(code)
 
 
 # Every job the operator starts, to see its progress from here.
@@ -115,18 +111,6 @@ def uv_sphere(name, segments, rings):
     mesh = bpy.data.meshes.new(name)
     mesh.from_pydata(points.tolist(), [], faces)
     return mesh
-
-
-def window_context():
-    window = bpy.context.window_manager.windows[0]
-    area = next(a for a in window.screen.areas if a.type == 'VIEW_3D')
-    region = next(r for r in area.regions if r.type == 'WINDOW')
-    return dict(window=window, area=area, region=region)
-
-
-def invoke(**settings):
-    with bpy.context.temp_override(**window_context()):
-        return bpy.ops.object.subdiv_pia_interpolate('INVOKE_DEFAULT', **settings)
 
 
 def reports():
@@ -274,20 +258,4 @@ def script():
         report.status, report.iterations))
 
 
-def main():
-    steps = script()
-
-    def advance():
-        try:
-            return next(steps)
-        except StopIteration:
-            say("all passed")
-            finish(0)
-        except BaseException:
-            traceback.print_exc()
-            say("FAILED")
-            finish(1)
-    bpy.app.timers.register(advance, first_interval=0.5)
-
-
-main()
+run_steps(script(), passed=lambda: say("all passed"), failed=lambda: say("FAILED"))
