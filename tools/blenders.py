@@ -167,6 +167,13 @@ def prepare_chroot(name, suite):
     return path
 
 
+def enter_chroot(b):
+    """Makes (or reuses) the chroot of Blender b, named by the version in it."""
+    b.chroot_path = prepare_chroot(*b.root)
+    v = debian_blender_version(["chroot", b.chroot_path])
+    b.name = "Blender %s" % v if v else b.name
+
+
 def counts(xml_paths):
     """passed, failed (failures and errors), skipped and expected failures over junit files."""
     total = {"passed": 0, "failed": 0, "skipped": 0, "xfailed": 0, "files": 0}
@@ -272,9 +279,7 @@ def test(package, jobs, only, extra, discard):
                     slots.acquire()
                 prepare_venv(*b.prepare)
             if b.root:
-                b.chroot_path = prepare_chroot(*b.root)
-                v = debian_blender_version(["chroot", b.chroot_path])
-                b.name = "Blender %s" % v if v else b.name
+                enter_chroot(b)
             return None
         except (subprocess.CalledProcessError, RuntimeError, OSError) as exc:
             return "could not be installed: %s" % exc
@@ -336,9 +341,7 @@ def window(package):
         addon = WINDOW_ADDON
         command = "%s blender --factory-startup --enable-event-simulate --python %s" % (XVFB_RUN, WINDOW_PY)
         if b.root:
-            b.chroot_path = prepare_chroot(*b.root)
-            v = debian_blender_version(["chroot", b.chroot_path])
-            b.name = "Blender %s" % v if v else b.name
+            enter_chroot(b)
             addon = "/src/" + os.path.relpath(WINDOW_ADDON, ROOT)
             print("the window test in %s (%s)" % (b.name, b.how), flush=True)
             code = debian.in_chroot(b.chroot_path, "cd /src && " + command, binds=[(ROOT, "/src")],

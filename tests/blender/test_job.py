@@ -104,41 +104,7 @@ def test_job_cancel_after_the_library_finished_makes_nothing():
     assert job.done and counts() == count
 
 
-def test_job_close_removes_what_it_made():
-    scan = fine_sphere(segments=64, rings=32)
-    cage = quad_sphere(cuts=2)
-    count = counts()
-    started = threading.Event()
-    release = threading.Event()
-
-    def progress(round_, mean):
-        if round_ >= 1:
-            started.set()
-            release.wait(10.0)
-        return False
-    job = api.InterpolateJob(cage, target=scan, fit='SURFACE', cleanup=True, progress=progress)
-    # poll() moves the job on (the scan built, the cage cleaned, the fit
-    # started) until the fit's first round is done
-    while not started.is_set():
-        assert job.poll() is None
-        started.wait(0.01)
-    # the fit under way: the cleaned copy of the cage exists
-    assert len(bpy.data.meshes) == count[1] + 1
-    release.set()
-    job.close()
-    assert job.done and counts() == count
-
-
-def test_job_bad_input_raises_at_once():
-    cage = quad_sphere(cuts=2)
-    count = counts()
-    with pytest.raises(ValueError) as e:
-        api.InterpolateJob(cage, target="No such scan")
-    assert "not found" in str(e.value)
-    assert counts() == count
-
-
-def fit_under_way(**settings):
+def fit_under_way():
     """A job fitting the quad sphere to the fine one (a cleaned copy of the
     cage made), held at its first round until the returned event is set."""
     scan = fine_sphere(segments=64, rings=32)
@@ -150,11 +116,30 @@ def fit_under_way(**settings):
             started.set()
             release.wait(10.0)
         return False
-    job = api.InterpolateJob(cage, target=scan, fit='SURFACE', cleanup=True, progress=progress, **settings)
+    job = api.InterpolateJob(cage, target=scan, fit='SURFACE', cleanup=True, progress=progress)
     while not started.is_set():
         assert job.poll() is None
         started.wait(0.01)
     return job, cage, scan, release
+
+
+def test_job_close_removes_what_it_made():
+    count = counts()
+    job, cage, scan, release = fit_under_way()
+    # the fit under way: the cleaned copy of the cage exists
+    assert counts() == (count[0] + 2, count[1] + 3)
+    release.set()
+    job.close()
+    assert job.done and counts() == (count[0] + 2, count[1] + 2)
+
+
+def test_job_bad_input_raises_at_once():
+    cage = quad_sphere(cuts=2)
+    count = counts()
+    with pytest.raises(ValueError) as e:
+        api.InterpolateJob(cage, target="No such scan")
+    assert "not found" in str(e.value)
+    assert counts() == count
 
 
 def test_job_whose_source_is_deleted_meanwhile_cancels():
