@@ -1209,16 +1209,43 @@ def build_object(source, cage, report, settings, context=None, name=None, mesh=N
 
     Catmull-Clark: with a limit-surface Subdivision Surface modifier.
     Loop, Doo-Sabin: no modifier; limit = limit_arrays' output goes to a
-    `_limit` child.
+    `_limit` child.  A mesh passed in becomes the new object's.  If anything
+    here fails, what it made (and the mesh passed in) is removed again
+    before the error is raised.
     """
     context = context or bpy.context
     name = name or source.name + "_pia"
     if mesh is None:
         mesh = source.data.copy()
-    mesh.name = name
-    write_positions(mesh, cage)
+    new_obj = None
+    try:
+        mesh.name = name
+        write_positions(mesh, cage)
+        new_obj = bpy.data.objects.new(name, mesh)
+        _dress_object(source, new_obj, report, settings, context, limit)
+    except BaseException:
+        discard_object(new_obj, mesh)
+        raise
+    return new_obj
 
-    new_obj = bpy.data.objects.new(name, mesh)
+
+def discard_object(obj, mesh=None):
+    """Removes obj (may be None), its `_limit` child and their meshes, and
+    mesh, where nothing else uses them: undoes build_object."""
+    meshes = {} if mesh is None else {mesh.as_pointer(): mesh}
+    if obj is not None:
+        child = find_limit_object(obj)
+        for o in ((child,) if child is not None else ()) + (obj,):
+            if o.data is not None:
+                meshes[o.data.as_pointer()] = o.data
+            bpy.data.objects.remove(o)
+    for m in meshes.values():
+        if m.users == 0:
+            bpy.data.meshes.remove(m)
+
+
+def _dress_object(source, new_obj, report, settings, context, limit):
+    """build_object's placement, modifier, properties, limit child and selection."""
     _link_like(source, new_obj, context)
 
     if settings["scheme"] == 'CATMULL_CLARK':
@@ -1411,17 +1438,32 @@ def interpolate_steps(obj, *, context=None, name=None, progress=None, live=False
     for made_mesh in made[:-1]:  # the cleaned copy, once triangulated
         bpy.data.meshes.remove(made_mesh)
     new_obj = build_object(obj, cage, report, s, context=context, name=name, mesh=mesh, limit=limit)
-    if stats is not None:
-        store_cleanup(new_obj, stats)
-    if target is not None and s["fit_paint_scan"]:
-        why_not = paint_scan(target, report)
-        new_obj["pia_fit_scan_painted"] = why_not is None
-        if why_not is not None:
-            new_obj["pia_fit_scan_not_painted"] = "The scan '%s' was not painted: %s" % (target.name, why_not)
-    if live:
-        from . import live as live_module
-        live_module.set_live(new_obj, True, source=obj)
+    from . import live as live_module
+    try:
+        if stats is not None:
+            store_cleanup(new_obj, stats)
+        if live:
+            live_module.set_live(new_obj, True, source=obj)
+        if target is not None and s["fit_paint_scan"]:  # last: the one step that writes to another object
+            why_not = paint_scan(target, report)
+            new_obj["pia_fit_scan_painted"] = why_not is None
+            if why_not is not None:
+                new_obj["pia_fit_scan_not_painted"] = "The scan '%s' was not painted: %s" % (target.name, why_not)
+    except BaseException:
+        if live:
+            live_module.set_live(new_obj, False)
+        discard_object(new_obj)
+        _select_again(obj, context or bpy.context)
+        raise
     return new_obj, report
+
+
+def _select_again(obj, context):
+    """obj selected and active again, as before build_object chose the new object."""
+    view_layer = context.view_layer
+    if view_layer is not None and view_layer.objects.get(obj.name) is not None:
+        obj.select_set(True, view_layer=view_layer)
+        view_layer.objects.active = obj
 
 
 class _JobProgress:

@@ -57,6 +57,50 @@ def test_api_errors():
     assert len(bpy.data.objects) == n_objects + 2  # the empty and the cube only
 
 
+class Broken(Exception):
+    pass
+
+
+def _broken(*args, **kwargs):
+    raise Broken("broken on purpose")
+
+
+# Each case breaks one step of writing the new object, late in it: the cage
+# object (and its Loop limit child, the triangulated or cleaned copy it was
+# given, a Live registration) must be gone again, the source unchanged,
+# selected and active.
+WRITE_FAILURES = {
+    "modifier's settings": (shapes.cube, "api", "opensubdiv_version_string", {}),
+    "Loop limit child": (shapes.cube, "api", "set_limit_object", {"scheme": 'LOOP', "triangulate": True}),
+    "cleaned copy's figures": (shapes.cube, "api", "store_cleanup", {"cleanup": True}),
+    "Live": (shapes.cube, "live", "set_live", {"live": True}),
+}
+
+
+@pytest.mark.parametrize("case", sorted(WRITE_FAILURES))
+def test_api_failure_while_writing_leaves_nothing(monkeypatch, case):
+    from subdiv_pia import api, live
+    make, module, function, settings = WRITE_FAILURES[case]
+    source = make()
+    before = snapshot(source)
+    counts = (len(bpy.data.objects), len(bpy.data.meshes))
+    module = {"api": api, "live": live}[module]
+    real = getattr(module, function)
+    if function == "set_live":  # only turning it on fails; turning it off again must work
+        monkeypatch.setattr(module, function, lambda cage, enable=True, source=None:
+                            _broken() if enable else real(cage, enable, source))
+    else:
+        monkeypatch.setattr(module, function, _broken)
+    with pytest.raises(Broken):
+        subdiv_pia.interpolate(source, **settings)
+    assert (len(bpy.data.objects), len(bpy.data.meshes)) == counts
+    assert not [m for m in bpy.data.meshes if m.users == 0]
+    assert_unchanged(source, before)
+    assert bpy.context.view_layer.objects.active == source and source.select_get()
+    if function == "set_live":
+        assert not live._states
+
+
 def test_api_takes_settings_from_modifier():
     source = shapes.cube()
     mod = source.modifiers.new("Subsurf", 'SUBSURF')
