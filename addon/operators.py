@@ -151,10 +151,9 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
         self._total = FIT_ROUNDS if self._fit and settings["fit"] == 'SURFACE' else settings["max_iterations"]
         try:
             obj = self._source(context)
-            self._source_name = obj.name
             self._job = api.InterpolateJob(obj, live=self.live, **settings)
         except (native.PiaError, ValueError, RuntimeError) as error:
-            return self._failed(context.active_object, error)
+            return self._failed(context, context.active_object, error)
         wm = context.window_manager
         wm.progress_begin(0, max(int(self._total), 1))
         self._timer = wm.event_timer_add(MODAL_INTERVAL, window=context.window)
@@ -166,12 +165,26 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
         """The active object, checked, and out of Edit Mode (the new object becomes active)."""
         obj = context.active_object
         api.check_source(obj)
-        if obj.mode == 'EDIT':
+        self._source_name = obj.name
+        self._was_edit = obj.mode == 'EDIT'
+        if self._was_edit:
             bpy.ops.object.mode_set(mode='OBJECT')
         return obj
 
-    def _failed(self, source, error):
+    def _back_to_edit(self, context):
+        """Nothing was made: a source that was in Edit Mode goes back to it."""
+        if not getattr(self, "_was_edit", False):
+            return
+        obj = bpy.data.objects.get(self._source_name)
+        if obj is not None and obj == context.view_layer.objects.active and obj.mode != 'EDIT':
+            try:
+                bpy.ops.object.mode_set(mode='EDIT')
+            except RuntimeError:  # not possible here (hidden, linked): it stays in Object Mode
+                pass
+
+    def _failed(self, context, source, error):
         """Reports why nothing was made; {'CANCELLED'}."""
+        self._back_to_edit(context)
         if isinstance(error, native.PiaError):  # the library's words, with the object named
             self.report({'ERROR'}, "'%s': %s" % (getattr(source, "name", source), error))
         elif isinstance(error, (ValueError, RuntimeError)):  # already in the user's terms
@@ -219,9 +232,10 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
         except Exception as error:  # whatever it is, the window must not stay in the run
             self._end_modal(context)
             if isinstance(error, native.PiaCancelled) and self._job.cancelled:
+                self._back_to_edit(context)
                 self.report({'WARNING'}, "Cancelled: '%s' is unchanged and nothing was made" % self._source_name)
                 return {'CANCELLED'}
-            return self._failed(self._source_name, error)
+            return self._failed(context, self._source_name, error)
         if not self._job.done:
             self._show_status(context)
             return {'RUNNING_MODAL'}
@@ -266,7 +280,7 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
             new_obj, report = api.interpolate(obj, context=context, progress=progress, live=self.live,
                                               **settings)
         except (native.PiaError, ValueError, RuntimeError) as error:
-            return self._failed(context.active_object, error)
+            return self._failed(context, context.active_object, error)
         finally:
             progress.end()
         return self._made(new_obj, report, settings)

@@ -226,3 +226,21 @@ def test_edit_mode_edits_are_used():
     targets = positions(source.data).astype(np.float64)
     assert abs(targets[0, 2]) > 0.4
     assert relative_miss(bpy.context.active_object, targets) <= MATCH
+
+
+def test_edit_mode_kept_when_refused():
+    """Input refused after the operator left Edit Mode (Doo-Sabin needs a
+    closed mesh): the source is back in Edit Mode with its edit, and
+    nothing is made."""
+    source = shapes.open_grid()
+    bpy.ops.object.mode_set(mode='EDIT')
+    bm = bmesh.from_edit_mesh(source.data)
+    bm.verts.ensure_lookup_table()
+    bm.verts[0].co.z += 0.5
+    bmesh.update_edit_mesh(source.data)
+    expect_error(r"closed", scheme='DOO_SABIN')
+    assert source.mode == 'EDIT'
+    assert bpy.context.view_layer.objects.active == source
+    bm = bmesh.from_edit_mesh(source.data)
+    bm.verts.ensure_lookup_table()
+    assert abs(bm.verts[0].co.z) > 0.4

@@ -181,8 +181,11 @@ def script():
     before = positions(cage), positions(scan)
     count = len(bpy.data.objects), len(bpy.data.meshes)
 
-    # 1. Started from the window, the operator runs modal: it returns at once.
+    # 1. Started from the window (from Edit Mode), the operator runs modal:
+    # it returns at once.
     RecordedJob.pause = 1.0
+    with bpy.context.temp_override(**window_context()):
+        bpy.ops.object.mode_set(mode='EDIT')
     result = invoke(target=scan.name, fit='SURFACE')
     assert result == {'RUNNING_MODAL'}, result
     assert len(JOBS) == 1
@@ -198,7 +201,8 @@ def script():
         status_bar_picture(SCREENSHOT)
         say("the status bar written to %s" % SCREENSHOT)
 
-    # 2. Esc cancels within the fit: nothing made, nothing changed.
+    # 2. Esc cancels within the fit: nothing made, nothing changed, the cage
+    # back in Edit Mode.
     window = window_context()["window"]
     pressed = time.perf_counter()
     window.event_simulate(type='ESC', value='PRESS')
@@ -212,17 +216,22 @@ def script():
     assert np.array_equal(positions(cage), before[0]) and np.array_equal(positions(scan), before[1])
     text = reports()
     assert "Cancelled: 'Cage' is unchanged and nothing was made" in text, text
-    say("cancelled: nothing made, the cage and scan unchanged, the report says so")
+    assert cage.mode == 'EDIT'
+    say("cancelled: nothing made, the cage and scan unchanged and back in Edit Mode, the report says so")
 
     # 3. The library refusing the fit (nothing within the cut-off) on its
-    # thread: the run ends with the library's words, nothing made.
+    # thread: the run ends with the library's words, nothing made, the cage
+    # in Edit Mode still.
     RecordedJob.pause = 0.0
     job = yield from run_to_end(target=scan.name, fit='SURFACE', fit_cutoff=1e-6)
     assert not job.cancelled
     assert (len(bpy.data.objects), len(bpy.data.meshes)) == count, "something was made"
     text = reports()
     assert re.search(r"'Cage': no .* within the cut-off .* nothing to fit", text), text
-    say("refused by the library: reported, nothing made")
+    assert cage.mode == 'EDIT'
+    say("refused by the library: reported, nothing made, still in Edit Mode")
+    with bpy.context.temp_override(**window_context()):
+        bpy.ops.object.mode_set(mode='OBJECT')
 
     # 4. Let run, it makes what interpolate() makes, with its report.
     job = yield from run_to_end(target=scan.name, fit='SURFACE', fit_cutoff=0.02)
