@@ -451,12 +451,23 @@ SPIA_API spia_result spia_interpolate(const spia_mesh *mesh, const spia_options 
  *              limit surface (closed, consistently oriented manifold meshes).
  * Catmull-Clark is refused: Blender's modifier shows it.
  *
- * spia_refine_size writes the counts of vertices, faces and face corners;
- * spia_refine then fills caller buffers of vertex_count * 3 floats,
- * face_count ints (corners per face) and corner_count ints (face vertices,
- * faces one after another).  For LOOP, vertices 0 .. mesh->vertex_count - 1
- * are the limit points of the control vertices (vertices no face uses stay
- * where they are).
+ * spia_refine_size writes the counts of vertices, faces and face corners
+ * (in closed form: it costs a small part of the refinement, at most its
+ * first Doo-Sabin step, which checks the mesh); spia_refine then fills
+ * caller buffers of vertex_count * 3 floats, face_count ints (corners per
+ * face) and corner_count ints (face vertices, faces one after another).
+ * For LOOP, vertices 0 .. mesh->vertex_count - 1 are the limit points of
+ * the control vertices (vertices no face uses stay where they are).
+ *
+ * spia_refine calls the options' progress callback on the calling thread
+ * at the end of each level (the last one's once its positions are
+ * computed, before anything is written) and in between about every 0.1 s
+ * of the work, except inside OpenSubdiv's refinement of the topology (the
+ * LOOP rule SMOOTH: one call for all levels, about 0.15 s per million
+ * faces made): iteration is the level under way (1 to levels;
+ * 0 for levels 0) and relative_error the share of the refinement done, by
+ * face counts (each level four times the one before), 1 at the last call.
+ * Returning nonzero cancels: SPIA_ERROR_CANCELLED, nothing written.
  */
 SPIA_API spia_result spia_refine_size(const spia_mesh *mesh, const spia_options *options, int32_t levels,
                                       int32_t *vertex_count, int32_t *face_count, int64_t *corner_count,

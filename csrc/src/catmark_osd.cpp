@@ -2086,24 +2086,44 @@ struct Point {
 };
 
 spia_result refine(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, int32_t levels,
-                   int32_t *vertex_count, int32_t *face_count, float *positions, int32_t *faces, spia_status *status) {
+                   int32_t *vertex_count, int32_t *face_count, float *positions, int32_t *faces,
+                   spia__refine_clock *clock, spia_status *status) {
     Prepared p;
     spia_result r = prepare(m, adj, opt, p, status);
     if (r != SPIA_OK) return r;
     Far::TopologyRefiner &refiner = *p.refiner;
-    Far::TopologyRefiner::UniformOptions uniform(levels);
-    uniform.fullTopologyInLastLevel = true;
-    refiner.RefineUniform(uniform);
-    const Far::TopologyLevel &last = refiner.GetLevel(levels);
+    // The counts in closed form from the control mesh, so that asking for
+    // them costs no refinement: a uniform Loop step puts a vertex on every
+    // edge and splits every triangle in four (V' = V + E, E' = 2 E + 3 F,
+    // F' = 4 F).
+    int64_t nv = refiner.GetLevel(0).GetNumVertices(), ne = refiner.GetLevel(0).GetNumEdges(),
+            nf = refiner.GetLevel(0).GetNumFaces();
+    for (int32_t l = 0; l < levels; ++l) {
+        nv += ne;
+        ne = 2 * ne + 3 * nf;
+        nf *= 4;
+    }
     // Child vertices of vertices come first at every level, in their parents'
     // order, so the first osd_n vertices of the last level are the control
     // vertices; the output puts them at the caller's indices and appends the
     // others.
     const int32_t n = m->vertex_count;
-    const int32_t extra = last.GetNumVertices() - p.osd_n;
-    *vertex_count = n + extra;
-    *face_count = last.GetNumFaces();
+    const int64_t total = n + (nv - p.osd_n);
+    if (total > INT32_MAX || 3 * nf > INT32_MAX)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "%d levels make %lld faces, too many", (int)levels,
+                          (long long)nf);
+    *vertex_count = (int32_t)total;
+    *face_count = (int32_t)nf;
     if (!positions) return SPIA_OK;
+    Far::TopologyRefiner::UniformOptions uniform(levels);
+    uniform.fullTopologyInLastLevel = true;
+    refiner.RefineUniform(uniform);
+    const Far::TopologyLevel &last = refiner.GetLevel(levels);
+    if (last.GetNumVertices() != nv || last.GetNumFaces() != nf)
+        return spia__fail(status, SPIA_ERROR_INTERNAL, -1,
+                          "refined to %d vertices and %d faces, not the %lld and %lld counted", last.GetNumVertices(),
+                          last.GetNumFaces(), (long long)nv, (long long)nf);
+    if (spia__refine_tick(clock, 0)) return spia__refine_cancelled(status, clock);
     std::vector<Point> src((size_t)refiner.GetNumVerticesTotal()), limit((size_t)last.GetNumVertices());
     for (int32_t o = 0; o < p.osd_n; ++o)
         for (int a = 0; a < 3; ++a) src[o].p[a] = m->positions[3 * (int64_t)p.vertex_of[o] + a];
@@ -2113,9 +2133,11 @@ spia_result refine(const spia_mesh *m, const spia_adjacency *adj, const spia_opt
         Point *level_dst = level_src + refiner.GetLevel(level - 1).GetNumVertices();
         primvar.Interpolate(level, level_src, level_dst);
         level_src = level_dst;
+        if (level < levels && spia__refine_level_done(clock, level)) return spia__refine_cancelled(status, clock);
     }
     Point *limit_dst = limit.data();
     primvar.Limit(level_src, limit_dst);
+    if (spia__refine_level_done(clock, levels)) return spia__refine_cancelled(status, clock);
     auto out_index = [&](int32_t i) { return i < p.osd_n ? p.vertex_of[i] : n + (i - p.osd_n); };
     for (int32_t v = 0; v < n; ++v)
         if (p.osd_of[v] < 0)
@@ -2463,9 +2485,9 @@ extern "C" spia_result spia__osd_limit_stencils(const spia_mesh *mesh, spia_adja
 extern "C" spia_result spia__osd_refine_limit(const spia_mesh *mesh, const spia_adjacency *adj,
                                               const spia_options *options, int32_t levels, int32_t *vertex_count,
                                               int32_t *face_count, float *positions, int32_t *faces,
-                                              spia_status *status) {
+                                              spia__refine_clock *clock, spia_status *status) {
     try {
-        return refine(mesh, adj, options, levels, vertex_count, face_count, positions, faces, status);
+        return refine(mesh, adj, options, levels, vertex_count, face_count, positions, faces, clock, status);
     } catch (const std::bad_alloc &) {
         return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory refining the surface");
     } catch (...) {

@@ -136,7 +136,7 @@ static int64_t next_around(const spia_mesh *m, const spia_adjacency *a, int64_t 
  * W_i = sum_j alpha_ij V_j, alpha_ii = (k + 5) / (4k),
  * alpha_ij = (3 + 2 cos(2 pi (i - j) / k)) / (4k). */
 static spia_result ds_step(const poly_level *in, const spia_options *o, int phase_one, poly_level *out,
-                           spia_status *status) {
+                           spia__refine_clock *clock, spia_status *status) {
     float *dummy = (float *)calloc(3 * (size_t)in->n + 3, sizeof(float));
     spia_adjacency a;
     memset(&a, 0, sizeof a);
@@ -148,6 +148,7 @@ static spia_result ds_step(const poly_level *in, const spia_options *o, int phas
     /* Edges: each corner c starts edge (v, next); its twin runs back. */
     int64_t edges = 0, used = 0;
     for (int64_t c = 0; c < in->corners; ++c) {
+        if (spia__refine_tick(clock, c)) goto cancelled;
         const int32_t v = in->fv[c], w = spia__corner_next(&m, &a, c);
         int twins = 0;
         for (int64_t i = a.first[w]; i < a.first[w + 1]; ++i) twins += spia__corner_next(&m, &a, a.corner_of[i]) == v;
@@ -175,6 +176,7 @@ static spia_result ds_step(const poly_level *in, const spia_options *o, int phas
     int64_t k = 0;
     int32_t nf = 0;
     for (int32_t f = 0; f < in->f; ++f) {
+        if (spia__refine_tick(clock, f)) goto cancelled;
         const int64_t s0 = a.corner_start[f];
         const int32_t size = in->sizes[f];
         double centroid[3] = {0.0, 0.0, 0.0};
@@ -199,6 +201,7 @@ static spia_result ds_step(const poly_level *in, const spia_options *o, int phas
     }
     /* E-faces: edge v -> w in corner c's face, w -> v in its twin's. */
     for (int64_t c = 0; c < in->corners; ++c) {
+        if (spia__refine_tick(clock, c)) goto cancelled;
         const int32_t v = in->fv[c], w = spia__corner_next(&m, &a, c);
         if (v > w) continue;
         int64_t cw = -1, twin_w = -1, twin_v = -1;
@@ -220,6 +223,7 @@ static spia_result ds_step(const poly_level *in, const spia_options *o, int phas
     }
     /* V-faces: the corners of v in their order around v. */
     for (int32_t v = 0; v < in->n; ++v) {
+        if (spia__refine_tick(clock, v)) goto cancelled;
         if (a.first[v + 1] == a.first[v]) continue;
         const int64_t start = a.corner_of[a.first[v]];
         int64_t c = start;
@@ -242,6 +246,8 @@ static spia_result ds_step(const poly_level *in, const spia_options *o, int phas
     spia__adjacency_free(&a);
     free(dummy);
     return SPIA_OK;
+cancelled:
+    r = spia__refine_cancelled(status, clock);
 fail:
     spia__adjacency_free(&a);
     free(dummy);
@@ -251,7 +257,7 @@ fail:
 
 spia_result spia__doosabin_refine(const spia_mesh *m, const spia_options *o, int32_t levels, int32_t *vertex_count,
                                   int32_t *face_count, int64_t *corner_count, float *positions, int32_t *face_sizes,
-                                  int32_t *face_vertices, spia_status *status) {
+                                  int32_t *face_vertices, spia__refine_clock *clock, spia_status *status) {
     spia_adjacency a;
     spia_result r = spia__adjacency_build(m, &a, status);
     if (r != SPIA_OK) return r;
@@ -263,6 +269,13 @@ spia_result spia__doosabin_refine(const spia_mesh *m, const spia_options *o, int
     cur.f = m->face_count;
     cur.corners = 0;
     for (int32_t f = 0; f < m->face_count; ++f) cur.corners += m->face_sizes[f];
+    /* The counts: the first step's (which checks the mesh), then in closed
+     * form: after a step every vertex is a corner of a closed manifold mesh
+     * (E = C / 2 edges), and a step makes a vertex of every corner and a
+     * face of every face, edge and vertex, with C + 4 E + C corners. */
+    int64_t nv = cur.n, nf = cur.f, nc = cur.corners;
+    const int counts_only = positions == NULL;
+    if (counts_only && levels == 0) goto counted;
     cur.P = (double *)malloc(sizeof(double) * 3 * (size_t)cur.n);
     cur.sizes = (int32_t *)malloc(sizeof(int32_t) * (size_t)cur.f);
     cur.fv = (int32_t *)malloc(sizeof(int32_t) * (size_t)cur.corners);
@@ -279,20 +292,50 @@ spia_result spia__doosabin_refine(const spia_mesh *m, const spia_options *o, int
             poly_free(&cur);
             return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "%d levels make too many faces", (int)levels);
         }
-        r = ds_step(&cur, o, l == 0, &next, status);
+        r = ds_step(&cur, o, l == 0, &next, clock, status);
         poly_free(&cur);
         if (r != SPIA_OK) return r;
         cur = next;
+        if (l == 0) {
+            nv = cur.n, nf = cur.f, nc = cur.corners;
+            for (int32_t k = 1; k < levels; ++k) {
+                if (nc * 3 > INT32_MAX) {
+                    poly_free(&cur);
+                    return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "%d levels make too many faces",
+                                      (int)levels);
+                }
+                nf += nc / 2 + nv;
+                nv = nc;
+                nc *= 4;
+            }
+            if (counts_only) {
+                poly_free(&cur);
+                goto counted;
+            }
+        }
+        if (l + 1 < levels && spia__refine_level_done(clock, l + 1)) {
+            poly_free(&cur);
+            return spia__refine_cancelled(status, clock);
+        }
     }
-    *vertex_count = cur.n;
-    *face_count = cur.f;
-    *corner_count = cur.corners;
-    if (positions) {
-        for (int64_t k = 0; k < 3 * (int64_t)cur.n; ++k) positions[k] = (float)cur.P[k];
-        memcpy(face_sizes, cur.sizes, sizeof(int32_t) * (size_t)cur.f);
-        memcpy(face_vertices, cur.fv, sizeof(int32_t) * (size_t)cur.corners);
+    if (cur.n != nv || cur.f != nf || cur.corners != nc) {
+        poly_free(&cur);
+        return spia__fail(status, SPIA_ERROR_INTERNAL, -1,
+                          "refined to %d vertices, %d faces and %lld corners, not the %lld, %lld and %lld counted",
+                          (int)cur.n, (int)cur.f, (long long)cur.corners, (long long)nv, (long long)nf, (long long)nc);
     }
+    if (spia__refine_level_done(clock, levels)) {
+        poly_free(&cur);
+        return spia__refine_cancelled(status, clock);
+    }
+    for (int64_t k = 0; k < 3 * (int64_t)cur.n; ++k) positions[k] = (float)cur.P[k];
+    memcpy(face_sizes, cur.sizes, sizeof(int32_t) * (size_t)cur.f);
+    memcpy(face_vertices, cur.fv, sizeof(int32_t) * (size_t)cur.corners);
     poly_free(&cur);
+counted:
+    *vertex_count = (int32_t)nv;
+    *face_count = (int32_t)nf;
+    *corner_count = nc;
     spia__ok(status);
     return SPIA_OK;
 }

@@ -285,27 +285,55 @@ enum { SPIA__ROW_NOT_CLOSED = -1, SPIA__ROW_OUT_OF_MEMORY = -2 };
 int32_t spia__catmark_closed_row(const spia_mesh *mesh, const spia_adjacency *adj, const spia_catmark_sharpness *sh,
                                  int32_t v, spia_row_scratch *scratch);
 
+/* spia_refine's progress (interpolate.c): the options' callback at the end
+ * of each level (of the last one once its limit positions are
+ * computed, before any output is written; levels 0: once) and, from spia__refine_tick, once
+ * REFINE_INTERVAL seconds have passed since the last call; iteration is
+ * the level under way (1 to levels) and relative_error the share of the
+ * refinement done (a level's share by its face count: four times the one
+ * before).  Once it has asked
+ * to stop, every later call says so without calling it again. */
+typedef struct spia__refine_clock {
+    spia_progress_fn fn;
+    void *user;
+    double last;
+    int32_t level, levels;
+    int cancelled;
+} spia__refine_clock;
+void spia__refine_clock_start(spia__refine_clock *clock, const spia_options *options, int32_t levels);
+/* Nonzero when cancelled (checks the clock only every 1024 calls of k). */
+int spia__refine_tick(spia__refine_clock *clock, int64_t k);
+/* Level `level` finished: the callback is called; nonzero when cancelled. */
+int spia__refine_level_done(spia__refine_clock *clock, int32_t level);
+spia_result spia__refine_cancelled(spia_status *status, const spia__refine_clock *clock);
+
 /* Loop refinement with every vertex at its limit (OpenSubdiv's rules, in
- * catmark_osd.cpp; Hoppe's, in loop.c).  Counts only when positions is NULL. */
+ * catmark_osd.cpp; Hoppe's, in loop.c).  Counts only when positions is
+ * NULL, without refining; otherwise the refinement's progress goes to
+ * clock. */
 spia_result spia__osd_refine_limit(const spia_mesh *mesh, const spia_adjacency *adj, const spia_options *options,
                                    int32_t levels, int32_t *vertex_count, int32_t *face_count, float *positions,
-                                   int32_t *faces, spia_status *status);
+                                   int32_t *faces, spia__refine_clock *clock, spia_status *status);
 spia_result spia__loop_hoppe_refine_limit(const spia_mesh *mesh, const spia_options *options, int32_t levels,
                                           int32_t *vertex_count, int32_t *face_count, float *positions,
-                                          int32_t *faces, spia_status *status);
+                                          int32_t *faces, spia__refine_clock *clock, spia_status *status);
 
 /* Two-phase Doo-Sabin (doosabin.c): limit stencils (paper eq. 2) and
  * refinement (phase one, then regular Doo-Sabin); counts only when
- * positions is NULL. */
+ * positions is NULL (the first step's checks, then the counts in closed
+ * form). */
 spia_result spia__doosabin_limit_stencils(const spia_mesh *mesh, spia_adjacency *adj,
                                           const spia_options *options, spia_stencils **out, spia_status *status);
 spia_result spia__doosabin_refine(const spia_mesh *mesh, const spia_options *options, int32_t levels,
                                   int32_t *vertex_count, int32_t *face_count, int64_t *corner_count, float *positions,
-                                  int32_t *face_sizes, int32_t *face_vertices, spia_status *status);
+                                  int32_t *face_sizes, int32_t *face_vertices, spia__refine_clock *clock,
+                                  spia_status *status);
 
-/* Loop limit stencils with Hoppe et al.'s boundary rules (loop.c). */
+/* Loop limit stencils with Hoppe et al.'s boundary rules (loop.c); clock
+ * (may be NULL): a refinement's, ticked row by row. */
 spia_result spia__loop_hoppe_limit_stencils(const spia_mesh *mesh, spia_adjacency *adj,
-                                            const spia_options *options, spia_stencils **out, spia_status *status);
+                                            const spia_options *options, spia__refine_clock *clock,
+                                            spia_stencils **out, spia_status *status);
 
 /* Rejects Loop input that is not all triangles, naming how many faces are not. */
 spia_result spia__require_triangles(const spia_mesh *mesh, spia_status *status);

@@ -18,7 +18,7 @@ static spia_result classified(const spia_mesh *m, spia_adjacency *a, const spia_
 static spia_result loop_hoppe(const spia_mesh *m, spia_adjacency *a, const spia_options *o, unsigned char *on_boundary,
                               spia_stencils **out, spia_status *status) {
     const spia_result r = classified(m, a, o, on_boundary, status);
-    return r != SPIA_OK ? r : spia__loop_hoppe_limit_stencils(m, a, o, out, status);
+    return r != SPIA_OK ? r : spia__loop_hoppe_limit_stencils(m, a, o, NULL, out, status);
 }
 static spia_result doo_sabin(const spia_mesh *m, spia_adjacency *a, const spia_options *o, unsigned char *on_boundary,
                              spia_stencils **out, spia_status *status) {
@@ -95,6 +95,55 @@ spia_result spia_interpolate(const spia_mesh *mesh, const spia_options *options,
     return r;
 }
 
+/* ---- refinement ------------------------------------------------------------ */
+
+#define REFINE_INTERVAL 0.1
+
+void spia__refine_clock_start(spia__refine_clock *c, const spia_options *o, int32_t levels) {
+    c->fn = o->progress;
+    c->user = o->progress_user_data;
+    c->last = spia__now();
+    c->level = levels > 0 ? 1 : 0;
+    c->levels = levels;
+    c->cancelled = 0;
+}
+
+/* The share of the faces of levels 1..done among those of 1..levels. */
+static double refine_share(int32_t done, int32_t levels) {
+    double part = 0.0, whole = 0.0, faces = 1.0;
+    for (int32_t l = 1; l <= levels; ++l) {
+        faces *= 4.0;
+        whole += faces;
+        if (l <= done) part += faces;
+    }
+    return whole > 0.0 ? part / whole : 1.0;
+}
+
+static int refine_call(spia__refine_clock *c, int32_t done) {
+    c->last = spia__now();
+    if (c->fn(c->user, c->level, refine_share(done, c->levels))) c->cancelled = 1;
+    return c->cancelled;
+}
+
+int spia__refine_tick(spia__refine_clock *c, int64_t k) {
+    if (!c || !c->fn || c->cancelled || (k & 1023) != 0) return c ? c->cancelled : 0;
+    if (spia__now() - c->last < REFINE_INTERVAL) return 0;
+    return refine_call(c, c->level - 1);
+}
+
+int spia__refine_level_done(spia__refine_clock *c, int32_t level) {
+    if (!c || !c->fn || c->cancelled) return c ? c->cancelled : 0;
+    c->level = level;
+    const int stop = refine_call(c, level);
+    if (level < c->levels) c->level = level + 1;
+    return stop;
+}
+
+spia_result spia__refine_cancelled(spia_status *status, const spia__refine_clock *c) {
+    return spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled refining level %d of %d", (int)c->level,
+                      (int)c->levels);
+}
+
 static spia_result refine_dispatch(const spia_mesh *mesh, const spia_options *options, int32_t levels,
                                    int32_t *vertex_count, int32_t *face_count, int64_t *corner_count,
                                    float *positions, int32_t *face_sizes, int32_t *faces, spia_status *status) {
@@ -108,17 +157,22 @@ static spia_result refine_dispatch(const spia_mesh *mesh, const spia_options *op
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "levels must be 0 to 8, got %d", (int)levels);
     r = spia_mesh_validate(mesh, status);
     if (r != SPIA_OK) return r;
+    spia__refine_clock clock;
+    spia__refine_clock_start(&clock, &opt, levels);
+    spia__refine_clock *tick = positions ? &clock : NULL;
     if (opt.scheme == SPIA_SCHEME_DOO_SABIN)
         return spia__doosabin_refine(mesh, &opt, levels, vertex_count, face_count, corner_count, positions,
-                                     face_sizes, faces, status);
+                                     face_sizes, faces, tick, status);
     if ((r = spia__require_triangles(mesh, status)) != SPIA_OK) return r;
     if (opt.boundary_rule == SPIA_BOUNDARY_RULE_HOPPE) {
-        r = spia__loop_hoppe_refine_limit(mesh, &opt, levels, vertex_count, face_count, positions, faces, status);
+        r = spia__loop_hoppe_refine_limit(mesh, &opt, levels, vertex_count, face_count, positions, faces, tick,
+                                          status);
     } else {
         spia_adjacency adj;
         r = spia__adjacency_build(mesh, &adj, status);
         if (r != SPIA_OK) return r;
-        r = spia__osd_refine_limit(mesh, &adj, &opt, levels, vertex_count, face_count, positions, faces, status);
+        r = spia__osd_refine_limit(mesh, &adj, &opt, levels, vertex_count, face_count, positions, faces, tick,
+                                   status);
         spia__adjacency_free(&adj);
     }
     if (r == SPIA_OK) {

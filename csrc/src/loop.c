@@ -79,7 +79,7 @@ static int32_t fan_count(const spia_mesh *m, const spia_adjacency *a, int32_t v,
 }
 
 spia_result spia__loop_hoppe_limit_stencils(const spia_mesh *m, spia_adjacency *a, const spia_options *opt,
-                                            spia_stencils **out, spia_status *status) {
+                                            spia__refine_clock *clock, spia_stencils **out, spia_status *status) {
     (void)opt;
     *out = NULL;
     const int32_t n = m->vertex_count;
@@ -98,6 +98,12 @@ spia_result spia__loop_hoppe_limit_stencils(const spia_mesh *m, spia_adjacency *
     /* Valence, boundary, and the manifold test the boundary rules need. */
     int64_t nonmanifold = 0, first_bad = -1, nnz = 0;
     for (int32_t v = 0; v < n; ++v) {
+        if (spia__refine_tick(clock, v)) {
+            free(nb);
+            free(valence);
+            free(boundary);
+            return spia__refine_cancelled(status, clock);
+        }
         const int64_t faces = a->first[v + 1] - a->first[v];
         int32_t k = spia__vertex_neighbours(m, a, v, nb, fe, cap), boundary_edges = 0, bad = 0;
         for (int32_t i = 0; i < k; ++i) {
@@ -131,6 +137,13 @@ spia_result spia__loop_hoppe_limit_stencils(const spia_mesh *m, spia_adjacency *
     }
     int64_t pos = 0;
     for (int32_t v = 0; v < n; ++v) {
+        if (spia__refine_tick(clock, v)) {
+            spia_stencils_free(s);
+            free(nb);
+            free(valence);
+            free(boundary);
+            return spia__refine_cancelled(status, clock);
+        }
         s->offsets[v] = pos;
         if (a->first[v + 1] == a->first[v]) { /* used by no face: stays put */
             s->indices[pos] = v;
@@ -189,7 +202,7 @@ typedef struct tri_level {
 } tri_level;
 
 /* One subdivision step: old vertices keep their indices, edge points follow. */
-static spia_result hoppe_step(const tri_level *in, tri_level *out) {
+static spia_result hoppe_step(const tri_level *in, tri_level *out, spia__refine_clock *clock) {
     spia_result r = SPIA_ERROR_OUT_OF_MEMORY;
     int32_t *sizes = (int32_t *)malloc(sizeof(int32_t) * ((size_t)in->f + 1));
     float *dummy = (float *)calloc(3 * (size_t)in->n + 3, sizeof(float));
@@ -213,6 +226,10 @@ static spia_result hoppe_step(const tri_level *in, tri_level *out) {
     /* Edges (v, w) with v < w, numbered vertex by vertex. */
     int64_t edges = 0;
     for (int32_t v = 0; v < in->n; ++v) {
+        if (spia__refine_tick(clock, v)) {
+            r = SPIA_ERROR_CANCELLED;
+            goto done;
+        }
         int32_t k = spia__vertex_neighbours(&m, &adj, v, nb, cnt, cap);
         valence[v] = k;
         bnd[2 * v] = bnd[2 * v + 1] = -1;
@@ -228,6 +245,10 @@ static spia_result hoppe_step(const tri_level *in, tri_level *out) {
     edge_faces = (int64_t *)calloc((size_t)edges + 1, sizeof(int64_t));
     if (!edge_other || !edge_opp || !edge_faces) goto done;
     for (int32_t v = 0; v < in->n; ++v) {
+        if (spia__refine_tick(clock, v)) {
+            r = SPIA_ERROR_CANCELLED;
+            goto done;
+        }
         int32_t k = spia__vertex_neighbours(&m, &adj, v, nb, cnt, cap);
         int64_t e = first_edge[v];
         for (int32_t i = 0; i < k; ++i)
@@ -235,6 +256,10 @@ static spia_result hoppe_step(const tri_level *in, tri_level *out) {
     }
     for (int32_t f = 0; f < in->f; ++f)
         for (int c = 0; c < 3; ++c) {
+            if (c == 0 && spia__refine_tick(clock, f)) {
+                r = SPIA_ERROR_CANCELLED;
+                goto done;
+            }
             int32_t a = in->F[3 * f + c], b = in->F[3 * f + (c + 1) % 3], opp = in->F[3 * f + (c + 2) % 3];
             int32_t lo = a < b ? a : b, hi = a < b ? b : a;
             int64_t e = first_edge[lo];
@@ -249,6 +274,10 @@ static spia_result hoppe_step(const tri_level *in, tri_level *out) {
     out->F = (int32_t *)malloc(sizeof(int32_t) * 3 * (size_t)out->f);
     if (!out->P || !out->F) goto done;
     for (int32_t v = 0; v < in->n; ++v) {
+        if (spia__refine_tick(clock, v)) {
+            r = SPIA_ERROR_CANCELLED;
+            goto done;
+        }
         double *q = out->P + 3 * (int64_t)v;
         const double *p = in->P + 3 * (int64_t)v;
         if (valence[v] == 0) {
@@ -309,13 +338,13 @@ done:
 
 spia_result spia__loop_hoppe_refine_limit(const spia_mesh *m, const spia_options *opt, int32_t levels,
                                           int32_t *vertex_count, int32_t *face_count, float *positions,
-                                          int32_t *faces, spia_status *status) {
+                                          int32_t *faces, spia__refine_clock *clock, spia_status *status) {
     /* The manifold test and the limit masks of the control mesh first. */
     spia_adjacency adj;
     spia_result r = spia__adjacency_build(m, &adj, status);
     if (r != SPIA_OK) return r;
     spia_stencils *check = NULL;
-    r = spia__loop_hoppe_limit_stencils(m, &adj, opt, &check, status);
+    r = spia__loop_hoppe_limit_stencils(m, &adj, opt, NULL, &check, status);
     spia_stencils_free(check);
     if (r != SPIA_OK) {
         spia__adjacency_free(&adj);
@@ -364,11 +393,23 @@ spia_result spia__loop_hoppe_refine_limit(const spia_mesh *m, const spia_options
     memcpy(cur.F, m->face_vertices, sizeof(int32_t) * 3 * (size_t)cur.f);
     for (int32_t l = 0; l < levels; ++l) {
         tri_level next;
-        r = hoppe_step(&cur, &next);
+        r = hoppe_step(&cur, &next, clock);
         free(cur.P);
         free(cur.F);
+        if (r == SPIA_ERROR_CANCELLED) return spia__refine_cancelled(status, clock);
         if (r != SPIA_OK) return spia__fail(status, r, -1, "out of memory refining the surface");
         cur = next;
+        if (l + 1 < levels && spia__refine_level_done(clock, l + 1)) {
+            free(cur.P);
+            free(cur.F);
+            return spia__refine_cancelled(status, clock);
+        }
+    }
+    if (cur.n != nv || cur.f != nf) {
+        free(cur.P);
+        free(cur.F);
+        return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "refined to %d vertices and %d faces, not the %lld and %lld "
+                          "counted", (int)cur.n, (int)cur.f, (long long)nv, (long long)nf);
     }
     /* Limit positions of the refined mesh: its own Hoppe masks. */
     int32_t *sizes = (int32_t *)malloc(sizeof(int32_t) * (size_t)cur.f);
@@ -382,11 +423,12 @@ spia_result spia__loop_hoppe_refine_limit(const spia_mesh *m, const spia_options
         spia_mesh fine = {cur.n, fpos, cur.f, sizes, cur.F, 0, NULL, NULL, NULL};
         r = spia__adjacency_build(&fine, &adj, status);
         if (r == SPIA_OK) {
-            r = spia__loop_hoppe_limit_stencils(&fine, &adj, opt, &s, status);
+            r = spia__loop_hoppe_limit_stencils(&fine, &adj, opt, clock, &s, status);
             spia__adjacency_free(&adj);
         }
+        if (r == SPIA_OK) spia_stencils_apply(s, cur.P, lim);
+        if (r == SPIA_OK && spia__refine_level_done(clock, levels)) r = spia__refine_cancelled(status, clock);
         if (r == SPIA_OK) {
-            spia_stencils_apply(s, cur.P, lim);
             for (int64_t k = 0; k < 3 * (int64_t)cur.n; ++k) positions[k] = (float)lim[k];
             memcpy(faces, cur.F, sizeof(int32_t) * 3 * (size_t)cur.f);
             spia__ok(status);

@@ -154,7 +154,115 @@ static void check_warm_start(const tmesh *m0, const char *name) {
     free(warm);
 }
 
+/* ---- refinement: counts asked for first, progress, cancel ----------------- */
+
+typedef struct refine_calls {
+    int count, stop_at, bad;
+    int32_t last_level;
+    double last_share;
+} refine_calls;
+
+static int record_refine(void *user, int32_t iteration, double share) {
+    refine_calls *c = (refine_calls *)user;
+    if (iteration < c->last_level || share < c->last_share || share > 1.0) ++c->bad;
+    c->last_level = iteration, c->last_share = share;
+    return ++c->count == c->stop_at;
+}
+
+/* spia_refine_size's counts (now in closed form) fill the buffers exactly:
+ * a canary after each buffer stays; the corners are the face sizes' sum;
+ * every face vertex is in range.  The progress callback sees levels
+ * rising and shares rising to 1 at the end; stopping it at its first call
+ * gives SPIA_ERROR_CANCELLED and leaves the buffers as they were. */
+static void check_refine(const tmesh *m, const char *name, spia_options o) {
+    spia_mesh mesh = tmesh_view(m);
+    for (int32_t levels = 0; levels <= 3; ++levels) {
+        int32_t nv = 0, nf = 0;
+        int64_t nc = 0;
+        spia_status st;
+        spia_result r = spia_refine_size(&mesh, &o, levels, &nv, &nf, &nc, &st);
+        CHECK(r == SPIA_OK, "%s level %d size: %s", name, (int)levels, st.message);
+        if (r != SPIA_OK) continue;
+        const float canary = 12345.0f;
+        float *pos = (float *)malloc(sizeof(float) * (3 * (size_t)nv + 1));
+        int32_t *fs = (int32_t *)malloc(sizeof(int32_t) * ((size_t)nf + 1));
+        int32_t *fv = (int32_t *)malloc(sizeof(int32_t) * ((size_t)nc + 1));
+        for (int64_t k = 0; k <= 3 * (int64_t)nv; ++k) pos[k] = canary;
+        for (int64_t k = 0; k <= nf; ++k) fs[k] = -7;
+        for (int64_t k = 0; k <= nc; ++k) fv[k] = -7;
+        refine_calls calls = {0, 0, 0, 0, 0.0};
+        spia_options with = o;
+        with.progress = record_refine, with.progress_user_data = &calls;
+        r = spia_refine(&mesh, &with, levels, pos, fs, fv, &st);
+        CHECK(r == SPIA_OK, "%s level %d: %s", name, (int)levels, st.message);
+        CHECK(pos[3 * (int64_t)nv] == canary && fs[nf] == -7 && fv[nc] == -7, "%s level %d wrote past the counts",
+              name, (int)levels);
+        int64_t corners = 0, bad_index = 0, unwritten = 0;
+        for (int32_t f = 0; f < nf; ++f) corners += fs[f];
+        for (int64_t k = 0; k < nc; ++k) bad_index += fv[k] < 0 || fv[k] >= nv;
+        for (int64_t k = 0; k < 3 * (int64_t)nv; ++k) unwritten += pos[k] == canary;
+        CHECK(corners == nc && bad_index == 0 && unwritten == 0,
+              "%s level %d: corners %lld of %lld, %lld bad indices, %lld positions unwritten", name, (int)levels,
+              (long long)corners, (long long)nc, (long long)bad_index, (long long)unwritten);
+        CHECK(calls.count >= levels && calls.bad == 0 && calls.last_level == levels && calls.last_share == 1.0,
+              "%s level %d: %d progress calls, %d out of order, the last (%d, %g)", name, (int)levels, calls.count,
+              calls.bad, (int)calls.last_level, calls.last_share);
+        /* Cancelled at the first call: nothing written. */
+        for (int64_t k = 0; k < 3 * (int64_t)nv; ++k) pos[k] = canary;
+        for (int64_t k = 0; k < nf; ++k) fs[k] = -7;
+        for (int64_t k = 0; k < nc; ++k) fv[k] = -7;
+        refine_calls stop = {0, 1, 0, 0, 0.0};
+        with.progress_user_data = &stop;
+        r = spia_refine(&mesh, &with, levels, pos, fs, fv, &st);
+        CHECK(r == SPIA_ERROR_CANCELLED && stop.count == 1, "%s level %d: cancel gave %s after %d calls", name,
+              (int)levels, spia_result_name(r), stop.count);
+        CHECK(strstr(st.message, "cancelled") != NULL, "message: %s", st.message);
+        unwritten = 0;
+        for (int64_t k = 0; k < 3 * (int64_t)nv; ++k) unwritten += pos[k] == canary;
+        for (int64_t k = 0; k < nf; ++k) unwritten += fs[k] == -7;
+        for (int64_t k = 0; k < nc; ++k) unwritten += fv[k] == -7;
+        CHECK(unwritten == 3 * (int64_t)nv + nf + nc, "%s level %d: a cancelled refinement wrote %lld values", name,
+              (int)levels, (long long)(3 * (int64_t)nv + nf + nc - unwritten));
+        free(pos);
+        free(fs);
+        free(fv);
+    }
+}
+
+static void check_refinements(void) {
+    spia_options loop = spia_options_default(), hoppe, ds = spia_options_default();
+    loop.scheme = SPIA_SCHEME_LOOP;
+    hoppe = loop;
+    hoppe.boundary_rule = SPIA_BOUNDARY_RULE_HOPPE;
+    ds.scheme = SPIA_SCHEME_DOO_SABIN;
+    tmesh torus = make_torus(12, 8, 1), grid = make_grid(5, 4), open, fin;
+    /* The grid triangulated (open), and with a vertex no face uses. */
+    memset(&open, 0, sizeof open);
+    for (int32_t v = 0; v < grid.nv; ++v) tmesh_vertex(&open, grid.pos[3 * v], grid.pos[3 * v + 1], grid.pos[3 * v + 2]);
+    for (int32_t f = 0; f < grid.nf; ++f) {
+        const int32_t *q = grid.fv + 4 * f;
+        tmesh_tri(&open, q[0], q[1], q[2]);
+        tmesh_tri(&open, q[0], q[2], q[3]);
+    }
+    tmesh_vertex(&open, 9.0, 9.0, 9.0);
+    /* Three triangles on one edge (non-manifold). */
+    memset(&fin, 0, sizeof fin);
+    tmesh_vertex(&fin, 0, 0, 0), tmesh_vertex(&fin, 1, 0, 0), tmesh_vertex(&fin, 0.5, 1, 0);
+    tmesh_vertex(&fin, 0.5, -1, 0), tmesh_vertex(&fin, 0.5, 0, 1);
+    tmesh_tri(&fin, 0, 1, 2), tmesh_tri(&fin, 1, 0, 3), tmesh_tri(&fin, 0, 1, 4);
+    check_refine(&torus, "Loop torus", loop);
+    check_refine(&open, "Loop open grid", loop);
+    check_refine(&open, "Loop open grid, Hoppe", hoppe);
+    check_refine(&fin, "Loop fin", loop);
+    tmesh quads = make_torus(12, 8, 0), cube = make_cut_cube(3);
+    check_refine(&quads, "Doo-Sabin torus", ds);
+    check_refine(&cube, "Doo-Sabin cube", ds);
+    tmesh_free(&torus), tmesh_free(&grid), tmesh_free(&open), tmesh_free(&fin), tmesh_free(&quads),
+        tmesh_free(&cube);
+}
+
 int main(void) {
+    check_refinements();
     tmesh m;
     m = make_torus(12, 8, 0);
     check_mesh(&m, "quad torus");
