@@ -1002,10 +1002,11 @@ def limit_arrays(mesh, settings, positions=None):
     return limit_work(mesh, settings, positions)()
 
 
-def limit_work(mesh, settings, positions=None):
+def limit_work(mesh, settings, positions=None, progress=None):
     """limit_arrays in two halves: reads the mesh here and returns the
     library's share, a function that refines and touches nothing of
-    Blender's (InterpolateJob runs it on another thread)."""
+    Blender's (InterpolateJob runs it on another thread).  progress(level,
+    share_done) -> bool, as native.refine's: True cancels."""
     doo_sabin = settings["scheme"] == 'DOO_SABIN'
     _require_library()
     arrays = mesh_arrays(mesh)
@@ -1018,14 +1019,14 @@ def limit_work(mesh, settings, positions=None):
         return lambda: native.refine(cage, int(settings["levels"]), scheme='LOOP',
                                      boundary_rule=settings["boundary_rule"],
                                      boundary_smooth=settings["boundary_smooth"],
-                                     use_creases=bool(settings["use_creases"]))
+                                     use_creases=bool(settings["use_creases"]), progress=progress)
     values = face_shape_parameters(mesh, settings)
 
     def run():
         try:
             return native.refine(cage, int(settings["levels"]), scheme='DOO_SABIN', use_creases=False,
                                  shape_parameter=float(settings["shape_parameter"]),
-                                 face_shape_parameters=values)
+                                 face_shape_parameters=values, progress=progress)
         except native.PiaError as error:
             named = _shape_error(error, values, settings)
             if named is not None:
@@ -1349,7 +1350,9 @@ def interpolate(obj, *, context=None, name=None, progress=None, live=False, **se
     Edit Mode), pia_fit_scan_not_painted why not.
 
     progress(iteration, relative_error) -> bool: return True to cancel
-    (for a Surface fit: progress(round, mean relative distance)).
+    (for a Surface fit: progress(round, mean relative distance)); while a
+    Loop or Doo-Sabin preview is refined, it is called again with the
+    solve's last figures about every 0.1 s.
 
     live=True turns the new cage's Live switch on (live.set_live): every
     later change of obj's vertex positions solves the cage again, in place.
@@ -1400,6 +1403,16 @@ def interpolate_steps(obj, *, context=None, name=None, progress=None, live=False
     loop = s["scheme"] == 'LOOP'
     separate_limit = s["scheme"] in LIMIT_SCHEMES
     target = find_target(obj, s)
+    refining = None
+    if progress is not None and separate_limit:
+        user, last = progress, [0, 0.0]
+
+        def progress(iteration, value):  # the solve's: remembered for the refinement's calls
+            last[:] = iteration, value
+            return user(iteration, value)
+
+        def refining(_level, _share):  # the solve's last figures again, so that a cancel is heard
+            return user(*last)
     scan = (yield scan_work(target, obj, context, progress)) if target is not None else None
     mesh = None
     made = []  # meshes made here: removed again on failure
@@ -1422,7 +1435,7 @@ def interpolate_steps(obj, *, context=None, name=None, progress=None, live=False
                 if named is None:
                     raise
                 raise named from None
-            limit = (yield limit_work(data, s, cage)) if separate_limit else None
+            limit = (yield limit_work(data, s, cage, progress=refining)) if separate_limit else None
         except native.PiaError as error:
             hinted = cleanup_hint(error, data, s)
             if hinted is not None:

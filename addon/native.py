@@ -744,17 +744,19 @@ def interpolate(mesh, scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases
 
 
 def refine(mesh, levels, scheme="LOOP", boundary_rule="SMOOTH", boundary_smooth="ALL", use_creases=True,
-           shape_parameter=0.5, face_shape_parameters=None):
+           shape_parameter=0.5, face_shape_parameters=None, progress=None):
     """The surface of ``mesh`` (a cage) refined ``levels`` times, for the
     schemes Blender cannot show: ``(positions (M, 3) float32, face_sizes
     (K,) int32, face_vertices int32)``.  LOOP: triangles, every vertex at its
     limit position, rows 0..N-1 the limit points of the N control vertices.
     DOO_SABIN: the refined control mesh (its face centroids lie on the
-    limit surface)."""
+    limit surface).  ``progress(level, share_done) -> bool`` is called at
+    the end of each level and about every 0.1 s in between; True cancels
+    (:class:`PiaCancelled`)."""
     lib = _library()
     opts, _keep = _options(scheme=scheme, boundary_smooth=boundary_smooth, use_creases=use_creases,
                            boundary_rule=boundary_rule, shape_parameter=shape_parameter,
-                           face_shape_parameters=face_shape_parameters)
+                           face_shape_parameters=face_shape_parameters, progress=progress)
     cm = mesh._c()
     status = _Status()
     nv, nf, nc = ctypes.c_int32(), ctypes.c_int32(), ctypes.c_int64()

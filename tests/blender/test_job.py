@@ -51,6 +51,31 @@ def test_job_limit_schemes_make_what_interpolate_makes(scheme):
     assert np.array_equal(positions(limit), positions(plain_limit))
 
 
+@pytest.mark.parametrize("scheme", ['LOOP', 'DOO_SABIN'])
+def test_job_cancel_during_the_preview_refinement_makes_nothing(scheme):
+    # The refinement calls progress with the solve's last figures again: the
+    # first call after the solve's first iteration that repeats the one
+    # before comes from it.
+    source = shapes.ico_sphere() if scheme == 'LOOP' else shapes.cube()
+    before = positions(source)
+    count = counts()
+    calls = []
+
+    def progress(iteration, error):
+        calls.append((iteration, error, threading.get_ident()))
+        if len(calls) >= 2 and iteration >= 1 and calls[-1][:2] == calls[-2][:2]:
+            job.cancel()
+        return False
+    job = api.InterpolateJob(source, scheme=scheme, levels=3, progress=progress)
+    with pytest.raises(native.PiaCancelled) as e:
+        job.wait()
+    assert "cancelled refining level" in str(e.value), str(e.value)
+    assert job.done and job.cancelled
+    assert calls[-1][2] != threading.get_ident()
+    assert counts() == count
+    assert np.array_equal(positions(source), before)
+
+
 def test_job_fit_runs_the_library_off_this_thread_and_matches():
     scan = fine_sphere(segments=64, rings=32)
     cage = quad_sphere(cuts=2)
