@@ -294,9 +294,12 @@ def main(argv):
         settings["fit_paint_scan"] = True
 
     progress = None
-    if sys.stdout.isatty():
-        def progress(iteration, error):
-            sys.stdout.write("\riteration %d: max error %.3g" % (iteration, error))
+    if sys.stdout.isatty():  # one line, rewritten: a Surface fit's rounds, or the solver's iterations
+        surface = "target" in settings and settings.get("fit", package.api.DEFAULT_SETTINGS["fit"]) == 'SURFACE'
+        line = "\rround %d: mean distance %.3g of the scan's diagonal" if surface else "\riteration %d: max error %.3g"
+
+        def progress(iteration, value):
+            sys.stdout.write(line % (iteration, value))
             sys.stdout.flush()
             return False
 

@@ -2,6 +2,7 @@
 """Script API (subdiv_pia.interpolate) and the command line (cli.py)."""
 
 import os
+import re
 import subprocess
 import sys
 
@@ -128,6 +129,27 @@ def run_cli(*args):
     return subprocess.run(cli_command() + list(args), capture_output=True, text=True, timeout=120)
 
 
+def run_cli_on_terminal(*args):
+    """(exit status, what it wrote) for cli.py with its output on a
+    terminal (a pseudo-terminal), where it shows its progress."""
+    import pty
+    main, side = pty.openpty()
+    with subprocess.Popen(cli_command() + list(args), stdin=subprocess.DEVNULL, stdout=side, stderr=side) as run:
+        os.close(side)
+        chunks = []
+        while True:
+            try:
+                chunk = os.read(main, 65536)
+            except OSError:  # the other side closed (Linux raises EIO)
+                break
+            if not chunk:
+                break
+            chunks.append(chunk)
+        status = run.wait(timeout=120)
+    os.close(main)
+    return status, b"".join(chunks).decode("utf-8", "replace")
+
+
 def test_cli_uses_its_own_package():
     """cli.py beside the package in use imports that package (the installed
     copy when SUBDIV_PIA_PACKAGE is set) and its library."""
@@ -148,6 +170,15 @@ def test_cli_writes_blend(tmp_path):
     with bpy.data.libraries.load(output) as (data_from, data_to):
         names = list(data_from.objects)
     assert "mushroom_pia" in names and "mushroom" in names
+
+
+def test_cli_progress_on_a_terminal(tmp_path):
+    output = str(tmp_path / "mushroom_cage.blend")
+    status, text = run_cli_on_terminal(os.path.join(DATA, "mushroom.obj"), output, "--method", "PIA")
+    assert status == 0, text
+    lines = re.findall(r"\riteration (\d+): max error ([0-9.e+-]+)", text)
+    assert len(lines) >= 2 and int(lines[-1][0]) >= 2, text
+    assert "round" not in text
 
 
 def test_cli_error_exit_status(tmp_path):

@@ -6,6 +6,7 @@ attributes and properties on the result, transforms, progress and the
 command line."""
 
 import os
+import re
 import subprocess
 
 import bmesh
@@ -609,7 +610,7 @@ def test_panel_passes_the_target():
 
 
 def test_cli_fits_to_a_target(tmp_path):
-    from test_api_cli import run_cli
+    from test_api_cli import run_cli, run_cli_on_terminal
     fine_sphere("Scan", segments=64, rings=32)
     quad_sphere("Cage", cuts=2)
     path = str(tmp_path / "scene.blend")
@@ -632,3 +633,9 @@ def test_cli_fits_to_a_target(tmp_path):
     assert new_obj["pia_fit_cutoff"] == pytest.approx(0.05)
     result = run_cli(path, output, "--object", "Cage", "--target", "NoSuchScan")
     assert result.returncode == 1 and "NoSuchScan" in result.stderr
+    # On a terminal it shows each round and its mean distance.
+    status, text = run_cli_on_terminal(path, output, "--object", "Cage", "--target", "Scan", "--fit-cutoff", "0.05")
+    assert status == 0, text
+    rounds = re.findall(r"\rround (\d+): mean distance ([0-9.e+-]+) of the scan's diagonal", text)
+    assert rounds and max(int(r) for r, _ in rounds) >= 2, text
+    assert "max error" not in text
