@@ -214,13 +214,19 @@ def test_menu_and_panel_registered():
     assert math.isclose(settings.tolerance, 1e-6, rel_tol=1e-6)
 
 
-def test_edit_mode_edits_are_used():
+def grid_edited_in_edit_mode():
+    """An open grid in Edit Mode, its vertex 0 raised by 0.5 there (not yet in its mesh)."""
     source = shapes.open_grid()
     bpy.ops.object.mode_set(mode='EDIT')
     bm = bmesh.from_edit_mesh(source.data)
     bm.verts.ensure_lookup_table()
     bm.verts[0].co.z += 0.5
     bmesh.update_edit_mesh(source.data)
+    return source
+
+
+def test_edit_mode_edits_are_used():
+    source = grid_edited_in_edit_mode()
     assert run_operator() == {'FINISHED'}
     assert source.mode == 'OBJECT'
     targets = positions(source.data).astype(np.float64)
@@ -232,12 +238,7 @@ def test_edit_mode_kept_when_refused():
     """Input refused after the operator left Edit Mode (Doo-Sabin needs a
     closed mesh): the source is back in Edit Mode with its edit, and
     nothing is made."""
-    source = shapes.open_grid()
-    bpy.ops.object.mode_set(mode='EDIT')
-    bm = bmesh.from_edit_mesh(source.data)
-    bm.verts.ensure_lookup_table()
-    bm.verts[0].co.z += 0.5
-    bmesh.update_edit_mesh(source.data)
+    source = grid_edited_in_edit_mode()
     expect_error(r"closed", scheme='DOO_SABIN')
     assert source.mode == 'EDIT'
     assert bpy.context.view_layer.objects.active == source
