@@ -462,12 +462,18 @@ SPIA_API spia_result spia_interpolate(const spia_mesh *mesh, const spia_options 
  * spia_refine calls the options' progress callback on the calling thread
  * at the end of each level (the last one's once its positions are
  * computed, before anything is written) and in between about every 0.1 s
- * of the work, except inside OpenSubdiv's refinement of the topology (the
- * LOOP rule SMOOTH: one call for all levels, about 0.15 s per million
- * faces made): iteration is the level under way (1 to levels;
- * 0 for levels 0) and relative_error the share of the refinement done, by
- * face counts (each level four times the one before), 1 at the last call.
- * Returning nonzero cancels: SPIA_ERROR_CANCELLED, nothing written.
+ * from its own loops.  Some steps are single calls that grow with the
+ * faces made: OpenSubdiv's refinement of the topology for the LOOP rule
+ * SMOOTH (one call for all levels, about 0.15 s per million faces made),
+ * a level's adjacency and, for LOOP, its
+ * interpolation, limit positions and the writing of the output.  Measured
+ * on a 131k-triangle cage refined three times (8.4 million faces):
+ * at most 0.11 s without a call for DOO_SABIN, 0.5 s for LOOP with
+ * Hoppe's rule, 1.2 s for SMOOTH.  iteration is the level under way (1 to
+ * levels; 0 for levels 0) and relative_error the share of the refinement
+ * done, by face counts (each level four times the one before), 1 at the
+ * last call.  Returning nonzero cancels: SPIA_ERROR_CANCELLED, nothing
+ * written.
  */
 SPIA_API spia_result spia_refine_size(const spia_mesh *mesh, const spia_options *options, int32_t levels,
                                       int32_t *vertex_count, int32_t *face_count, int64_t *corner_count,

@@ -262,8 +262,22 @@ spia_result spia__doosabin_refine(const spia_mesh *m, const spia_options *o, int
     spia_result r = spia__adjacency_build(m, &a, status);
     if (r != SPIA_OK) return r;
     r = check_input(m, &a, o, status);
+    /* A vertex on two faces becomes a two-sided face in the first step,
+     * which the second cannot refine (two of its edges join the same two
+     * vertices): refused here, before any counting or allocating. */
+    int64_t on_two = 0, first_on_two = -1;
+    for (int32_t v = 0; r == SPIA_OK && levels >= 2 && v < m->vertex_count; ++v)
+        if (a.first[v + 1] - a.first[v] == 2) {
+            if (first_on_two < 0) first_on_two = v;
+            ++on_two;
+        }
     spia__adjacency_free(&a);
     if (r != SPIA_OK) return r;
+    if (on_two)
+        return spia__fail(status, SPIA_ERROR_TOPOLOGY, first_on_two,
+                          "Doo-Sabin refinement beyond one level needs every vertex on three or more faces: %lld "
+                          "vertices are on two (first: vertex %lld); dissolve them or show one level",
+                          (long long)on_two, (long long)first_on_two);
     poly_level cur;
     cur.n = m->vertex_count;
     cur.f = m->face_count;

@@ -135,7 +135,7 @@ int spia__refine_level_done(spia__refine_clock *c, int32_t level) {
     if (!c || !c->fn || c->cancelled) return c ? c->cancelled : 0;
     c->level = level;
     const int stop = refine_call(c, level);
-    if (level < c->levels) c->level = level + 1;
+    if (!stop && level < c->levels) c->level = level + 1;
     return stop;
 }
 

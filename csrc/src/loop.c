@@ -112,7 +112,11 @@ spia_result spia__loop_hoppe_limit_stencils(const spia_mesh *m, spia_adjacency *
         }
         valence[v] = k;
         boundary[v] = boundary_edges > 0;
-        if (faces > 0 && (bad || (boundary_edges != 0 && boundary_edges != 2) || fan_count(m, a, v, parent) != 1)) {
+        /* An interior vertex on two triangles: they share all three corners
+         * (a doubled triangle, closed on itself), and its edges are not the
+         * two-sided edges the rules need. */
+        if (faces > 0 && (bad || (boundary_edges != 0 && boundary_edges != 2) || (boundary_edges == 0 && k == 2) ||
+                          fan_count(m, a, v, parent) != 1)) {
             if (first_bad < 0) first_bad = v;
             ++nonmanifold;
         }
@@ -123,8 +127,8 @@ spia_result spia__loop_hoppe_limit_stencils(const spia_mesh *m, spia_adjacency *
         free(valence);
         free(boundary);
         return spia__fail(status, SPIA_ERROR_TOPOLOGY, first_bad,
-                          "Hoppe's boundary rules need a manifold mesh: %lld vertices are non-manifold "
-                          "(first: vertex %lld); use the SMOOTH boundary rule or clean the mesh",
+                          "Hoppe's boundary rules need a manifold mesh: %lld vertices are non-manifold or on a "
+                          "doubled triangle (first: vertex %lld); use the SMOOTH boundary rule or clean the mesh",
                           (long long)nonmanifold, (long long)first_bad);
     }
 

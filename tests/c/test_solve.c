@@ -216,7 +216,9 @@ static void check_refine(const tmesh *m, const char *name, spia_options o) {
         r = spia_refine(&mesh, &with, levels, pos, fs, fv, &st);
         CHECK(r == SPIA_ERROR_CANCELLED && stop.count == 1, "%s level %d: cancel gave %s after %d calls", name,
               (int)levels, spia_result_name(r), stop.count);
-        CHECK(strstr(st.message, "cancelled") != NULL, "message: %s", st.message);
+        char expected[64];
+        snprintf(expected, sizeof expected, "cancelled refining level %d of %d", levels > 0 ? 1 : 0, (int)levels);
+        CHECK(strstr(st.message, expected) != NULL, "message: %s (expected %s)", st.message, expected);
         unwritten = 0;
         for (int64_t k = 0; k < 3 * (int64_t)nv; ++k) unwritten += pos[k] == canary;
         for (int64_t k = 0; k < nf; ++k) unwritten += fs[k] == -7;
@@ -257,8 +259,39 @@ static void check_refinements(void) {
     tmesh quads = make_torus(12, 8, 0), cube = make_cut_cube(3);
     check_refine(&quads, "Doo-Sabin torus", ds);
     check_refine(&cube, "Doo-Sabin cube", ds);
+    /* Refused before counting, as the refinement itself would refuse them:
+     * Hoppe's rules and a doubled triangle (two triangles on the same three
+     * vertices), Doo-Sabin beyond one level and a vertex on two faces (a
+     * cube with a vertex in the middle of an edge). */
+    tmesh doubled = make_torus(12, 8, 1);
+    const int32_t a = tmesh_vertex(&doubled, 5, 0, 0), b = tmesh_vertex(&doubled, 6, 0, 0),
+                  c = tmesh_vertex(&doubled, 5, 1, 0);
+    tmesh_tri(&doubled, a, b, c), tmesh_tri(&doubled, a, c, b);
+    spia_mesh view = tmesh_view(&doubled);
+    int32_t nv, nf;
+    int64_t nc;
+    spia_status st;
+    CHECK(spia_refine_size(&view, &hoppe, 2, &nv, &nf, &nc, &st) == SPIA_ERROR_TOPOLOGY &&
+              strstr(st.message, "doubled triangle") != NULL && st.index == a,
+          "Hoppe, doubled triangle: %s", st.message);
+    check_refine(&doubled, "Loop doubled triangle", loop);  /* OpenSubdiv's rules take it */
+    tmesh split;
+    memset(&split, 0, sizeof split);
+    static const double corner[8][3] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0},
+                                        {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}};
+    for (int i = 0; i < 8; ++i) tmesh_vertex(&split, corner[i][0], corner[i][1], corner[i][2]);
+    tmesh_vertex(&split, 0.5, 0, 0);
+    static const int32_t bottom[5] = {0, 3, 2, 1, 8}, front[5] = {0, 8, 1, 5, 4};
+    tmesh_face(&split, 5, bottom), tmesh_face(&split, 5, front);
+    tmesh_quad(&split, 4, 5, 6, 7), tmesh_quad(&split, 1, 2, 6, 5), tmesh_quad(&split, 2, 3, 7, 6),
+        tmesh_quad(&split, 3, 0, 4, 7);
+    view = tmesh_view(&split);
+    CHECK(spia_refine_size(&view, &ds, 1, &nv, &nf, &nc, &st) == SPIA_OK, "Doo-Sabin, one level: %s", st.message);
+    CHECK(spia_refine_size(&view, &ds, 2, &nv, &nf, &nc, &st) == SPIA_ERROR_TOPOLOGY &&
+              strstr(st.message, "on two") != NULL && st.index == 8,
+          "Doo-Sabin, a vertex on two faces: %s", st.message);
     tmesh_free(&torus), tmesh_free(&grid), tmesh_free(&open), tmesh_free(&fin), tmesh_free(&quads),
-        tmesh_free(&cube);
+        tmesh_free(&cube), tmesh_free(&doubled), tmesh_free(&split);
 }
 
 int main(void) {
