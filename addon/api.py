@@ -1450,6 +1450,8 @@ def interpolate_steps(obj, *, context=None, name=None, progress=None, live=False
         raise
     for made_mesh in made[:-1]:  # the cleaned copy, once triangulated
         bpy.data.meshes.remove(made_mesh)
+    view_layer = (context or bpy.context).view_layer
+    selection = (obj.select_get(view_layer=view_layer), view_layer.objects.active) if view_layer else None
     new_obj = build_object(obj, cage, report, s, context=context, name=name, mesh=mesh, limit=limit)
     from . import live as live_module
     try:
@@ -1466,17 +1468,11 @@ def interpolate_steps(obj, *, context=None, name=None, progress=None, live=False
         if live:
             live_module.set_live(new_obj, False)
         discard_object(new_obj)
-        _select_again(obj, context or bpy.context)
+        if selection is not None and view_layer.objects.get(obj.name) is not None:  # as before build_object
+            obj.select_set(selection[0], view_layer=view_layer)
+            view_layer.objects.active = selection[1]
         raise
     return new_obj, report
-
-
-def _select_again(obj, context):
-    """obj selected and active again, as before build_object chose the new object."""
-    view_layer = context.view_layer
-    if view_layer is not None and view_layer.objects.get(obj.name) is not None:
-        obj.select_set(True, view_layer=view_layer)
-        view_layer.objects.active = obj
 
 
 class _JobProgress:
@@ -1521,7 +1517,7 @@ class InterpolateJob:
 
     cancel() makes the library stop at its next progress call (a fit's or
     solve's: a few tenths of a second apart at any scale; a Loop or
-    Doo-Sabin preview's refinement has none and runs to its end); poll()
+    Doo-Sabin preview's refinement's: see native.refine); poll()
     then raises native.PiaCancelled, and nothing is made.  A cancel that
     comes after the library has finished, but before poll() saw it, cancels
     as well; so does a change of the source or the scan beneath the job (an

@@ -751,8 +751,9 @@ def refine(mesh, levels, scheme="LOOP", boundary_rule="SMOOTH", boundary_smooth=
     limit position, rows 0..N-1 the limit points of the N control vertices.
     DOO_SABIN: the refined control mesh (its face centroids lie on the
     limit surface).  ``progress(level, share_done) -> bool`` is called at
-    the end of each level and about every 0.1 s in between; True cancels
-    (:class:`PiaCancelled`)."""
+    the end of each level and about every 0.1 s in between, but for steps
+    that are single calls (spia_refine in subdiv_pia.h lists them); True
+    cancels (:class:`PiaCancelled`)."""
     lib = _library()
     opts, _keep = _options(scheme=scheme, boundary_smooth=boundary_smooth, use_creases=use_creases,
                            boundary_rule=boundary_rule, shape_parameter=shape_parameter,

@@ -166,6 +166,7 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
         obj = context.active_object
         api.check_source(obj)
         self._source_name = obj.name
+        self._source_key = api._id_key(obj)
         self._was_edit = obj.mode == 'EDIT'
         if self._was_edit:
             bpy.ops.object.mode_set(mode='OBJECT')
@@ -175,8 +176,10 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
         """Nothing was made: a source that was in Edit Mode goes back to it."""
         if not getattr(self, "_was_edit", False):
             return
+        if not api._same_id(self._source_key):  # deleted, or another object took its name
+            return
         obj = bpy.data.objects.get(self._source_name)
-        if obj is not None and obj == context.view_layer.objects.active and obj.mode != 'EDIT':
+        if obj == context.view_layer.objects.active and obj.mode != 'EDIT':
             try:
                 bpy.ops.object.mode_set(mode='EDIT')
             except RuntimeError:  # not possible here (hidden, linked): it stays in Object Mode
