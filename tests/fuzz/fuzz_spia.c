@@ -300,12 +300,16 @@ static void run_refine(const spia_mesh *m, const spia_options *o, int32_t levels
     check_status("spia_refine_size", r, &st);
     if (r != SPIA_OK) return;
     if (nv < 0 || nf < 0 || nc < 0) fuzz_fail("negative counts", "spia_refine_size");
-    float *pos = (float *)malloc(sizeof(float) * 3 * ((size_t)nv + 1));
-    int32_t *sizes = (int32_t *)malloc(sizeof(int32_t) * ((size_t)nf + 1));
-    int32_t *fv = (int32_t *)malloc(sizeof(int32_t) * ((size_t)nc + 1));
+    /* Exactly the counts (at least one element, for malloc): AddressSanitizer
+     * catches a write past them. */
+    float *pos = (float *)malloc(sizeof(float) * 3 * (size_t)(nv > 0 ? nv : 1));
+    int32_t *sizes = (int32_t *)malloc(sizeof(int32_t) * (size_t)(nf > 0 ? nf : 1));
+    int32_t *fv = (int32_t *)malloc(sizeof(int32_t) * (size_t)(nc > 0 ? nc : 1));
     if (!pos || !sizes || !fv) abort();
     r = spia_refine(m, o, levels, pos, sizes, fv, &st);
     check_status("spia_refine", r, &st);
+    /* The counts are in closed form: what they accept, the refinement makes. */
+    if (r != SPIA_OK && r != SPIA_ERROR_OUT_OF_MEMORY) fuzz_fail("refused after its counts were given", "spia_refine");
     if (r == SPIA_OK) {
         int64_t c = 0;
         for (int32_t f = 0; f < nf; ++f) {
