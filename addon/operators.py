@@ -154,6 +154,9 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
             self._job = api.InterpolateJob(obj, live=self.live, **settings)
         except (native.PiaError, ValueError, RuntimeError) as error:
             return self._failed(context, context.active_object, error)
+        except BaseException:  # unforeseen: reported by Blender as it is, the mode as it was
+            self._back_to_edit(context)
+            raise
         wm = context.window_manager
         wm.progress_begin(0, max(int(self._total), 1))
         self._timer = wm.event_timer_add(MODAL_INTERVAL, window=context.window)
@@ -284,6 +287,9 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
                                               **settings)
         except (native.PiaError, ValueError, RuntimeError) as error:
             return self._failed(context, context.active_object, error)
+        except BaseException:  # unforeseen: reported by Blender as it is, the mode as it was
+            self._back_to_edit(context)
+            raise
         finally:
             progress.end()
         return self._made(new_obj, report, settings)

@@ -245,3 +245,19 @@ def test_edit_mode_kept_when_refused():
     bm = bmesh.from_edit_mesh(source.data)
     bm.verts.ensure_lookup_table()
     assert abs(bm.verts[0].co.z) > 0.4
+
+
+def test_edit_mode_kept_on_an_unforeseen_error(monkeypatch):
+    """An error the operator does not name (here a KeyError from inside the
+    run) reaches the caller as it is, and the source is back in Edit Mode."""
+    from subdiv_pia import api
+
+    def broken(*args, **kwargs):
+        raise KeyError("broken on purpose")
+    source = grid_edited_in_edit_mode()
+    monkeypatch.setattr(api, "interpolate", broken)
+    before = counts()
+    with pytest.raises(RuntimeError, match="broken on purpose"):
+        run_operator()
+    assert counts() == before
+    assert source.mode == 'EDIT'
