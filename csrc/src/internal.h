@@ -286,13 +286,13 @@ int32_t spia__catmark_closed_row(const spia_mesh *mesh, const spia_adjacency *ad
                                  int32_t v, spia_row_scratch *scratch);
 
 /* spia_refine's progress (interpolate.c): the options' callback at the end
- * of each level (of the last one once its limit positions are
- * computed, before any output is written; levels 0: once) and, from spia__refine_tick, once
- * REFINE_INTERVAL seconds have passed since the last call; iteration is
- * the level under way (1 to levels) and relative_error the share of the
- * refinement done (a level's share by its face count: four times the one
- * before).  Once it has asked
- * to stop, every later call says so without calling it again. */
+ * of each level (the last one's once its limit positions are computed,
+ * before any output is written; levels 0: once) and, from
+ * spia__refine_tick, once REFINE_INTERVAL seconds have passed since the
+ * last call; iteration is the level under way (1 to levels) and
+ * relative_error the share of the refinement done (a level's share by its
+ * face count: four times the one before).  Once it has asked to stop,
+ * every later call says so without calling it again. */
 typedef struct spia__refine_clock {
     spia_progress_fn fn;
     void *user;
@@ -301,7 +301,7 @@ typedef struct spia__refine_clock {
     int cancelled;
 } spia__refine_clock;
 void spia__refine_clock_start(spia__refine_clock *clock, const spia_options *options, int32_t levels);
-/* Nonzero when cancelled (checks the clock only every 1024 calls of k). */
+/* Nonzero when cancelled; looks at the time only when k is a multiple of 1024. */
 int spia__refine_tick(spia__refine_clock *clock, int64_t k);
 /* Level `level` finished: the callback is called; nonzero when cancelled. */
 int spia__refine_level_done(spia__refine_clock *clock, int32_t level);

@@ -230,10 +230,7 @@ static spia_result hoppe_step(const tri_level *in, tri_level *out, spia__refine_
     /* Edges (v, w) with v < w, numbered vertex by vertex. */
     int64_t edges = 0;
     for (int32_t v = 0; v < in->n; ++v) {
-        if (spia__refine_tick(clock, v)) {
-            r = SPIA_ERROR_CANCELLED;
-            goto done;
-        }
+        if (spia__refine_tick(clock, v)) goto cancelled;
         int32_t k = spia__vertex_neighbours(&m, &adj, v, nb, cnt, cap);
         valence[v] = k;
         bnd[2 * v] = bnd[2 * v + 1] = -1;
@@ -249,10 +246,7 @@ static spia_result hoppe_step(const tri_level *in, tri_level *out, spia__refine_
     edge_faces = (int64_t *)calloc((size_t)edges + 1, sizeof(int64_t));
     if (!edge_other || !edge_opp || !edge_faces) goto done;
     for (int32_t v = 0; v < in->n; ++v) {
-        if (spia__refine_tick(clock, v)) {
-            r = SPIA_ERROR_CANCELLED;
-            goto done;
-        }
+        if (spia__refine_tick(clock, v)) goto cancelled;
         int32_t k = spia__vertex_neighbours(&m, &adj, v, nb, cnt, cap);
         int64_t e = first_edge[v];
         for (int32_t i = 0; i < k; ++i)
@@ -260,10 +254,7 @@ static spia_result hoppe_step(const tri_level *in, tri_level *out, spia__refine_
     }
     for (int32_t f = 0; f < in->f; ++f)
         for (int c = 0; c < 3; ++c) {
-            if (c == 0 && spia__refine_tick(clock, f)) {
-                r = SPIA_ERROR_CANCELLED;
-                goto done;
-            }
+            if (c == 0 && spia__refine_tick(clock, f)) goto cancelled;
             int32_t a = in->F[3 * f + c], b = in->F[3 * f + (c + 1) % 3], opp = in->F[3 * f + (c + 2) % 3];
             int32_t lo = a < b ? a : b, hi = a < b ? b : a;
             int64_t e = first_edge[lo];
@@ -278,10 +269,7 @@ static spia_result hoppe_step(const tri_level *in, tri_level *out, spia__refine_
     out->F = (int32_t *)malloc(sizeof(int32_t) * 3 * (size_t)out->f);
     if (!out->P || !out->F) goto done;
     for (int32_t v = 0; v < in->n; ++v) {
-        if (spia__refine_tick(clock, v)) {
-            r = SPIA_ERROR_CANCELLED;
-            goto done;
-        }
+        if (spia__refine_tick(clock, v)) goto cancelled;
         double *q = out->P + 3 * (int64_t)v;
         const double *p = in->P + 3 * (int64_t)v;
         if (valence[v] == 0) {
@@ -319,6 +307,9 @@ static spia_result hoppe_step(const tri_level *in, tri_level *out, spia__refine_
         memcpy(out->F + 12 * (int64_t)f, tris, sizeof tris);
     }
     r = SPIA_OK;
+    goto done;
+cancelled:
+    r = SPIA_ERROR_CANCELLED;
 done:
     if (r != SPIA_OK) {
         free(out->P);
