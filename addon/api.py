@@ -1166,16 +1166,32 @@ def store_fit(obj, report, settings):
 def write_heat_map(mesh, distance_name, color_name, distances, colors):
     """The point attribute distance_name (float) and the colour attribute
     color_name (the active one, and the one rendered) on mesh, replacing
-    attributes of those names."""
+    attributes of those names.  Both are written under names of their own
+    first and take the old ones' places only once whole: if writing fails,
+    mesh's attributes are as they were."""
+    written = []  # the names Blender gave the new attributes
+    try:
+        attr = mesh.attributes.new(distance_name + "_pia_new", 'FLOAT', 'POINT')
+        written.append(attr.name)
+        attr.data.foreach_set("value", np.ascontiguousarray(distances, np.float32))
+        color = mesh.color_attributes.new(color_name + "_pia_new", 'FLOAT_COLOR', 'POINT')
+        written.append(color.name)
+        color.data.foreach_set("color", np.ascontiguousarray(colors, np.float32).ravel())
+    except BaseException:
+        for name in written:
+            made = mesh.attributes.get(name)
+            if made is not None:
+                mesh.attributes.remove(made)
+        raise
+    # Adding or removing an attribute may move the others: each is looked
+    # up by name again.
     for name in (distance_name, color_name):
         old = mesh.attributes.get(name)
         if old is not None:
             mesh.attributes.remove(old)
-    attr = mesh.attributes.new(distance_name, 'FLOAT', 'POINT')
-    attr.data.foreach_set("value", np.ascontiguousarray(distances, np.float32))
-    color = mesh.color_attributes.new(color_name, 'FLOAT_COLOR', 'POINT')
-    color.data.foreach_set("color", np.ascontiguousarray(colors, np.float32).ravel())
-    mesh.color_attributes.active_color = color
+    mesh.attributes[written[0]].name = distance_name
+    mesh.attributes[written[1]].name = color_name
+    mesh.color_attributes.active_color = mesh.color_attributes[color_name]
     if hasattr(mesh.color_attributes, "render_color_index"):
         mesh.color_attributes.render_color_index = mesh.color_attributes.active_color_index
     mesh.update()

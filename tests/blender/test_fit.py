@@ -404,6 +404,32 @@ def test_paint_scan_leaves_the_scan_alone_otherwise():
     assert set(other.data.attributes.keys()) == names
 
 
+def test_paint_scan_failing_midway_keeps_the_last_painting(monkeypatch):
+    """Painting that fails after the distances are written (the colours
+    do not convert) leaves the scan's attributes, their values and its active colour
+    as the painting before left them, and makes no object."""
+    scan = fine_sphere(segments=32, rings=16)
+    cage = quad_sphere(cuts=1)
+    fit(cage, scan, fit_cutoff=0.2, fit_paint_scan=True)
+    mesh = scan.data
+    before = {name: _attribute(mesh, name, 4 if name == api.SCAN_COLOR_ATTRIBUTE else 1)
+              for name in (api.SCAN_DISTANCE_ATTRIBUTE, api.SCAN_COLOR_ATTRIBUTE)}
+    names = set(mesh.attributes.keys())
+    counts = (len(bpy.data.objects), len(bpy.data.meshes))
+    real = api.heat_colors
+    n = len(mesh.vertices)
+    # colours that only fail once converted for Blender: after both new attributes are made
+    monkeypatch.setattr(api, "heat_colors", lambda d: np.full((n, 4), "x", object) if len(d) == n else real(d))
+    with pytest.raises(ValueError, match="could not convert"):
+        api.interpolate(cage, target=scan.name, fit_cutoff=0.2, fit_smoothing=0.1, fit_paint_scan=True)
+    assert set(mesh.attributes.keys()) == names
+    assert mesh.color_attributes.active_color.name == api.SCAN_COLOR_ATTRIBUTE
+    for name, values in before.items():
+        np.testing.assert_array_equal(_attribute(mesh, name, values.shape[1] if values.ndim > 1 else 1), values)
+    assert (len(bpy.data.objects), len(bpy.data.meshes)) == counts
+    assert not [m for m in bpy.data.meshes if m.users == 0]
+
+
 # --- bad input ------------------------------------------------------------------------
 
 def _missing(cage):
