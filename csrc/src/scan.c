@@ -74,6 +74,9 @@ void spia_scan_free(spia_scan *scan) { scan_release(scan); }
 
 double spia_scan_diagonal(const spia_scan *scan) { return scan ? scan->diagonal : 0.0; }
 
+/* Whether a build with progress p was cancelled. */
+static int build_cancelled(spia__build_progress *p) { return p && spia__counter_get(&p->cancelled); }
+
 /* Polls every 2^20 items of a loop on the calling thread. */
 #define POLL_EVERY(i) (((i) & 0xFFFFF) == 0)
 
@@ -143,6 +146,46 @@ static void boundary_bits_range(void *context, int64_t first, int64_t last, int 
     }
 }
 
+/* The buckets' counts (count) or their entries (!count), on threads by
+ * ranges of lower vertices: each thread reads every edge and takes those
+ * whose lower vertex is in its range.  Filled backwards, each bucket is in
+ * the order a single loop would give. */
+typedef struct edge_job {
+    const int32_t *triangles;
+    int64_t triangle_count;
+    uint32_t *begin;
+    edge_entry *entries;
+    spia__build_progress *progress;
+    int count;
+} edge_job;
+
+static void bucket_edges_range(void *context, int64_t first, int64_t last, int thread) {
+    const edge_job *j = (const edge_job *)context;
+    const int32_t *tri = j->triangles;
+    const int64_t count = j->triangle_count;
+    if (j->count) {
+        for (int64_t t = 0; t < count; ++t) {
+            if (POLL_EVERY(t) && spia__build_poll(j->progress, thread, 0.1 * (double)t / (double)count)) return;
+            for (int k = 0; k < 3; ++k) {
+                const int32_t a = tri[3 * t + k], b = tri[3 * t + (k == 2 ? 0 : k + 1)], lo = a < b ? a : b;
+                if (lo >= first && lo < last) ++j->begin[lo];
+            }
+        }
+        return;
+    }
+    for (int64_t t = count - 1; t >= 0; --t) {
+        if (POLL_EVERY(t) && spia__build_poll(j->progress, thread, 0.1 + 0.1 * (double)(count - t) / (double)count))
+            return;
+        for (int k = 2; k >= 0; --k) {
+            const int32_t a = tri[3 * t + k], b = tri[3 * t + (k == 2 ? 0 : k + 1)], lo = a < b ? a : b;
+            if (lo < first || lo >= last) continue;
+            edge_entry *x = j->entries + --j->begin[lo];
+            x->hi = a < b ? b : a;
+            x->slot = (uint32_t)(3 * t + k);
+        }
+    }
+}
+
 static spia_result mark_boundary(spia_scan *s, int threads, spia__build_progress *p) {
     const int64_t m = 3 * s->triangle_count, n = s->vertex_count;
     /* The entries in the hierarchy's memory (24 of its 28 bytes a
@@ -172,18 +215,14 @@ static spia_result mark_boundary(spia_scan *s, int threads, spia__build_progress
     spia_result r = SPIA_ERROR_CANCELLED;
     /* begin[v] counts the edges whose lower vertex is v, then (summed) is
      * the end of v's bucket; filled backwards it becomes the bucket's start. */
-    for (int64_t i = 0; i < m; ++i) {
-        if (POLL_EVERY(i) && spia__build_poll(p, 0, 0.1 * (double)i / (double)m)) goto done;
-        const int32_t a = tri[i], b = tri[i % 3 == 2 ? i - 2 : i + 1];
-        ++begin[a < b ? a : b];
-    }
-    for (int64_t v = 1; v <= n; ++v) begin[v] += begin[v - 1];
-    for (int64_t i = m - 1; i >= 0; --i) {
-        if (POLL_EVERY(i) && spia__build_poll(p, 0, 0.1 + 0.1 * (double)(m - i) / (double)m)) goto done;
-        const int32_t a = tri[i], b = tri[i % 3 == 2 ? i - 2 : i + 1];
-        edge_entry *x = e + --begin[a < b ? a : b];
-        x->hi = a < b ? b : a;
-        x->slot = (uint32_t)i;
+    {
+        edge_job job = {tri, s->triangle_count, begin, e, p, 1};
+        spia__parallel_for(threads, n, 0, bucket_edges_range, &job);
+        if (build_cancelled(p)) goto done;
+        for (int64_t v = 1; v <= n; ++v) begin[v] += begin[v - 1];
+        job.count = 0;
+        spia__parallel_for(threads, n, 0, bucket_edges_range, &job);
+        if (build_cancelled(p)) goto done;
     }
     {
         boundary_job job = {p, n, begin, e, once, tri, vertex_boundary, s->boundary_bits};
@@ -234,6 +273,22 @@ static spia_result renumber_vertices(spia_scan *s, spia__build_progress *p) {
     }
     phase_memory_free(new_id, fresh);
     return SPIA_OK;
+}
+
+/* The triangles' polygons in the hierarchy's leaf order: to[i] =
+ * from[order[i]], in pieces of GATHER_PIECE triangles on threads. */
+#define GATHER_PIECE 65536
+typedef struct gather_job {
+    int32_t *to;
+    const int32_t *from;
+    const uint32_t *order;
+    spia__build_progress *p;
+} gather_job;
+
+static void gather_range(void *context, int64_t begin, int64_t end, int thread) {
+    const gather_job *j = context;
+    if (spia__build_poll(j->p, thread, 1.0)) return; /* the hierarchy's end: its share is done */
+    for (int64_t i = begin; i < end; ++i) j->to[i] = j->from[j->order[i]];
 }
 
 static int face_repeats_vertex(const int32_t *fv, int32_t size) {
@@ -291,9 +346,6 @@ static void vertex_normals(spia_scan *s, double *acc, int threads, spia__build_p
     normals_job j = {s, acc, p};
     spia__parallel_for(threads, s->vertex_count, 0, normals_range, &j);
 }
-
-/* Whether a build with progress p was cancelled. */
-static int build_cancelled(spia__build_progress *p) { return p && spia__counter_get(&p->cancelled); }
 
 /* The fans of the faces of piece k (FAN_PIECE faces from piece_start's
  * corner and triangle) and the box of their vertices (box[6 k ..]: lo,
@@ -354,6 +406,168 @@ static spia_result cancelled(spia_status *status, const char *where) {
     return spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled while %s", where);
 }
 
+/* The checks of the scan given, on threads, piece by piece: the first
+ * vertex with a non-finite coordinate in each piece of CHECK_PIECE vertices;
+ * for each piece of FAN_PIECE faces its corners and its first face with
+ * fewer than three (sizes), then, from its first corner, its triangles, the
+ * faces it skips and its first face referring to a vertex out of range
+ * (corners; faces from the first with too few corners on are not looked
+ * at).  What is reported is the first failure in the mesh's order, as a
+ * loop over it would find it. */
+#define CHECK_PIECE 65536
+typedef struct check_job {
+    const spia_mesh *mesh;
+    int64_t pieces, stop_face;
+    int64_t *first_bad; /* per piece */
+    int64_t *start;     /* per piece: corners, then triangles (counts; summed by check_input) */
+    int64_t *skipped;   /* per piece */
+    spia__build_progress *p;
+} check_job;
+
+static void finite_range(void *context, int64_t begin, int64_t end, int thread) {
+    const check_job *j = context;
+    const float *x = j->mesh->positions;
+    const int64_t count = 3 * (int64_t)j->mesh->vertex_count;
+    for (int64_t k = begin; k < end; ++k) {
+        if (spia__build_poll(j->p, thread, 0.4 * (double)k / (double)j->pieces)) return;
+        const int64_t last = 3 * (k + 1) * CHECK_PIECE < count ? 3 * (k + 1) * CHECK_PIECE : count;
+        for (int64_t i = 3 * k * CHECK_PIECE; i < last; ++i)
+            if (!isfinite(x[i])) {
+                j->first_bad[k] = i / 3;
+                break;
+            }
+    }
+}
+
+static void sizes_range(void *context, int64_t begin, int64_t end, int thread) {
+    const check_job *j = context;
+    const spia_mesh *mesh = j->mesh;
+    for (int64_t k = begin; k < end; ++k) {
+        if (spia__build_poll(j->p, thread, 0.4 + 0.2 * (double)k / (double)j->pieces)) return;
+        const int64_t last = (k + 1) * FAN_PIECE < mesh->face_count ? (k + 1) * FAN_PIECE : mesh->face_count;
+        int64_t corners = 0;
+        for (int64_t f = k * FAN_PIECE; f < last; ++f) {
+            if (mesh->face_sizes[f] < 3) {
+                j->first_bad[k] = f;
+                break;
+            }
+            corners += mesh->face_sizes[f];
+        }
+        j->start[2 * k] = corners;
+    }
+}
+
+/* The first corner of face f (at corner) that refers to no vertex; -1 if none. */
+static int32_t corner_out_of_range(const spia_mesh *mesh, int64_t corner, int64_t f) {
+    for (int32_t c = 0; c < mesh->face_sizes[f]; ++c) {
+        const int32_t v = mesh->face_vertices[corner + c];
+        if (v < 0 || v >= mesh->vertex_count) return c;
+    }
+    return -1;
+}
+
+static void corners_range(void *context, int64_t begin, int64_t end, int thread) {
+    const check_job *j = context;
+    const spia_mesh *mesh = j->mesh;
+    for (int64_t k = begin; k < end; ++k) {
+        if (spia__build_poll(j->p, thread, 0.6 + 0.4 * (double)k / (double)j->pieces)) return;
+        const int64_t last = (k + 1) * FAN_PIECE < j->stop_face ? (k + 1) * FAN_PIECE : j->stop_face;
+        int64_t corner = j->start[2 * k], tris = 0, skipped = 0;
+        for (int64_t f = k * FAN_PIECE; f < last; ++f) {
+            const int32_t size = mesh->face_sizes[f];
+            if (corner_out_of_range(mesh, corner, f) >= 0) {
+                j->first_bad[k] = f;
+                break;
+            }
+            if (face_repeats_vertex(mesh->face_vertices + corner, size))
+                ++skipped;
+            else
+                tris += size - 2;
+            corner += size;
+        }
+        j->start[2 * k + 1] = tris;
+        j->skipped[k] = skipped;
+    }
+}
+
+/* The first of the pieces' first failures (INT64_MAX if none). */
+static int64_t first_failure(const int64_t *first_bad, int64_t pieces) {
+    for (int64_t k = 0; k < pieces; ++k)
+        if (first_bad[k] != INT64_MAX) return first_bad[k];
+    return INT64_MAX;
+}
+
+/* Checks mesh (counts and pointers already checked), counting its
+ * triangles (fans) and the faces skipped for repeating a vertex, and notes
+ * in piece_start where each of the `pieces` pieces of FAN_PIECE faces starts
+ * (its first corner and triangle; the totals after the last). */
+static spia_result check_input(const spia_mesh *mesh, spia__build_progress *p, int64_t *piece_start,
+                               int64_t pieces, int64_t *tris_out, int64_t *skipped_out, spia_status *status) {
+    const int32_t n = mesh->vertex_count;
+    const int64_t vertex_pieces = ((int64_t)n + CHECK_PIECE - 1) / CHECK_PIECE;
+    const int64_t most = vertex_pieces > pieces ? vertex_pieces : pieces;
+    int64_t *first_bad = malloc(sizeof(int64_t) * 2 * (size_t)most);
+    if (!first_bad) return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the scan");
+    int64_t *skipped = first_bad + most;
+    const int threads = spia__processor_count();
+    check_job j = {mesh, vertex_pieces, mesh->face_count, first_bad, piece_start, skipped, p};
+    spia_result r = SPIA_OK;
+    for (int64_t k = 0; k < vertex_pieces; ++k) first_bad[k] = INT64_MAX;
+    spia__parallel_for(threads, vertex_pieces, 1, finite_range, &j);
+    const int64_t bad_vertex = first_failure(first_bad, vertex_pieces);
+    int64_t bad_size = INT64_MAX, bad_index = INT64_MAX, corner = 0;
+    if (bad_vertex == INT64_MAX && !build_cancelled(p)) {
+        j.pieces = pieces;
+        for (int64_t k = 0; k < pieces; ++k) first_bad[k] = INT64_MAX;
+        spia__parallel_for(threads, pieces, 1, sizes_range, &j);
+        bad_size = first_failure(first_bad, pieces);
+        for (int64_t k = 0; k < pieces; ++k) { /* (starts past the piece with bad_size go unused) */
+            const int64_t corners = piece_start[2 * k];
+            piece_start[2 * k] = corner;
+            corner += corners;
+        }
+        j.stop_face = bad_size == INT64_MAX ? mesh->face_count : bad_size;
+        const int64_t corner_pieces = (j.stop_face + FAN_PIECE - 1) / FAN_PIECE;
+        for (int64_t k = 0; k < pieces; ++k) first_bad[k] = INT64_MAX;
+        if (!build_cancelled(p)) spia__parallel_for(threads, corner_pieces, 1, corners_range, &j);
+        bad_index = first_failure(first_bad, corner_pieces);
+    }
+    if (build_cancelled(p)) {
+        r = cancelled(status, "checking the scan");
+    } else if (bad_vertex != INT64_MAX) {
+        r = spia__fail(status, SPIA_ERROR_NONFINITE, bad_vertex, "scan vertex %lld has a non-finite coordinate",
+                       (long long)bad_vertex);
+    } else if (bad_index != INT64_MAX) { /* before bad_size: faces from that one on were not looked at */
+        int64_t at = piece_start[2 * (bad_index / FAN_PIECE)];
+        for (int64_t f = bad_index / FAN_PIECE * FAN_PIECE; f < bad_index; ++f) at += mesh->face_sizes[f];
+        const int32_t v = mesh->face_vertices[at + corner_out_of_range(mesh, at, bad_index)];
+        r = spia__fail(status, SPIA_ERROR_INDEX_RANGE, bad_index, "scan face %d refers to vertex %d of %d",
+                       (int)bad_index, v, n);
+    } else if (bad_size != INT64_MAX) {
+        r = spia__fail(status, SPIA_ERROR_FACE_SIZE, bad_size, "scan face %d has %d corners (at least 3 needed)",
+                       (int)bad_size, mesh->face_sizes[bad_size]);
+    }
+    if (r == SPIA_OK) {
+        int64_t tris = 0, skip = 0;
+        for (int64_t k = 0; k < pieces; ++k) {
+            const int64_t t = piece_start[2 * k + 1];
+            piece_start[2 * k + 1] = tris;
+            tris += t;
+            skip += skipped[k];
+        }
+        piece_start[2 * pieces] = corner, piece_start[2 * pieces + 1] = tris;
+        if (tris == 0)
+            r = spia__fail(status, SPIA_ERROR_EMPTY_MESH, -1, "the scan has no usable faces (%lld degenerate)",
+                           (long long)skip);
+        else if (tris > UINT32_MAX / 3)
+            r = spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "the scan has too many triangles (%lld)",
+                           (long long)tris);
+        *tris_out = tris, *skipped_out = skip;
+    }
+    free(first_bad);
+    return r;
+}
+
 spia_result spia_scan_create(const spia_mesh *mesh, spia_scan **out, spia_status *status) {
     return spia_scan_create_progress(mesh, NULL, NULL, out, status);
 }
@@ -382,54 +596,15 @@ static spia_result scan_create(const spia_mesh *mesh, spia_progress_fn progress,
     const double start = t0;
     pr.last = t0;
     phase(&pr, 0);
-    for (int64_t i = 0; i < 3 * (int64_t)n; ++i) {
-        if (POLL_EVERY(i) && spia__build_poll(p, 0, (double)i / (6.0 * (double)n)))
-            return cancelled(status, "checking the scan");
-        if (!isfinite(mesh->positions[i]))
-            return spia__fail(status, SPIA_ERROR_NONFINITE, i / 3, "scan vertex %lld has a non-finite coordinate",
-                              (long long)(i / 3));
-    }
-    /* Count triangles (fans), checking sizes and indices, and note where
-     * each piece of FAN_PIECE faces starts (its first corner and triangle). */
     const int64_t pieces = ((int64_t)mesh->face_count + FAN_PIECE - 1) / FAN_PIECE;
     int64_t *piece_start = malloc(sizeof(int64_t) * 2 * (size_t)(pieces + 1));
     if (!piece_start) return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the scan");
-    int64_t tris = 0, corner = 0, skipped = 0;
-    spia_result bad = SPIA_OK;
-    for (int32_t f = 0; f < mesh->face_count && bad == SPIA_OK; ++f) {
-        if (f % FAN_PIECE == 0) piece_start[2 * (f / FAN_PIECE)] = corner, piece_start[2 * (f / FAN_PIECE) + 1] = tris;
-        if (POLL_EVERY(f) && spia__build_poll(p, 0, 0.5 + 0.5 * (double)f / (double)mesh->face_count)) {
-            bad = cancelled(status, "checking the scan");
-            break;
-        }
-        const int32_t size = mesh->face_sizes[f];
-        if (size < 3) {
-            bad = spia__fail(status, SPIA_ERROR_FACE_SIZE, f, "scan face %d has %d corners (at least 3 needed)", f,
-                             size);
-            break;
-        }
-        for (int32_t k = 0; k < size && bad == SPIA_OK; ++k) {
-            const int32_t v = mesh->face_vertices[corner + k];
-            if (v < 0 || v >= n)
-                bad = spia__fail(status, SPIA_ERROR_INDEX_RANGE, f, "scan face %d refers to vertex %d of %d", f, v, n);
-        }
-        if (face_repeats_vertex(mesh->face_vertices + corner, size))
-            ++skipped;
-        else
-            tris += size - 2;
-        corner += size;
-    }
-    if (bad == SPIA_OK && tris == 0)
-        bad = spia__fail(status, SPIA_ERROR_EMPTY_MESH, -1, "the scan has no usable faces (%lld degenerate)",
-                         (long long)skipped);
-    if (bad == SPIA_OK && tris > UINT32_MAX / 3)
-        bad = spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "the scan has too many triangles (%lld)",
-                         (long long)tris);
+    int64_t tris = 0, skipped = 0;
+    const spia_result bad = check_input(mesh, p, piece_start, pieces, &tris, &skipped, status);
     if (bad != SPIA_OK) {
         free(piece_start);
         return bad;
     }
-    piece_start[2 * pieces] = corner, piece_start[2 * pieces + 1] = tris;
 
     spia_scan *s = calloc(1, sizeof *s);
     if (!s) {
@@ -500,13 +675,12 @@ static spia_result scan_create(const spia_mesh *mesh, spia_progress_fn progress,
             return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the scan");
         }
         memcpy(polygon_of, s->polygon_of, sizeof(int32_t) * (size_t)tris);
-        for (int64_t i = 0; i < tris; ++i) {
-            if (POLL_EVERY(i) && spia__build_poll(p, 0, 1.0)) {
-                phase_memory_free(polygon_of, fresh);
-                scan_release(s);
-                return cancelled(status, "ordering the scan's triangles");
-            }
-            s->polygon_of[i] = polygon_of[s->bvh.order[i]];
+        gather_job g = {s->polygon_of, polygon_of, s->bvh.order, p};
+        spia__parallel_for(threads, tris, GATHER_PIECE, gather_range, &g);
+        if (build_cancelled(p)) {
+            phase_memory_free(polygon_of, fresh);
+            scan_release(s);
+            return cancelled(status, "ordering the scan's triangles");
         }
         phase_memory_free(polygon_of, fresh);
     }

@@ -28,6 +28,20 @@ static void expect_code(const spia_mesh *mesh, const spia_options *o, spia_resul
     CHECK(s == NULL, "%s: stencils not NULL on failure", what);
 }
 
+/* Faults in a scan of 400 x 400 quads (160,000 faces: three of the pieces
+ * its checks work in), in its later pieces: the first in the mesh's order
+ * is the one reported, and nothing is made. */
+static const struct {
+    int64_t nan_vertex, small_face, bad_face;
+    spia_result expect;
+    int64_t index;
+} scan_cases[] = {
+    {150000, 70000, -1, SPIA_ERROR_NONFINITE, 150000},
+    {-1, 140000, 100000, SPIA_ERROR_INDEX_RANGE, 100000},
+    {-1, 131072, 150000, SPIA_ERROR_FACE_SIZE, 131072},
+    {-1, -1, 159999, SPIA_ERROR_INDEX_RANGE, 159999},
+};
+
 static int cancel_now(void *user, int32_t it, double err) {
     (void)it;
     (void)err;
@@ -210,6 +224,35 @@ int main(void) {
         free(targets);
         free(cage);
         spia_stencils_free(s);
+    }
+
+    /* The scan_cases. */
+    {
+        const int32_t side = 400, nv = (side + 1) * (side + 1), nf = side * side;
+        for (size_t c = 0; c < sizeof scan_cases / sizeof scan_cases[0]; ++c) {
+            int32_t *sizes = (int32_t *)malloc(sizeof(int32_t) * (size_t)nf);
+            int32_t *fv = (int32_t *)malloc(sizeof(int32_t) * 4 * (size_t)nf);
+            float *pos = (float *)malloc(sizeof(float) * 3 * (size_t)nv);
+            for (int32_t v = 0; v < nv; ++v)
+                pos[3 * v] = (float)(v % (side + 1)), pos[3 * v + 1] = (float)(v / (side + 1)), pos[3 * v + 2] = 0.0f;
+            for (int32_t f = 0; f < nf; ++f) {
+                const int32_t a = f / side * (side + 1) + f % side;
+                sizes[f] = 4;
+                fv[4 * f] = a, fv[4 * f + 1] = a + 1, fv[4 * f + 2] = a + side + 2, fv[4 * f + 3] = a + side + 1;
+            }
+            if (scan_cases[c].nan_vertex >= 0) pos[3 * scan_cases[c].nan_vertex + 2] = NAN;
+            if (scan_cases[c].bad_face >= 0) fv[4 * scan_cases[c].bad_face + 1] = nv;
+            if (scan_cases[c].small_face >= 0) sizes[scan_cases[c].small_face] = 2; /* its corners go to the next face */
+            spia_mesh sm;
+            memset(&sm, 0, sizeof sm);
+            sm.vertex_count = nv, sm.positions = pos, sm.face_count = nf, sm.face_sizes = sizes, sm.face_vertices = fv;
+            spia_scan *scan = (spia_scan *)&st; /* must be reset to NULL */
+            const spia_result r = spia_scan_create(&sm, &scan, &st);
+            CHECK(r == scan_cases[c].expect && st.index == scan_cases[c].index, "scan case %d: %s at %lld (%s)",
+                  (int)c, spia_result_name(r), (long long)st.index, st.message);
+            CHECK(scan == NULL, "scan case %d: a scan was made", (int)c);
+            free(sizes), free(fv), free(pos);
+        }
     }
 
     /* Every code has a distinct name. */

@@ -254,3 +254,92 @@ def test_closest_points_progress_and_cancel(native):
         scan.closest_points(q, progress=stop)
     assert error.value.code == 'CANCELLED'
     assert time.perf_counter() - stopped[0] < 0.5
+
+
+# --- the checks and the fans, over many pieces ------------------------------------------
+# The build checks and cuts faces in pieces of 65,536 on threads: these
+# meshes span several, and put their faults in late pieces.
+
+def flat_quads(n):
+    """An n x n grid of unit quads in the plane z = 0: positions, sizes, corners."""
+    x, y = np.meshgrid(np.arange(n + 1, dtype=np.float32), np.arange(n + 1, dtype=np.float32))
+    pos = np.stack([x.ravel(), y.ravel(), np.zeros(x.size, np.float32)], 1)
+    v = np.arange((n + 1) * (n + 1)).reshape(n + 1, n + 1)
+    quads = np.stack([v[:-1, :-1].ravel(), v[:-1, 1:].ravel(), v[1:, 1:].ravel(), v[1:, :-1].ravel()], 1)
+    return pos, np.full(len(quads), 4, np.int32), quads.astype(np.int32)
+
+
+def first_fault(pos, sizes, corners):
+    """(code, index) of the first fault a loop over the mesh meets: a
+    non-finite coordinate first, then faces in order (too few corners, or a
+    corner out of range)."""
+    bad = np.flatnonzero(~np.isfinite(pos).all(axis=1))
+    if len(bad):
+        return "NONFINITE", bad[0]
+    starts = np.concatenate([[0], np.cumsum(sizes)])
+    for f, size in enumerate(sizes):
+        if size < 3:
+            return "FACE_SIZE", f
+        c = corners[starts[f]:starts[f] + size]
+        if ((c < 0) | (c >= len(pos))).any():
+            return "INDEX_RANGE", f
+    return None
+
+
+def scan_of(native, pos, sizes, corners):
+    return native.Scan(native.Mesh(np.asarray(pos, np.float32), np.asarray(sizes, np.int32),
+                                   np.ascontiguousarray(corners, np.int32).ravel()))
+
+
+@pytest.mark.parametrize("faults", [
+    {"nan": [200_000, 70_000], "size": [3]},                 # two non-finite vertices, a bad face before
+    {"index": [150_000], "size": [200_000]},                  # a corner out of range first
+    {"size": [140_000], "index": [250_000]},                  # too few corners first
+    {"index": [131_072]},                                     # the first face of a piece
+    {"index": [262_143]},                                     # the last face of a piece
+    {"size": [196_608, 196_609]},
+])
+def test_scan_reports_the_first_fault_in_order(native, faults):
+    pos, sizes, quads = flat_quads(520)  # 270,400 faces: five pieces
+    quads = quads.copy()
+    for v in faults.get("nan", []):
+        pos[v, 1] = np.nan
+    for f in faults.get("index", []):
+        quads[f, 2] = len(pos) + f
+    corners = [q[:2] if f in faults.get("size", []) else q for f, q in enumerate(quads)]
+    sizes = np.array([len(c) for c in corners], np.int32)
+    corners = np.concatenate(corners)
+    code, index = first_fault(pos, sizes, corners)
+    with pytest.raises(native.PiaError) as error:
+        scan_of(native, pos, sizes, corners)
+    assert (error.value.code, error.value.index) == (code, index)
+    assert str(index) in str(error.value)
+
+
+def test_scan_fans_and_skipped_faces_over_many_pieces(native):
+    """Quads, pentagons and faces repeating a vertex (left out) spread over
+    five pieces: a point just above each kept face's first fan triangle is
+    closest to that face, and no left-out face is ever returned."""
+    pos, sizes, quads = flat_quads(520)
+    rng = np.random.default_rng(5)
+    skipped = rng.choice(len(quads), 3000, replace=False)
+    faces = [list(q) for q in quads]
+    for f in skipped:
+        faces[f] = [faces[f][0], faces[f][1], faces[f][1], faces[f][2]]
+    # pentagons: a quad with its last edge's midpoint added, as a new vertex
+    pentagons = rng.choice(np.setdiff1d(np.arange(len(quads)), skipped), 2000, replace=False)
+    extra = []
+    for f in pentagons:
+        extra.append(0.5 * (pos[faces[f][3]] + pos[faces[f][0]]))
+        faces[f] = faces[f] + [len(pos) + len(extra) - 1]
+    pos = np.concatenate([pos, np.array(extra, np.float32)])
+    sizes = np.array([len(f) for f in faces], np.int32)
+    scan = scan_of(native, pos, sizes, np.concatenate(faces))
+    kept = np.setdiff1d(np.arange(len(faces)), skipped)
+    first_triangle = np.array([[pos[faces[f][0]], pos[faces[f][1]], pos[faces[f][2]]] for f in kept])
+    query = first_triangle.mean(axis=1) + np.float32([0, 0, 0.25])
+    _, _, distances, found = scan.closest_points(query.astype(np.float32))
+    np.testing.assert_allclose(distances, 0.25, rtol=1e-5)
+    assert np.array_equal(found, kept)
+    everywhere = rng.uniform([0, 0, -1], [520, 520, 1], (200_000, 3)).astype(np.float32)
+    assert not np.isin(scan.closest_points(everywhere)[3], skipped).any()
