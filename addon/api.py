@@ -1524,41 +1524,21 @@ def _same_id(key):
     return found is not None and found.as_pointer() == key[1]
 
 
-class InterpolateJob:
-    """interpolate with the library's work on a thread of its own, for a
-    caller that must stay responsive (the operator's modal run in Blender's
-    window): Blender's data is read and written only on the caller's thread,
-    in the constructor (bad input raises there, as interpolate does) and in
-    poll().
+class _StepsJob:
+    """A generator of interpolate_steps' kind driven with the library's work
+    on a thread of its own (InterpolateJob, RefreshLimitJob: see there).
+    make_steps(progress) makes the generator; watched are the objects that
+    must stay the same ones while the library works."""
 
-    cancel() makes the library stop at its next progress call (a fit's or
-    solve's: a few tenths of a second apart at any scale; a Loop or
-    Doo-Sabin preview's refinement's: see native.refine); poll()
-    then raises native.PiaCancelled, and nothing is made.  A cancel that
-    comes after the library has finished, but before poll() saw it, cancels
-    as well; so does a change of the source or the scan beneath the job (an
-    undo, a deletion), found when poll() resumes it.  close() abandons a job
-    that has not finished (waiting for the library to stop): what it made
-    so far is removed; call it, or poll() to the end, before dropping a job.
-
-    progress (optional), as interpolate's, is called on the library's thread
-    too: it must not touch Blender's data.  iteration and value hold the last
-    progress call's arguments.  There is no context argument: an operator's
-    context lasts only as long as the call it was given to, so each step
-    reads bpy.context as it runs."""
-
-    def __init__(self, obj, *, name=None, progress=None, live=False, **settings):
+    def __init__(self, make_steps, watched, progress):
         self._state = _JobProgress(progress)
         self._thread = None
         self._outcome = None
         self._done = False
         self._result = None
         self._error = None
-        target = settings.get("target")
-        if isinstance(target, str):
-            target = bpy.data.objects.get(target) if target else None
-        self._watched = [_id_key(obj), _id_key(target if isinstance(target, bpy.types.Object) else None)]
-        self._steps = interpolate_steps(obj, name=name, progress=self._state, live=live, **settings)
+        self._watched = [_id_key(o) for o in watched]
+        self._steps = make_steps(self._state)
         self._advance(lambda: next(self._steps))
 
     @property
@@ -1609,9 +1589,10 @@ class InterpolateJob:
         return self._thread is not None and self._thread.is_alive()
 
     def poll(self):
-        """None while the library works; then (new_object, report), or the
-        exception interpolate would raise (again at every later call).  Call
-        it on Blender's thread."""
+        """None while the library works; then what the steps return
+        (InterpolateJob: (new_object, report); RefreshLimitJob: the child),
+        or the exception they raise (again at every later call).  Call it
+        on Blender's thread."""
         if self._done:
             if self._error is not None:
                 raise self._error
@@ -1626,8 +1607,8 @@ class InterpolateJob:
             ok, value = False, native.PiaCancelled("CANCELLED", "cancelled")
         if not all(_same_id(key) for key in self._watched):
             ok, value = False, native.PiaCancelled(
-                "CANCELLED", "cancelled: the source or the scan was changed (undone, deleted or renamed) "
-                "while the library worked")
+                "CANCELLED", "cancelled: the source, the scan or the cage was changed (undone, deleted or "
+                "renamed) while the library worked")
         if ok:
             self._advance(lambda: self._steps.send(value))
         else:
@@ -1645,7 +1626,7 @@ class InterpolateJob:
 
     def close(self):
         """Abandons the job (waiting for the library to stop): what it made
-        so far (a cleaned copy of the mesh) is removed."""
+        so far (interpolate's cleaned copy of the mesh) is removed."""
         self._state.cancel.set()
         if self._thread is not None:
             self._thread.join()
@@ -1661,6 +1642,52 @@ class InterpolateJob:
             state.cancel.set()
 
 
+class InterpolateJob(_StepsJob):
+    """interpolate with the library's work on a thread of its own, for a
+    caller that must stay responsive (the operator's modal run in Blender's
+    window): Blender's data is read and written only on the caller's thread,
+    in the constructor (bad input raises there, as interpolate does) and in
+    poll().
+
+    cancel() makes the library stop at its next progress call (a fit's or
+    solve's: a few tenths of a second apart at any scale; a Loop or
+    Doo-Sabin preview's refinement's: see native.refine); poll()
+    then raises native.PiaCancelled, and nothing is made.  A cancel that
+    comes after the library has finished, but before poll() saw it, cancels
+    as well; so does a change of the source or the scan beneath the job (an
+    undo, a deletion), found when poll() resumes it.  close() abandons a job
+    that has not finished (waiting for the library to stop): what it made
+    so far is removed; call it, or poll() to the end, before dropping a job.
+
+    progress (optional), as interpolate's, is called on the library's thread
+    too: it must not touch Blender's data.  iteration and value hold the last
+    progress call's arguments.  There is no context argument: an operator's
+    context lasts only as long as the call it was given to, so each step
+    reads bpy.context as it runs."""
+
+    def __init__(self, obj, *, name=None, progress=None, live=False, **settings):
+        target = settings.get("target")
+        if isinstance(target, str):
+            target = bpy.data.objects.get(target) if target else None
+        watched = (obj, target) if isinstance(target, bpy.types.Object) else (obj,)
+        super().__init__(lambda state: interpolate_steps(obj, name=name, progress=state, live=live, **settings),
+                         watched, progress)
+
+
+class RefreshLimitJob(_StepsJob):
+    """refresh_limit with the refinement on a thread of its own, as
+    InterpolateJob runs interpolate (the operator's modal run in Blender's
+    window): poll() gives the `_limit` child once done; cancel() stops the
+    refinement at its next progress call and leaves the child as it was.
+    progress(level, share_done) -> bool is native.refine's, called on the
+    library's thread."""
+
+    def __init__(self, obj, *, progress=None):
+        cage = limit_cage_of(obj) if obj is not None else None
+        super().__init__(lambda state: refresh_limit_steps(obj, progress=state),
+                         (cage,) if cage is not None else (), progress)
+
+
 def refresh_limit(obj, context=None):
     """Recompute the limit surface of a Loop or Doo-Sabin cage from its current mesh.
 
@@ -1671,6 +1698,14 @@ def refresh_limit(obj, context=None):
     Raises ValueError if obj is not such a cage, native.PiaError if the
     library refuses the edited cage (nothing is changed then).
     """
+    return run_steps(refresh_limit_steps(obj, context=context))
+
+
+def refresh_limit_steps(obj, *, context=None, progress=None):
+    """refresh_limit as a generator of interpolate_steps' kind: the
+    refinement is yielded as a function that touches nothing of Blender's
+    (RefreshLimitJob runs it on another thread).  progress(level,
+    share_done) -> bool as native.refine's.  Returns the child."""
     if obj is None:
         raise ValueError("No active object: select a Loop or Doo-Sabin cage or its limit surface")
     cage = limit_cage_of(obj)
@@ -1683,7 +1718,8 @@ def refresh_limit(obj, context=None):
     if cage.mode == 'EDIT':
         cage.update_from_editmode()
     check_source(cage)
-    return set_limit_object(cage, limit_arrays(cage.data, stored_settings(cage)), context=context)
+    limit = yield limit_work(cage.data, stored_settings(cage), progress=progress)
+    return set_limit_object(cage, limit, context=context)
 
 
 def format_fit_report(report, target_name):

@@ -118,7 +118,61 @@ def draw_fit_settings(layout, settings, has_target):
     col.prop(settings, "fit_paint_scan")
 
 
-class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
+class _ModalJob:
+    """An operator's library work on a job's thread (api.InterpolateJob,
+    api.RefreshLimitJob) while Blender's window stays live: the status bar
+    and the progress cursor show it, and Esc cancels.  The operator gives
+    _status_text(), _job_failed(context, error) and _job_done(context,
+    result)."""
+
+    def _start_modal(self, context, job, total):
+        self._job = job
+        self._total = max(int(total), 1)
+        wm = context.window_manager
+        wm.progress_begin(0, self._total)
+        self._timer = wm.event_timer_add(MODAL_INTERVAL, window=context.window)
+        wm.modal_handler_add(self)
+        self._show_status(context)
+        return {'RUNNING_MODAL'}
+
+    def _show_status(self, context):
+        text = self._status_text()
+        context.workspace.status_text_set(text + ("" if self._job.cancelled else "   (Esc to cancel)"))
+        context.window_manager.progress_update(min(max(self._job.iteration, 0), self._total))
+
+    def _end_modal(self, context):
+        wm = context.window_manager
+        wm.event_timer_remove(self._timer)
+        wm.progress_end()
+        if context.workspace is not None:
+            context.workspace.status_text_set(None)
+
+    def modal(self, context, event):
+        if event.type == 'ESC' and event.value == 'PRESS':
+            self._job.cancel()
+        elif event.type != 'TIMER':
+            return {'RUNNING_MODAL'}  # nothing else while the mesh is being worked on
+        try:
+            result = self._job.poll()
+        except Exception as error:  # whatever it is, the window must not stay in the run
+            self._end_modal(context)
+            return self._job_failed(context, error)
+        if not self._job.done:
+            self._show_status(context)
+            return {'RUNNING_MODAL'}
+        self._end_modal(context)
+        return self._job_done(context, result)
+
+    def cancel(self, context):
+        # Blender ends the operator (the window closes): stop the library,
+        # remove what was made so far.
+        job = getattr(self, "_job", None)
+        if job is not None:
+            job.close()
+        self._end_modal(context)
+
+
+class OBJECT_OT_subdiv_pia_interpolate(_ModalJob, bpy.types.Operator):
     """Make a new object whose subdivision limit surface passes through this mesh's vertices"""
     bl_idname = "object.subdiv_pia_interpolate"
     bl_label = "Make Interpolating Cage"
@@ -148,21 +202,16 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
         settings = {name: getattr(self, name) for name in SETTING_NAMES}
         self._settings = settings
         self._fit = bool(settings["target"])
-        self._total = FIT_ROUNDS if self._fit and settings["fit"] == 'SURFACE' else settings["max_iterations"]
         try:
             obj = self._source(context)
-            self._job = api.InterpolateJob(obj, live=self.live, **settings)
+            job = api.InterpolateJob(obj, live=self.live, **settings)
         except (native.PiaError, ValueError, RuntimeError) as error:
             return self._failed(context, context.active_object, error)
         except BaseException:  # unforeseen: reported by Blender as it is, the mode as it was
             self._back_to_edit(context)
             raise
-        wm = context.window_manager
-        wm.progress_begin(0, max(int(self._total), 1))
-        self._timer = wm.event_timer_add(MODAL_INTERVAL, window=context.window)
-        wm.modal_handler_add(self)
-        self._show_status(context)
-        return {'RUNNING_MODAL'}
+        surface_fit = self._fit and settings["fit"] == 'SURFACE'
+        return self._start_modal(context, job, FIT_ROUNDS if surface_fit else settings["max_iterations"])
 
     def _source(self, context):
         """The active object, checked, and out of Edit Mode (the new object becomes active)."""
@@ -205,56 +254,28 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
         self.report({'INFO'} if fine else {'WARNING'}, result_line(new_obj, report, settings))
         return {'FINISHED'}
 
-    def _show_status(self, context):
+    def _status_text(self):
         job = self._job
         what = "Fitting" if self._fit else "Solving"
         if job.cancelled:
-            text = "%s '%s': cancelling" % (what, self._source_name)
-        elif job.iteration <= 0:
-            text = "%s '%s': %s" % (what, self._source_name,
+            return "%s '%s': cancelling" % (what, self._source_name)
+        if job.iteration <= 0:
+            return "%s '%s': %s" % (what, self._source_name,
                                     "reading and preparing the scan" if self._fit else "preparing")
-        elif self._fit:
-            text = "%s '%s': round %d, mean distance %.3g of the scan's diagonal" % (
+        if self._fit:
+            return "%s '%s': round %d, mean distance %.3g of the scan's diagonal" % (
                 what, self._source_name, job.iteration, job.value)
-        else:
-            text = "%s '%s': iteration %d, error %.3g" % (what, self._source_name, job.iteration, job.value)
-        context.workspace.status_text_set(text + ("" if job.cancelled else "   (Esc to cancel)"))
-        context.window_manager.progress_update(min(max(job.iteration, 0), max(int(self._total), 1)))
+        return "%s '%s': iteration %d, error %.3g" % (what, self._source_name, job.iteration, job.value)
 
-    def _end_modal(self, context):
-        wm = context.window_manager
-        wm.event_timer_remove(self._timer)
-        wm.progress_end()
-        if context.workspace is not None:
-            context.workspace.status_text_set(None)
+    def _job_failed(self, context, error):
+        if isinstance(error, native.PiaCancelled) and self._job.cancelled:
+            self._back_to_edit(context)
+            self.report({'WARNING'}, "Cancelled: '%s' is unchanged and nothing was made" % self._source_name)
+            return {'CANCELLED'}
+        return self._failed(context, self._source_name, error)
 
-    def modal(self, context, event):
-        if event.type == 'ESC' and event.value == 'PRESS':
-            self._job.cancel()
-        elif event.type != 'TIMER':
-            return {'RUNNING_MODAL'}  # nothing else while the mesh is being worked on
-        try:
-            result = self._job.poll()
-        except Exception as error:  # whatever it is, the window must not stay in the run
-            self._end_modal(context)
-            if isinstance(error, native.PiaCancelled) and self._job.cancelled:
-                self._back_to_edit(context)
-                self.report({'WARNING'}, "Cancelled: '%s' is unchanged and nothing was made" % self._source_name)
-                return {'CANCELLED'}
-            return self._failed(context, self._source_name, error)
-        if not self._job.done:
-            self._show_status(context)
-            return {'RUNNING_MODAL'}
-        self._end_modal(context)
+    def _job_done(self, context, result):
         return self._made(*result, self._settings)
-
-    def cancel(self, context):
-        # Blender ends the operator (the window closes): stop the library,
-        # remove what was made so far.
-        job = getattr(self, "_job", None)
-        if job is not None:
-            job.close()
-        self._end_modal(context)
 
     def draw(self, context):
         layout = self.layout
@@ -295,7 +316,7 @@ class OBJECT_OT_subdiv_pia_interpolate(bpy.types.Operator):
         return self._made(new_obj, report, settings)
 
 
-class OBJECT_OT_subdiv_pia_refresh_limit(bpy.types.Operator):
+class OBJECT_OT_subdiv_pia_refresh_limit(_ModalJob, bpy.types.Operator):
     """Recompute the Loop or Doo-Sabin limit surface (the cage's "_limit" child) from the cage's current shape and shape attribute"""
     bl_idname = "object.subdiv_pia_refresh_limit"
     bl_label = "Refresh Limit Surface"
@@ -306,25 +327,63 @@ class OBJECT_OT_subdiv_pia_refresh_limit(bpy.types.Operator):
         # Keep the operator callable so that bad input gets a clear message.
         return True
 
+    def invoke(self, context, event):
+        if bpy.app.background or context.window is None or not native.available():
+            return self.execute(context)
+        # In Blender's window the refinement runs on a thread of its own, as
+        # Make Interpolating Cage's work does: Esc cancels.
+        obj = context.active_object
+        try:
+            job = api.RefreshLimitJob(obj)
+        except (native.PiaError, ValueError, RuntimeError) as error:
+            return self._refused(obj, error)
+        cage = api.limit_cage_of(obj)
+        self._cage_name = cage.name
+        return self._start_modal(context, job, api.stored_settings(cage)["levels"])
+
     def execute(self, context):
         if not native.available():
             self.report({'ERROR'}, library_missing())
             return {'CANCELLED'}
         obj = context.active_object
         try:
-            cage = api.limit_cage_of(obj)
-            if cage is not None and cage.mode == 'EDIT':
-                cage.update_from_editmode()
             child = api.refresh_limit(obj, context=context)
-        except native.PiaError as error:
-            self.report({'ERROR'}, "'%s': %s" % (api.limit_cage_of(obj).name, error))
-            return {'CANCELLED'}
-        except (ValueError, RuntimeError) as error:
+        except (native.PiaError, ValueError, RuntimeError) as error:
+            return self._refused(obj, error)
+        return self._refreshed(child)
+
+    def _refused(self, obj, error):
+        if isinstance(error, native.PiaError):  # the library's words, with the cage named
+            cage = api.limit_cage_of(obj) if isinstance(obj, bpy.types.Object) else None
+            self.report({'ERROR'}, "'%s': %s" % (cage.name if cage is not None else obj, error))
+        else:
             self.report({'ERROR'}, str(error))
-            return {'CANCELLED'}
+        return {'CANCELLED'}
+
+    def _refreshed(self, child):
         self.report({'INFO'}, "%s: %d vertices, %d faces"
                     % (child.name, len(child.data.vertices), len(child.data.polygons)))
         return {'FINISHED'}
+
+    def _status_text(self):
+        job = self._job
+        if job.cancelled:
+            return "Refreshing the limit surface of '%s': cancelling" % self._cage_name
+        return "Refreshing the limit surface of '%s': level %d of %d" % (
+            self._cage_name, max(job.iteration, 1), self._total)
+
+    def _job_failed(self, context, error):
+        if isinstance(error, native.PiaCancelled) and self._job.cancelled:
+            self.report({'WARNING'}, "Cancelled: the limit surface of '%s' is as it was" % self._cage_name)
+            return {'CANCELLED'}
+        if isinstance(error, native.PiaError):
+            self.report({'ERROR'}, "'%s': %s" % (self._cage_name, error))
+        else:
+            self.report({'ERROR'}, "'%s': %s: %s" % (self._cage_name, type(error).__name__, error))
+        return {'CANCELLED'}
+
+    def _job_done(self, context, result):
+        return self._refreshed(result)
 
 
 class OBJECT_OT_subdiv_pia_live(bpy.types.Operator):

@@ -197,3 +197,70 @@ def test_job_dropped_unfinished_cleans_up_here_and_stops_the_library():
     assert not thread.is_alive()
     gc.collect()
     assert counts() == (count[0] + 2, count[1] + 2)
+
+
+# --- api.RefreshLimitJob: Refresh Limit Surface in Blender's window -------------------------
+
+def edited_limit_cage(scheme):
+    """A Loop or Doo-Sabin cage (levels 3) with one vertex moved after it was made."""
+    source = shapes.ico_sphere() if scheme == 'LOOP' else shapes.cube()
+    cage, _ = api.interpolate(source, scheme=scheme, levels=3)
+    co = positions(cage).astype(np.float32)
+    co[0] += np.float32(0.2)
+    cage.data.vertices.foreach_set("co", co.ravel())
+    cage.data.update()
+    return cage
+
+
+@pytest.mark.parametrize("scheme", ['LOOP', 'DOO_SABIN'])
+def test_refresh_job_makes_what_refresh_limit_makes(scheme):
+    cage = edited_limit_cage(scheme)
+    child = api.find_limit_object(cage)
+    stale = positions(child)
+    calls = []
+    job = api.RefreshLimitJob(child, progress=lambda level, share: calls.append(threading.get_ident()) and False)
+    assert job.wait() is child and job.done and not job.cancelled
+    refreshed = positions(child)
+    assert calls and calls[-1] != threading.get_ident()  # refined on the job's thread
+    assert refreshed.shape != stale.shape or not np.array_equal(refreshed, stale)  # the edit shows
+    assert api.refresh_limit(cage) is child
+    assert np.array_equal(positions(child), refreshed)
+
+
+@pytest.mark.parametrize("scheme", ['LOOP', 'DOO_SABIN'])
+def test_refresh_job_cancelled_leaves_the_limit_surface_as_it_was(scheme):
+    cage = edited_limit_cage(scheme)
+    child = api.find_limit_object(cage)
+    mesh, stale, count = child.data, positions(child), counts()
+    job = api.RefreshLimitJob(cage, progress=lambda level, share: job.cancel() or False)
+    with pytest.raises(native.PiaCancelled):
+        job.wait()
+    assert job.done and job.cancelled
+    assert child.data == mesh and np.array_equal(positions(child), stale)
+    assert counts() == count
+
+
+def test_refresh_job_whose_cage_is_deleted_meanwhile_cancels():
+    cage = edited_limit_cage('LOOP')
+    started, release = threading.Event(), threading.Event()
+
+    def progress(level, share):
+        started.set()
+        release.wait(10.0)
+        return False
+    job = api.RefreshLimitJob(cage, progress=progress)
+    started.wait(10.0)
+    bpy.data.objects.remove(cage)
+    release.set()
+    with pytest.raises(native.PiaCancelled) as e:
+        job.wait()
+    assert "changed" in str(e.value) and not job.cancelled
+
+
+def test_refresh_job_bad_input_raises_at_once():
+    count = counts()
+    with pytest.raises(ValueError, match="not a Loop cage or a Doo-Sabin cage"):
+        api.RefreshLimitJob(shapes.cube())
+    with pytest.raises(ValueError, match="No active object"):
+        api.RefreshLimitJob(None)
+    assert counts() == (count[0] + 1, count[1] + 1)  # the cube

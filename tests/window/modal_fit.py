@@ -2,7 +2,9 @@
 """The operator in Blender's window, as an artist runs it (Make Interpolating
 Cage from the panel or the menu): the fit works on a thread of its own, the
 window stays live, the status bar says what it does, Esc cancels and leaves
-nothing, and a fit let run makes the cage interpolate() makes.
+nothing, and a fit let run makes the cage interpolate() makes.  Refresh
+Limit Surface likewise: Esc leaves the limit surface as it was, and let run
+it makes what refresh_limit() makes.
 
     xvfb-run -a -s "-screen 0 1600x900x24" blender --factory-startup --enable-event-simulate \\
         --python tests/window/modal_fit.py [-- --screenshot docs/status_fit.png]
@@ -67,6 +69,26 @@ class RecordedJob(api.InterpolateJob):
 
 
 api.InterpolateJob = RecordedJob
+
+
+class RecordedRefreshJob(api.RefreshLimitJob):
+    """Refresh Limit Surface's job, seen from here; with `pause` set, each
+    progress call of the refinement waits that long on the library's
+    thread."""
+    pause = 0.0
+
+    def __init__(self, *args, **kwargs):
+        JOBS.append(self)
+        pause = RecordedRefreshJob.pause
+
+        def progress(level, share):
+            if pause:
+                time.sleep(pause)
+            return False
+        super().__init__(*args, progress=progress, **kwargs)
+
+
+api.RefreshLimitJob = RecordedRefreshJob
 
 
 def make_scene():
@@ -265,6 +287,58 @@ def script():
     assert np.array_equal(positions(cage), before[0])
     say("interpolating from Edit Mode: the cage made is interpolate()'s (%s, %d iterations)" % (
         report.status, report.iterations))
+
+    # 6. Refresh Limit Surface on an edited Loop cage: modal too; Esc leaves
+    # the limit surface as it was; let run, it is refresh_limit()'s.
+    loop, _ = api.interpolate(cage, scheme='LOOP', triangulate=True, levels=3, name="Loop")
+    child = api.find_limit_object(loop)
+    co = positions(loop).astype(np.float32)
+    co[0] *= np.float32(1.1)
+    loop.data.vertices.foreach_set("co", co.ravel())
+    loop.data.update()
+    for obj in bpy.context.scene.objects:
+        obj.select_set(obj is loop)
+    bpy.context.view_layer.objects.active = loop
+    stale, mesh, count = positions(child), child.data, (len(bpy.data.objects), len(bpy.data.meshes))
+    RecordedRefreshJob.pause = 1.0
+    with bpy.context.temp_override(**window_context()):
+        result = bpy.ops.object.subdiv_pia_refresh_limit('INVOKE_DEFAULT')
+    assert result == {'RUNNING_MODAL'}, result
+    job = JOBS[-1]
+    assert isinstance(job, RecordedRefreshJob)
+    started = time.perf_counter()
+    while job.calls < 1 and time.perf_counter() - started < LIMIT:
+        yield 0.01
+    assert not job.done, "the refinement ended before its first progress call was seen"
+    pressed = time.perf_counter()
+    window.event_simulate(type='ESC', value='PRESS')
+    window.event_simulate(type='ESC', value='RELEASE')
+    while not job.done and time.perf_counter() - pressed < LIMIT:
+        yield 0.01
+    assert job.done and job.cancelled, "Esc did not end the refresh"
+    yield 0.1
+    assert child.data == mesh and np.array_equal(positions(child), stale)
+    assert (len(bpy.data.objects), len(bpy.data.meshes)) == count, "something was made"
+    text = reports()
+    assert "Cancelled: the limit surface of 'Loop' is as it was" in text, text
+    say("Refresh Limit Surface: Esc ended it %.2f s later, the limit surface as it was"
+        % (time.perf_counter() - pressed))
+    RecordedRefreshJob.pause = 0.0
+    with bpy.context.temp_override(**window_context()):
+        result = bpy.ops.object.subdiv_pia_refresh_limit('INVOKE_DEFAULT')
+    assert result == {'RUNNING_MODAL'}, result
+    job = JOBS[-1]
+    started = time.perf_counter()
+    while not job.done and time.perf_counter() - started < LIMIT:
+        yield 0.02
+    assert job.done and not job.cancelled, "the refresh did not end"
+    yield 0.1
+    refreshed = positions(child)
+    assert not np.array_equal(refreshed, stale), "the edit does not show"
+    assert api.refresh_limit(loop) is child and np.array_equal(positions(child), refreshed)
+    assert "Loop_limit: %d vertices" % len(child.data.vertices) in reports()
+    say("Refresh Limit Surface let run: refresh_limit()'s limit surface (%d vertices), reported"
+        % len(child.data.vertices))
 
 
 run_steps(script(), passed=lambda: say("all passed"), failed=lambda: say("FAILED"))
