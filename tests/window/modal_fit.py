@@ -183,6 +183,18 @@ def run_to_end(**settings):
     return job
 
 
+def press_esc(job):
+    """Esc in the window, then a wait (window running) until job's run ends;
+    returns the seconds from the key to the end."""
+    window = window_context()["window"]
+    pressed = time.perf_counter()
+    window.event_simulate(type='ESC', value='PRESS')
+    window.event_simulate(type='ESC', value='RELEASE')
+    while not job.done and time.perf_counter() - pressed < LIMIT:
+        yield 0.01
+    return time.perf_counter() - pressed
+
+
 def last_settings():
     """The settings the last finished run of the operator passed on (its
     float properties are single precision)."""
@@ -225,14 +237,9 @@ def script():
 
     # 2. Esc cancels within the fit: nothing made, nothing changed, the cage
     # back in Edit Mode.
-    window = window_context()["window"]
-    pressed = time.perf_counter()
-    window.event_simulate(type='ESC', value='PRESS')
-    window.event_simulate(type='ESC', value='RELEASE')
-    while not job.done and time.perf_counter() - pressed < LIMIT:
-        yield 0.01
+    took = yield from press_esc(job)
     assert job.done and job.cancelled, "Esc did not end the fit"
-    say("Esc at round %d: the operator ended %.2f s later" % (job.iteration, time.perf_counter() - pressed))
+    say("Esc at round %d: the operator ended %.2f s later" % (job.iteration, took))
     yield 0.1
     assert (len(bpy.data.objects), len(bpy.data.meshes)) == count, "something was made"
     assert np.array_equal(positions(cage), before[0]) and np.array_equal(positions(scan), before[1])
@@ -310,19 +317,14 @@ def script():
     while job.calls < 1 and time.perf_counter() - started < LIMIT:
         yield 0.01
     assert not job.done, "the refinement ended before its first progress call was seen"
-    pressed = time.perf_counter()
-    window.event_simulate(type='ESC', value='PRESS')
-    window.event_simulate(type='ESC', value='RELEASE')
-    while not job.done and time.perf_counter() - pressed < LIMIT:
-        yield 0.01
+    took = yield from press_esc(job)
     assert job.done and job.cancelled, "Esc did not end the refresh"
     yield 0.1
     assert child.data == mesh and np.array_equal(positions(child), stale)
     assert (len(bpy.data.objects), len(bpy.data.meshes)) == count, "something was made"
     text = reports()
     assert "Cancelled: the limit surface of 'Loop' is as it was" in text, text
-    say("Refresh Limit Surface: Esc ended it %.2f s later, the limit surface as it was"
-        % (time.perf_counter() - pressed))
+    say("Refresh Limit Surface: Esc ended it %.2f s later, the limit surface as it was" % took)
     RecordedRefreshJob.pause = 0.0
     with bpy.context.temp_override(**window_context()):
         result = bpy.ops.object.subdiv_pia_refresh_limit('INVOKE_DEFAULT')
