@@ -11,12 +11,16 @@ BLENDER_RUN = $(BLENDER) -b --factory-startup --python-exit-code 1
 # source package of OpenSubdiv (dpkg-source), the Windows one with mingw-w64
 # and tested under Wine; the machine's OpenSubdiv serves the development
 # build.
-DEBIAN_PACKAGES = blender libosd-dev cmake g++ clang make binutils python3-numpy python3-scipy python3-pytest \
+DEBIAN_PACKAGES = blender cmake g++ clang make binutils python3-numpy python3-scipy python3-pytest \
                   python3-matplotlib python3-venv libsuitesparse-dev debootstrap dpkg-dev xz-utils \
                   g++-mingw-w64-x86-64 wine64 xvfb xauth libgl1-mesa-dri
 # Installed where the release has them: the closest-point benchmark compares
 # the library with Embree (3 on Debian 12, 4 on 13).
 OPTIONAL_PACKAGES = libembree-dev
+# Every build links OpenSubdiv 3.6.0's static core, built once under build/osd/host
+# from the source package the shipped library is built from (tools/package.py),
+# so that each computes what the package computes.
+OSD_ARGS = $(shell $(PYTHON) tools/package.py opensubdiv-cmake-args)
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 VERSION = $(shell $(PYTHON) tools/package.py version)
 PACKAGE = dist/subdiv_pia-$(VERSION)-linux-x64.zip
@@ -58,7 +62,7 @@ test-c: build
 	ctest --test-dir build/cmake --output-on-failure
 
 test-asan: deps
-	cmake -S . -B build/asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSPIA_SANITIZE=ON
+	cmake -S . -B build/asan $(OSD_ARGS) -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSPIA_SANITIZE=ON
 	cmake --build build/asan --parallel 2
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
 	  ctest --test-dir build/asan --output-on-failure
@@ -66,7 +70,7 @@ test-asan: deps
 # ThreadSanitizer: interpolations, fits and closest-point queries from
 # several threads at once; only the library and that test are built.
 test-tsan: deps
-	cmake -S . -B build/tsan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSPIA_TSAN=ON
+	cmake -S . -B build/tsan $(OSD_ARGS) -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSPIA_TSAN=ON
 	cmake --build build/tsan --target test_concurrent --parallel 2
 	TSAN_OPTIONS=halt_on_error=1:second_deadlock_stack=1 build/tsan/tests/c/test_concurrent
 
@@ -79,7 +83,7 @@ test-tsan: deps
 FUZZ_SECONDS ?= 600
 FUZZ_TARGET = build/fuzz/tests/fuzz/spia_fuzz
 fuzz: build
-	cmake -S . -B build/fuzz -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++ \
+	cmake -S . -B build/fuzz $(OSD_ARGS) -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++ \
 	  -DSPIA_FUZZ=ON -DSPIA_TESTS=OFF
 	cmake --build build/fuzz --target spia_fuzz --parallel 2
 	mkdir -p build/fuzz/seeds build/fuzz/corpus build/fuzz/crashes
@@ -132,7 +136,7 @@ bench: build bench-scale bench-solve bench-closest
 # Speed and scale (bench/bench_scale.py; BENCH_QUICK=1 for a short subset).  The
 # OpenSubdiv helper is built in its own tree, with -DSPIA_BENCH=ON.
 bench-scale: build
-	cmake -S . -B build/bench -DCMAKE_BUILD_TYPE=Release -DSPIA_BENCH=ON -DSPIA_TESTS=OFF
+	cmake -S . -B build/bench $(OSD_ARGS) -DCMAKE_BUILD_TYPE=Release -DSPIA_BENCH=ON -DSPIA_TESTS=OFF
 	cmake --build build/bench --target spia_bench_osd --parallel 2
 	$(PYTHON) bench/bench_scale.py --blender $(BLENDER)
 
@@ -174,7 +178,7 @@ SCAN_BASE ?= HEAD
 SCAN_CASES ?= dragon_s2 dragon_s1t1
 bench-scan: build
 	$(BLENDER_RUN) --python bench/bench_fit_scale.py -- --export-scan-data $(SCAN_CASES)
-	cmake -S . -B build/bench -DCMAKE_BUILD_TYPE=Release -DSPIA_BENCH=ON -DSPIA_TESTS=OFF
+	cmake -S . -B build/bench $(OSD_ARGS) -DCMAKE_BUILD_TYPE=Release -DSPIA_BENCH=ON -DSPIA_TESTS=OFF
 	cmake --build build/bench --target spia_bench_scan --parallel 2
 	rm -rf build/bench/scan_base && mkdir -p build/bench/scan_base
 	for f in scan.c bvh.c bvh.h threads.c threads.h status.c message.c internal.h; do \
@@ -199,7 +203,7 @@ bench-scan: build
 # hierarchy is measured alone) on the bunny and dragon scans and a synthetic
 # one of 4 million triangles.  The table goes to out/bench/closest.md.
 bench-closest: deps
-	cmake -S . -B build/bench -DCMAKE_BUILD_TYPE=Release -DSPIA_BENCH=ON -DSPIA_TESTS=OFF
+	cmake -S . -B build/bench $(OSD_ARGS) -DCMAKE_BUILD_TYPE=Release -DSPIA_BENCH=ON -DSPIA_TESTS=OFF
 	cmake --build build/bench --target spia_bench_closest --parallel 2
 	mkdir -p out/bench
 	build/bench/bench/spia_bench_closest --out out/bench/closest.md

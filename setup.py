@@ -1,8 +1,9 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Builds the native library with CMake and assembles the Blender add-on.
 
-    python3 setup.py build     ->  build/addon/subdiv_pia/  (for development: the library links the
-                                   machine's OpenSubdiv, so it runs on this machine only)
+    python3 setup.py build     ->  build/addon/subdiv_pia/  (for development: the library links
+                                   OpenSubdiv 3.6.0 built from the same source package as the
+                                   shipped one, so it computes what the package computes)
     python3 setup.py package   ->  dist/subdiv_pia-<version>-linux-x64.zip and dist/repo/
                                    (the self-contained package: tools/package.py)
 
@@ -28,7 +29,10 @@ def run(cmd):
 
 
 def build_library(build_type="Release"):
-    run(["cmake", "-S", ROOT, "-B", CMAKE_BUILD, f"-DCMAKE_BUILD_TYPE={build_type}"])
+    sys.path.insert(0, os.path.join(ROOT, "tools"))
+    import package  # noqa: E402  (tools/package.py: OpenSubdiv from its source package)
+    run(["cmake", "-S", ROOT, "-B", CMAKE_BUILD, f"-DCMAKE_BUILD_TYPE={build_type}"] +
+        package.opensubdiv_cmake_args(sys.stdout))
     run(["cmake", "--build", CMAKE_BUILD, "--parallel", str(os.cpu_count() or 2)])
     return os.path.join(CMAKE_BUILD, LIBRARY)
 

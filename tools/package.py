@@ -105,6 +105,37 @@ def opensubdiv_source():
     return OPENSUBDIV_DIR
 
 
+def host_opensubdiv(log=sys.stdout):
+    """OpenSubdiv 3.6.0's static core built with this machine's compiler from
+    the same source package as the shipped libraries, at
+    build/osd/host/lib/libosdCPU.a; returns (source tree, archive).
+
+    Every build of the library (development, sanitizers, fuzzing,
+    benchmarks) links this one instead of the system's OpenSubdiv, so that
+    each computes what the package computes: Debian 12's OpenSubdiv 3.5
+    gives other limit points at valence-2 vertices and crashes in
+    Bfr::IrregularPatchBuilder on OpenSubdiv's own catmark_val2_interior."""
+    src = opensubdiv_source()
+    osd = os.path.join(BUILD, "osd", "host")
+    archive = os.path.join(osd, "lib", "libosdCPU.a")
+    stamp = os.path.join(osd, ".subdiv_pia-built")
+    if not os.path.exists(stamp):
+        os.makedirs(osd, exist_ok=True)
+        subprocess.run(["cmake", "-S", src, "-B", osd] + OPENSUBDIV_OPTIONS, check=True,
+                       stdout=subprocess.DEVNULL, stderr=log)
+        subprocess.run(["cmake", "--build", osd, "--target", "osd_static_cpu", "--parallel", str(os.cpu_count() or 2)],
+                       check=True, stdout=subprocess.DEVNULL, stderr=log)
+        with open(stamp, "w") as f:
+            f.write(OPENSUBDIV_VERSION + "\n")
+    return src, archive
+
+
+def opensubdiv_cmake_args(log=sys.stderr):
+    """The CMake arguments that point a build at host_opensubdiv()."""
+    src, archive = host_opensubdiv(log)
+    return ["-DOPENSUBDIV_INCLUDE_DIR=" + src, "-DOPENSUBDIV_CPU_LIBRARY=" + archive]
+
+
 # --------------------------------------------------------------------------
 # The Linux library
 # --------------------------------------------------------------------------
@@ -340,10 +371,24 @@ def main(argv):
     if argv[:1] == ["version"]:
         print(version())
         return 0
+    if argv[:1] == ["opensubdiv-cmake-args"]:
+        # The build's own output (and its commands') goes to stderr: stdout
+        # is the arguments alone.
+        sys.stdout.flush()
+        saved = os.dup(1)
+        os.dup2(2, 1)
+        try:
+            args = opensubdiv_cmake_args()
+        finally:
+            sys.stdout.flush()
+            os.dup2(saved, 1)
+            os.close(saved)
+        print(" ".join(args))
+        return 0
     if argv[:1] == ["name"] and len(argv) == 2:
         print(os.path.join(DIST, package_name(argv[1])))
         return 0
-    print("usage: package.py linux|windows|all [--no-tests] | version | name PLATFORM", file=sys.stderr)
+    print("usage: package.py linux|windows|all [--no-tests] | version | name PLATFORM | opensubdiv-cmake-args", file=sys.stderr)
     return 2
 
 
