@@ -34,7 +34,7 @@ __all__ = [
 SCHEMES = ("CATMULL_CLARK", "LOOP", "DOO_SABIN")
 BOUNDARY_RULES = ("SMOOTH", "HOPPE")
 BOUNDARY_SMOOTH = ("ALL", "PRESERVE_CORNERS")
-METHODS = ("AUTO", "PIA", "GS_PIA", "CHEBYSHEV", "WPIA", "CG", "GS_PIA_FAST")
+METHODS = ("AUTO", "PIA", "GS_PIA", "CHEBYSHEV", "WPIA", "CG", "GS_PIA_FAST", "LEAST_SQUARES")
 # spia_options.solve_flags, by name (see the header): parts of the
 # Gauss-Seidel solvers to switch on.
 SOLVE_FLAGS = {"FIRST_STEP": 1, "MULTICOLOUR": 2, "DOUBLE_SWEEPS": 4, "NO_AVX": 8}

@@ -67,14 +67,16 @@ typedef enum spia_result {
      * The cage written is the last iterate and is usable.  Not a failure of
      * the call: the report tells how far it got. */
     SPIA_MAX_ITERATIONS = 1,
-    /* The error stopped falling before the tolerance was reached: the
-     * tolerance is below what rounding allows, or some vertices cannot
-     * reach their targets at all because their limit points are tied to
-     * other vertices' (double-sided faces in scans: the three vertices of a
-     * triangle and of its reversed twin all have the centroid as limit
-     * point).  Such vertices are counted in spia_report.unreachable_count
-     * and keep their positions; the others are solved.  The cage written
-     * is usable. */
+    /* Some vertices cannot reach their targets: no cage's limit surface
+     * passes through all the points, because the limit matrix is singular
+     * there (limit points tied together: the three vertices of a
+     * double-sided triangle in a scan all have its centroid as limit point;
+     * interior valence-2 vertices; faces folded back over their
+     * neighbours).  The cage written is the least-squares cage (see
+     * SPIA_METHOD_LEAST_SQUARES): the other vertices are within the
+     * tolerance, these as close as the surface allows.  They are counted
+     * in spia_report.unreachable_count and flagged in
+     * spia_report.unreachable.  The cage is usable. */
     SPIA_STAGNATED = 2,
 
     /* Failures: nothing was written to the output buffers. */
@@ -87,7 +89,7 @@ typedef enum spia_result {
     SPIA_ERROR_TOPOLOGY = -7,         /* a topology the subdivision scheme rejects     */
     SPIA_ERROR_OUT_OF_MEMORY = -8,
     SPIA_ERROR_CANCELLED = -9,        /* the progress callback asked to stop           */
-    SPIA_ERROR_DIVERGED = -10,        /* the iteration blew up; nothing was written     */
+    SPIA_ERROR_DIVERGED = -10,        /* a NaN or infinity arose; nothing was written   */
     SPIA_ERROR_INTERNAL = -11         /* an unexpected failure inside the library      */
 } spia_result;
 
@@ -225,7 +227,18 @@ typedef enum spia_method {
      * double sweeps take over and the report says GS_PIA.  The error of an
      * iteration is the largest met during the sweep, as for GS_PIA.
      * Needs every L_ii > 0, as GS_PIA. */
-    SPIA_METHOD_GS_PIA_FAST = 6
+    SPIA_METHOD_GS_PIA_FAST = 6,
+    /* Least squares: conjugate gradients on the normal equations
+     * L^T L V = L^T P (CGLS), which converge for any L.  From the first
+     * iterate they reach the least-squares cage nearest it: where no cage's
+     * limit surface passes through every point (L singular: interior
+     * valence-2 vertices, faces folded back over their neighbours,
+     * double-sided faces), the points that can be reached are, within the
+     * tolerance, and the others are as close as the surface allows.  Every
+     * other method hands over to it by itself when it stagnates or
+     * diverges; spia_report.method then says LEAST_SQUARES, the
+     * iterations count both. */
+    SPIA_METHOD_LEAST_SQUARES = 7
 } spia_method;
 
 /* spia_options.solve_flags: parts of the Gauss-Seidel solvers that can be
@@ -421,8 +434,11 @@ typedef struct spia_report {
  *   report    optional; filled in whatever the outcome.
  *
  * Uses options->method, tolerance, max_iterations, weight, staged and the
- * progress callback.  Fails with SPIA_ERROR_DIVERGED if the error grows
- * without bound; GS-PIA refuses a table with a zero or negative diagonal
+ * progress callback.  Where the method chosen stagnates or its error grows
+ * without bound, least squares takes over (SPIA_METHOD_LEAST_SQUARES, with
+ * up to max_iterations more iterations) and the result is SPIA_OK or
+ * SPIA_STAGNATED; SPIA_ERROR_DIVERGED only if a NaN or infinity arises
+ * even so.  GS-PIA refuses a table with a zero or negative diagonal
  * entry and CG one without the D S form, as SPIA_ERROR_INVALID_ARGUMENT.
  */
 SPIA_API spia_result spia_solve(const spia_stencils *stencils, const float *targets,

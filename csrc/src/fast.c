@@ -1150,9 +1150,8 @@ spia_result spia__solve_fast(const spia_stencils *L, const float *targets, const
                        (int)it, sr.err_all / scale, opt->tolerance);
         else if (stuck_count > 0)
             spia__fail(status, res, -1,
-                       "%d vertices cannot reach their targets: their limit points are tied to other vertices' "
-                       "(as on double-sided faces); they keep their positions, with max error %.3g of the diagonal. "
-                       "The other vertices reach %.3g",
+                       "%d vertices cannot reach their targets (their limit points are tied to other vertices'), "
+                       "with max error %.3g of the diagonal. The other vertices reach %.3g",
                        (int)stuck_count, sr.err_all / scale, sr.err / scale);
         else
             spia__fail(status, res, -1,

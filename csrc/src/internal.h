@@ -224,6 +224,17 @@ spia_result spia__solve_fast(const spia_stencils *L, const float *targets, const
                              double diagonal, int automatic, float *cage, float **handover,
                              int32_t *handover_iterations, spia_report *report, spia_status *status);
 
+/* Least squares (least_squares.c): moves cage (row_count * 3 doubles, the
+ * first iterate on entry) towards the least-squares cage of L V = targets,
+ * until every row is within options->tolerance * scale, the least-squares
+ * residual is reached, or max_steps steps; *it counts the steps, which go
+ * into the report's history and the progress callback as iterations.  L
+ * must hold its CSR arrays.  Returns SPIA_OK, or SPIA_ERROR_CANCELLED,
+ * _OUT_OF_MEMORY or _DIVERGED (a NaN or infinity met). */
+spia_result spia__least_squares(const spia_stencils *L, const float *targets, double *cage, const spia_options *options,
+                                double scale, int32_t *it, int32_t max_steps, spia_report *report,
+                                spia_status *status);
+
 /* Fills s->boundary and s->boundary_count from the boundary vertices
  * (spia__boundary_vertices). */
 void spia__stencils_mark_boundary(spia_stencils *s, const unsigned char *on_boundary);

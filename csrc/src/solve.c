@@ -1016,21 +1016,34 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
             opt.solve_flags |= AUTO_FAST_FLAGS;
         }
     }
+    /* Least squares (see least_squares.c): asked for, or where the
+     * iteration stagnates or diverges. */
+    int least_squares = opt.method == SPIA_METHOD_LEAST_SQUARES;
     if (fast) {
         res = spia__solve_fast(L, targets, &opt, diagonal, automatic, cage, &handover, &it0, report, status);
-        if (res != SPIA__HAND_OVER) goto done;
-        /* Beyond float32: GS-PIA goes on from where the sweeps got to. */
-        if (report) initial_relative = report->initial_max_error_relative;
-        opt.method = SPIA_METHOD_GS_PIA;
-        opt.solve_flags &= ~SPIA_SOLVE_FIRST_STEP;
-        if (handover) opt.initial_cage = handover;
+        if (res == SPIA_STAGNATED || res == SPIA_ERROR_DIVERGED) {
+            /* From the cage the sweeps wrote, or after a blow-up from the
+             * first iterate. */
+            if (report) initial_relative = report->initial_max_error_relative;
+            if (res == SPIA_STAGNATED) opt.initial_cage = cage;
+            if (report) it0 = report->iterations;
+            least_squares = 1;
+        } else if (res != SPIA__HAND_OVER) {
+            goto done;
+        } else {
+            /* Beyond float32: GS-PIA goes on from where the sweeps got to. */
+            if (report) initial_relative = report->initial_max_error_relative;
+            opt.method = SPIA_METHOD_GS_PIA;
+            opt.solve_flags &= ~SPIA_SOLVE_FIRST_STEP;
+            if (handover) opt.initial_cage = handover;
+        }
     }
 
     if (!with_arrays(given, &L, &table, opt.threads)) {
         res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
         goto done;
     }
-    s.method = opt.method;
+    s.method = least_squares ? SPIA_METHOD_LEAST_SQUARES : opt.method;
     s.L = L;
     s.n = n;
     s.P = targets;
@@ -1052,7 +1065,7 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
     }
     if (!s.V || !s.R || !s.diag || !s.initial || !s.stuck || !s.frozen ||
         (s.method != SPIA_METHOD_PIA && s.method != SPIA_METHOD_GS_PIA && s.method != SPIA_METHOD_AUTO &&
-         !krylov_arrays(&s))) {
+         s.method != SPIA_METHOD_LEAST_SQUARES && !krylov_arrays(&s))) {
         res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
         goto done;
     }
@@ -1115,7 +1128,9 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
 
     int32_t it = it0, stuck_count = 0;
     const int staged = opt.staged && L->boundary_count > 0 && L->boundary_count < n;
-    if (staged) {
+    if (least_squares) {
+        res = SPIA_OK;
+    } else if (staged) {
         /* Stage 1: the boundary rows, which refer to boundary vertices only. */
         for (int32_t r = 0; r < n; ++r) s.frozen[r] = !L->boundary[r];
         res = run_stage(&s, &opt, threshold, scale, &it, &stuck_count, report, status);
@@ -1133,6 +1148,21 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
         s.method = SPIA_METHOD_PIA; /* done before AUTO had to choose */
         if (report) report->method = s.method;
     }
+    if ((res == SPIA_STAGNATED || res == SPIA_ERROR_DIVERGED || (res == SPIA_OK && stuck_count > 0)) &&
+        !least_squares) {
+        /* Some vertices cannot be reached, or L has eigenvalues outside
+         * (0, 1] that PIA-type iterations cannot take: least squares from
+         * here, or after a blow-up from the first iterate. */
+        least_squares = 1;
+        if (res == SPIA_ERROR_DIVERGED)
+            for (int64_t k = 0; k < 3 * (int64_t)n; ++k) s.V[k] = (double)s.start[k];
+    }
+    if (least_squares) {
+        memset(s.stuck, 0, (size_t)n);
+        s.method = SPIA_METHOD_LEAST_SQUARES;
+        if (report) report->method = s.method;
+        res = spia__least_squares(L, targets, s.V, &opt, scale, &it, opt.max_iterations, report, status);
+    }
     if (res >= 0) {
         /* Write the cage, then measure it as stored (in float). */
         for (int64_t k = 0; k < 3 * (int64_t)n; ++k) {
@@ -1140,23 +1170,30 @@ spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_
             s.V[k] = (double)cage[k];
         }
         err_all = residual(&s, &mean, &err);
-        if (stuck_count > 0 && res == SPIA_OK) res = SPIA_STAGNATED;
+        if (least_squares) {
+            /* The vertices the least-squares cage leaves beyond the
+             * tolerance are the ones no cage reaches. */
+            stuck_count = 0;
+            for (int32_t r = 0; r < n; ++r) {
+                const double *q = s.R + 3 * (int64_t)r;
+                s.stuck[r] = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]) > threshold;
+                stuck_count += s.stuck[r];
+            }
+            err_all = residual_stats(&s, &mean, &err);
+            res = stuck_count > 0 ? SPIA_STAGNATED : SPIA_OK;
+        }
         if (res == SPIA_OK)
             spia__ok(status);
         else if (res == SPIA_MAX_ITERATIONS)
             spia__fail(status, res, -1,
                        "stopped at max_iterations (%d) with max error %.3g of the diagonal, above the tolerance %.3g",
                        (int)it, err_all / scale, opt.tolerance);
-        else if (stuck_count > 0)
+        else /* SPIA_STAGNATED, from least squares */
             spia__fail(status, res, -1,
-                       "%d vertices cannot reach their targets: their limit points are tied to other vertices' "
-                       "(as on double-sided faces); they keep their positions, with max error %.3g of the diagonal. "
-                       "The other vertices reach %.3g",
+                       "%d vertices cannot be reached: no cage's limit surface passes through all the points (the "
+                       "limit matrix is singular there); the least-squares cage puts them as close as the surface "
+                       "allows, within %.3g of the diagonal. The other vertices reach %.3g",
                        (int)stuck_count, err_all / scale, err / scale);
-        else
-            spia__fail(status, res, -1,
-                       "the error stopped falling after %d iterations at %.3g of the diagonal, above the tolerance %.3g",
-                       (int)it, err_all / scale, opt.tolerance);
         if (report) {
             report->max_error = err_all;
             report->mean_error = mean;

@@ -46,7 +46,7 @@ spia_result spia__resolve_options(const spia_options *in, spia_options *out, spi
         (int)o.boundary_smooth != SPIA_BOUNDARY_SMOOTH_PRESERVE_CORNERS)
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "unknown boundary_smooth value %d",
                           (int)o.boundary_smooth);
-    if ((int)o.method < SPIA_METHOD_AUTO || (int)o.method > SPIA_METHOD_GS_PIA_FAST)
+    if ((int)o.method < SPIA_METHOD_AUTO || (int)o.method > SPIA_METHOD_LEAST_SQUARES)
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "unknown solver method %d", (int)o.method);
     if ((int)o.boundary_rule != SPIA_BOUNDARY_RULE_SMOOTH && (int)o.boundary_rule != SPIA_BOUNDARY_RULE_HOPPE)
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "unknown boundary_rule value %d", (int)o.boundary_rule);

@@ -247,6 +247,32 @@ static void stencil_row(const int64_t *off, const int32_t *idx, const double *wt
     for (int64_t k = off[i]; k < off[i + 1]; ++k) w[idx[k]] += wt[k];
 }
 
+/* The least-squares answer for an isolated double-sided triangle (its two
+ * faces alone) on vertices a, b, c: each of the three rows of the limit
+ * matrix is the same (the triangle's centroid), so the best any cage can do
+ * is put that common limit point on the centroid of the three targets.
+ * Returns the largest distance, over the three, of the cage's limit point
+ * (applied through the table) from that centroid. */
+static double double_sided_miss(const spia_stencils *s, const float *targets, const float *cage, const int32_t v[3]) {
+    const int32_t n = spia_stencils_row_count(s);
+    double *x = (double *)malloc(sizeof(double) * 3 * (size_t)n);
+    double *l = (double *)malloc(sizeof(double) * 3 * (size_t)n);
+    if (!x || !l) abort();
+    for (int64_t k = 0; k < 3 * (int64_t)n; ++k) x[k] = cage[k];
+    spia_stencils_apply(s, x, l);
+    double centroid[3] = {0.0, 0.0, 0.0}, worst = 0.0;
+    for (int i = 0; i < 3; ++i)
+        for (int a = 0; a < 3; ++a) centroid[a] += targets[3 * (int64_t)v[i] + a] / 3.0;
+    for (int i = 0; i < 3; ++i) {
+        double d2 = 0.0;
+        for (int a = 0; a < 3; ++a) d2 += (l[3 * (int64_t)v[i] + a] - centroid[a]) * (l[3 * (int64_t)v[i] + a] - centroid[a]);
+        worst = fmax(worst, sqrt(d2));
+    }
+    free(x);
+    free(l);
+    return worst;
+}
+
 #ifdef __cplusplus
 }
 #endif

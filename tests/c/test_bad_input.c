@@ -158,7 +158,7 @@ int main(void) {
     bad = o;
     bad.method = (spia_method)9;
     expect_code(&m, &bad, SPIA_ERROR_INVALID_ARGUMENT, "unknown method");
-    bad.method = (spia_method)(SPIA_METHOD_GS_PIA_FAST + 1);
+    bad.method = (spia_method)(SPIA_METHOD_LEAST_SQUARES + 1);
     expect_code(&m, &bad, SPIA_ERROR_INVALID_ARGUMENT, "the method after the last");
     bad = o;
     bad.solve_flags = 16;

@@ -113,7 +113,9 @@ static void decode_settings(reader *r, settings *s) {
     s->has_vertex_creases = (flags >> 6) & 1;
     s->has_face_shapes = (flags >> 7) & 1;
     b = u8(r);
-    s->o.method = (spia_method)(b % 8);       /* 7: unknown */
+    /* 7: least squares, or with bit 6 set the unknown method after it
+     * (0 to 6 read as before it came) */
+    s->o.method = (spia_method)(b % 8 == 7 ? SPIA_METHOD_LEAST_SQUARES + ((b >> 6) & 1) : b % 8);
     s->o.solve_flags = (int32_t)(b >> 3) & 7; /* the three SPIA_SOLVE_* */
     s->o.quality = u8(r) % 12;              /* 0: default, 11: out of range */
     b = u8(r);
