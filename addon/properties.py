@@ -38,6 +38,10 @@ METHOD_ITEMS = (
     ('GS_PIA_FAST', "Gauss-Seidel PIA (Fast)",
      "Gauss-Seidel PIA in an order laid out for it, in float32 with the error measured in double, "
      "on all threads on large meshes"),
+    ('LEAST_SQUARES', "Least Squares",
+     "Conjugate gradients on the normal equations: converges on any mesh, and where no cage passes "
+     "through every point puts the rest as close as the surface allows (every other method switches "
+     "to it by itself when it stalls)"),
 )
 
 FIT_ITEMS = (
