@@ -106,6 +106,12 @@ LIVE_CLEANUP_MESSAGE = ("A cage made with cleanup cannot be live: its vertices a
                         "without cleanup")
 # What the cleanup did, stored on the cage as pia_cleanup_<name> (cleanup.STAT_NAMES).
 CLEANUP_PREFIX = "pia_cleanup_"
+# The vertex group of a cage's vertices that no cage can put on their targets
+# (their limit points are tied to other vertices'), so that they can be
+# selected in Edit Mode; the custom property with their count.
+UNREACHABLE_GROUP = "pia_unreachable"
+UNREACHABLE_COUNT = "pia_unreachable_count"
+REACHABLE_MAX_ERROR = "pia_reachable_max_error"  # max error over the other vertices, while there are any
 
 # Settings that a source Subdivision Surface modifier provides.
 MODIFIER_SETTINGS = ("levels", "render_levels", "quality", "boundary_smooth", "use_creases")
@@ -1221,6 +1227,52 @@ def paint_scan(target, report):
     return None
 
 
+def write_unreachable_group(obj, report):
+    """The vertex group UNREACHABLE_GROUP of obj: exactly the report's
+    unreachable vertices, weight 1 (made active, for Select in Edit Mode);
+    removed when there are none.  Vertex groups live on the mesh (Blender
+    3.0 and later), so a mesh copied from a source brings the source's
+    groups along, a `pia_unreachable` of its own among them (a cage made
+    from a cage): the group is emptied of every vertex before the flagged
+    ones are added.  Returns the group or None."""
+    flags = getattr(report, "unreachable", None)
+    indices = [] if flags is None else np.flatnonzero(flags).tolist()
+    group = obj.vertex_groups.get(UNREACHABLE_GROUP)
+    if not indices:
+        if group is not None:
+            obj.vertex_groups.remove(group)
+        return None
+    if group is None:
+        group = obj.vertex_groups.new(name=UNREACHABLE_GROUP)
+    group.remove(list(range(len(obj.data.vertices))))
+    group.add(indices, 1.0, 'REPLACE')
+    obj.vertex_groups.active_index = group.index
+    return group
+
+
+def store_report(obj, report, settings):
+    """A solve's figures on obj (custom properties: pia_iterations,
+    pia_max_error, pia_mean_error, pia_status, pia_method,
+    pia_unreachable_count and, while there are unreachable vertices,
+    pia_reachable_max_error) and its unreachable vertices (the vertex group
+    pia_unreachable); a fit's through store_fit.  Used by build_object and
+    by each update of a live cage."""
+    if isinstance(report, native.FitReport):
+        store_fit(obj, report, settings)
+        return
+    obj["pia_iterations"] = int(report.iterations)
+    obj["pia_max_error"] = float(report.max_error_relative)
+    obj["pia_mean_error"] = float(report.mean_error_relative)
+    obj["pia_status"] = str(report.status)
+    obj["pia_method"] = str(report.method)
+    obj[UNREACHABLE_COUNT] = int(report.unreachable_count)
+    if report.unreachable_count:
+        obj[REACHABLE_MAX_ERROR] = float(report.reachable_max_error_relative)
+    elif REACHABLE_MAX_ERROR in obj:
+        del obj[REACHABLE_MAX_ERROR]
+    write_unreachable_group(obj, report)
+
+
 def build_object(source, cage, report, settings, context=None, name=None, mesh=None, limit=None):
     """New object with the cage positions on a copy of source's mesh (or on mesh).
 
@@ -1281,14 +1333,7 @@ def _dress_object(source, new_obj, report, settings, context, limit):
             mod.uv_smooth = src_mod.uv_smooth
             mod.show_only_control_edges = src_mod.show_only_control_edges
 
-    if isinstance(report, native.FitReport):
-        store_fit(new_obj, report, settings)
-    else:
-        new_obj["pia_iterations"] = int(report.iterations)
-        new_obj["pia_max_error"] = float(report.max_error_relative)
-        new_obj["pia_mean_error"] = float(report.mean_error_relative)
-        new_obj["pia_status"] = str(report.status)
-        new_obj["pia_method"] = str(report.method)
+    store_report(new_obj, report, settings)
     new_obj["pia_tolerance"] = float(settings["tolerance"])
     for key in STORED_SETTINGS:
         if key not in ("method", "tolerance"):  # pia_method is the method used
@@ -1751,6 +1796,15 @@ def report_converged(report):
     return report.status == 'CONVERGED'
 
 
+def format_unreachable(count, reachable_max_error):
+    """What a result says of its unreachable vertices ('' when there are none)."""
+    if not count:
+        return ""
+    return ("%d %s cannot be reached (in the vertex group '%s'); max error on the others %.3g of the "
+            "bounding-box diagonal" % (count, "vertex" if count == 1 else "vertices", UNREACHABLE_GROUP,
+                                       reachable_max_error))
+
+
 def format_report(report):
     """One line for the status bar and the command line."""
     if report.converged:
@@ -1764,6 +1818,9 @@ def format_report(report):
                report.max_error_relative, report.mean_error_relative))
     if report.stage_iterations[0] > 0:
         line += "; boundary first: %d + %d iterations" % tuple(report.stage_iterations)
-    if not report.converged and report.message:
+    unreachable = format_unreachable(report.unreachable_count, report.reachable_max_error_relative)
+    if unreachable:  # the library's message says the same at more length
+        line += "; " + unreachable
+    elif not report.converged and report.message:
         line += " (%s)" % report.message
     return line

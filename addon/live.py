@@ -185,17 +185,6 @@ def _stencils(cage, settings):
     return native.limit_stencils(api.native_mesh(cage.data), **options)
 
 
-def _store_report(cage, report, settings):
-    if isinstance(report, native.FitReport):
-        api.store_fit(cage, report, settings)
-        return
-    cage["pia_iterations"] = int(report.iterations)
-    cage["pia_max_error"] = float(report.max_error_relative)
-    cage["pia_mean_error"] = float(report.mean_error_relative)
-    cage["pia_status"] = str(report.status)
-    cage["pia_method"] = str(report.method)
-
-
 def _refresh_limit(cage, settings):
     """The `_limit` child of a Loop or Doo-Sabin cage, in place when its size stays."""
     if settings["scheme"] not in api.LIMIT_SCHEMES:
@@ -310,10 +299,16 @@ def sync(cage, force=False):
             api.write_positions(cage.data, positions)
         state.topology = (key, faces)
         state.positions = targets
-        _store_report(cage, report, settings)
+        api.store_report(cage, report, settings)  # figures and the pia_unreachable group
         _refresh_limit(cage, settings)
-        cage[MESSAGE] = "" if api.report_converged(report) else (
-            "Last edit: %s" % (report.status.lower().replace("_", " ")))
+        message = ""
+        if not api.report_converged(report):
+            message = "Last edit: %s" % (report.status.lower().replace("_", " "))
+            unreachable = api.format_unreachable(getattr(report, "unreachable_count", 0),
+                                                 getattr(report, "reachable_max_error_relative", 0.0))
+            if unreachable:
+                message += "; " + unreachable
+        cage[MESSAGE] = message
         return True
     except (ValueError, RuntimeError, native.PiaError) as error:
         cage[MESSAGE] = "Not followed: %s" % error

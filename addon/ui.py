@@ -10,7 +10,8 @@ from .operators import (OBJECT_OT_subdiv_pia_interpolate, OBJECT_OT_subdiv_pia_l
                         draw_cleanup_settings, draw_fit_settings, draw_settings, menu_func)
 from .properties import SCENE_SETTING_NAMES
 
-RESULT_KEYS = ("pia_status", "pia_method", "pia_iterations", "pia_max_error", "pia_mean_error")
+RESULT_KEYS = ("pia_status", "pia_method", "pia_iterations", "pia_max_error", "pia_mean_error",
+               api.UNREACHABLE_COUNT)
 
 
 def library_error_lines(width=60):
@@ -112,6 +113,10 @@ class DATA_PT_subdiv_pia(bpy.types.Panel):
             col.label(text="Iterations: %d" % int(obj.get("pia_iterations", 0)))
             col.label(text="Max error: %.3g of bbox diagonal" % float(obj.get("pia_max_error", 0.0)))
             col.label(text="Mean error: %.3g of bbox diagonal" % float(obj.get("pia_mean_error", 0.0)))
+            unreachable = api.format_unreachable(int(obj.get(api.UNREACHABLE_COUNT, 0)),
+                                                 float(obj.get(api.REACHABLE_MAX_ERROR, 0.0)))
+            for line in textwrap.wrap(unreachable, 60):
+                col.label(text=line)
         cleaned = api.format_cleanup(obj)
         if cleaned:
             box = layout.box()

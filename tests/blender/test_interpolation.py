@@ -196,3 +196,13 @@ def test_dragon_unreachable_vertices_are_reported():
     # fins on two of their edges infinitely sharp, which earlier ones do not:
     # the cage follows this Blender's rule.
     assert len(wrong) == 0, message
+    # The vertices the cage cannot reach are in its vertex group, for Select
+    # in Edit Mode: every vertex that misses, and as many as the count says.
+    group = new_obj.vertex_groups.get("pia_unreachable")
+    assert group is not None
+    in_group = np.zeros(len(targets), bool)
+    for vertex in new_obj.data.vertices:
+        if any(g.group == group.index for g in vertex.groups):
+            in_group[vertex.index] = True
+    assert int(in_group.sum()) == new_obj["pia_unreachable_count"] > 0
+    assert in_group[missed].all(), missed[~in_group[missed]].tolist()
