@@ -12,7 +12,6 @@ figures stand beside these.  Prints a Markdown table.
     /usr/bin/python3 bench/bench_least_squares.py [--compare path/to/libsubdiv_pia.so] [--repeat 3]
 """
 import argparse
-import ctypes
 import os
 import sys
 import time
@@ -26,7 +25,7 @@ sys.path.insert(0, os.path.join(ROOT, "tools"))
 sys.path.insert(0, HERE)
 from subdiv_pia import native  # noqa: E402
 import osd_shapes  # noqa: E402
-from bench_refine import use  # noqa: E402
+from bench_refine import libraries, use  # noqa: E402
 
 CASES = [("catmark_val2_interior", dict(use_creases=False, quality=1)),
          ("catmark_val2_interior", dict(use_creases=True, quality=3)),
@@ -78,23 +77,19 @@ def main():
     parser.add_argument("--compare", help="another build of the library, run beside this one")
     parser.add_argument("--repeat", type=int, default=3, help="runs of each case (the fastest is shown)")
     args = parser.parse_args()
-    this = native._library()
-    libraries = [("this", this)]
-    if args.compare:
-        other = ctypes.CDLL(os.path.abspath(args.compare))
-        native._declare(other)
-        libraries.append(("other", other))
+    loaded = libraries(args.compare)
+    this = loaded[0][1]
     columns = "status | solver | iterations | unreachable | worst of the others | worst | solve time"
     head = "| mesh | settings | vertices | " + columns + " |"
     if args.compare:
         head += " other: " + " | other: ".join(columns.split(" | ")) + " |"
     print(head)
-    print("|---|---|---:|" + "---|---|---:|---:|---:|---:|---:|" * len(libraries))
+    print("|---|---|---:|" + "---|---|---:|---:|---:|---:|---:|" * len(loaded))
     for name, settings in CASES:
         mesh = load(name)
         best = {}
         for _ in range(args.repeat):
-            for label, library in libraries:  # alternating, so that both see the same machine
+            for label, library in loaded:  # alternating, so that both see the same machine
                 use(library)
                 run = one_run(mesh, settings)
                 if label not in best or run[2] < best[label][2]:

@@ -54,6 +54,17 @@ def use(library):
     native._lib = library
 
 
+def libraries(compare):
+    """[("this", this build's library)] and, with `compare` (a path),
+    ("other", that build's), loaded and declared for native."""
+    found = [("this", native._library())]
+    if compare:
+        other = ctypes.CDLL(os.path.abspath(compare))
+        native._declare(other)
+        found.append(("other", other))
+    return found
+
+
 def one_run(mesh, levels, settings, cancel_after=None):
     """(seconds, faces made, longest wait between progress calls (from the
     start and to the end too), calls, seconds from the cancel to the return
@@ -86,12 +97,8 @@ def main():
     parser.add_argument("--repeat", type=int, default=2, help="runs of each case (the fastest is shown)")
     parser.add_argument("--splits", type=int, nargs="+", default=[5, 6, 7])
     args = parser.parse_args()
-    this = native._library()
-    libraries = [("this", this)]
-    if args.compare:
-        other = ctypes.CDLL(os.path.abspath(args.compare))
-        native._declare(other)
-        libraries.append(("other", other))
+    loaded = libraries(args.compare)
+    this = loaded[0][1]
     head = ("| scheme | cage triangles | levels | faces made | time | longest wait between progress calls | "
             "cancel half-way: stopped after |")
     if args.compare:
@@ -104,7 +111,7 @@ def main():
             for levels in (1, 2, 3):
                 best = {}
                 for _ in range(args.repeat):
-                    for name, library in libraries:  # alternating, so that both see the same machine
+                    for name, library in loaded:  # alternating, so that both see the same machine
                         use(library)
                         run = one_run(mesh, levels, settings)
                         if name not in best or run[0] < best[name][0]:
