@@ -26,7 +26,7 @@ VERSION = $(shell $(PYTHON) tools/package.py version)
 PACKAGE = dist/subdiv_pia-$(VERSION)-linux-x64.zip
 WINDOWS_PACKAGE = dist/subdiv_pia-$(VERSION)-windows-x64.zip
 
-.PHONY: all deps build package test test-c test-asan test-tsan test-fuzz fuzz test-python test-package test-blender test-window \
+.PHONY: all deps build package macos test-macos test test-c test-asan test-tsan test-fuzz fuzz test-python test-package test-blender test-window \
         blenders demo bench bench-scale bench-solve bench-closest bench-live bench-hard bench-fit-scale bench-scan clean
 
 all: build
@@ -56,7 +56,16 @@ build: deps
 package: deps
 	$(SUDO) $(PYTHON) tools/package.py all
 
-test: build test-c test-asan test-tsan test-fuzz test-python test-package test-blender test-window
+test: build test-c test-asan test-tsan test-fuzz test-python test-package test-macos test-blender test-window
+
+# The macOS libraries (arm64 and x86_64, macOS 11 and newer), cross-built
+# with PyPI's Zig in build/venv-macos, and their Mach-O audit
+# (tests/package/macho_audit.py, with PyPI's LIEF): nothing here can run them.
+macos: deps
+	$(PYTHON) tools/package.py macos --no-tests
+
+test-macos: deps
+	$(PYTHON) tools/package.py macos
 
 test-c: build
 	ctest --test-dir build/cmake --output-on-failure

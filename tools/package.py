@@ -6,6 +6,7 @@ extension zip around it.
     python3 tools/package.py linux     # dist/subdiv_pia-<version>-linux-x64.zip and dist/repo/
     python3 tools/package.py windows   # dist/subdiv_pia-<version>-windows-x64.zip (mingw-w64, Wine)
     python3 tools/package.py all       # both, and dist/repo/ listing both
+    python3 tools/package.py macos     # build/package/macos-{arm64,x64}/libsubdiv_pia.dylib (Zig), audited
 
 The Linux library is built in a Debian 11 (bullseye) chroot, so that it
 needs nothing newer than glibc 2.31, with OpenSubdiv 3.6.0 (the version
@@ -226,6 +227,95 @@ def build_windows(run_tests=True):
 
 
 # --------------------------------------------------------------------------
+# The macOS libraries (cross-built with Zig; nothing here can run them)
+# --------------------------------------------------------------------------
+
+MACOS_TOOLCHAIN = os.path.join(ROOT, "cmake", "zig-macos.cmake")
+MACOS_VENV = os.path.join(BUILD, "venv-macos")
+# Zig 0.17 (clang 22) carries macOS's libc headers, libSystem's stubs and
+# libc++; LIEF reads the Mach-O files for tests/package/macho_audit.py.
+MACOS_TOOLS = ["ziglang>=0.17,<0.18", "lief>=1.0,<2"]
+MACOS_TARGETS = {"macos-arm64": "aarch64-macos.11.0", "macos-x64": "x86_64-macos.11.0"}
+
+
+def macos_python():
+    """build/venv-macos's Python, with Zig and LIEF from PyPI (made once)."""
+    python = os.path.join(MACOS_VENV, "bin", "python")
+    stamp = os.path.join(MACOS_VENV, ".subdiv_pia-tools")
+    wanted = " ".join(MACOS_TOOLS) + "\n"
+    if not (os.path.exists(stamp) and open(stamp).read() == wanted and
+            subprocess.run([python, "-c", "import ziglang, lief"], stdout=subprocess.DEVNULL,
+                           stderr=subprocess.DEVNULL).returncode == 0):
+        if not os.path.exists(python):
+            debian.run([python_with_pip(), "-m", "venv", MACOS_VENV])
+        debian.run([python, "-m", "pip", "install", "-q", "--disable-pip-version-check"] + MACOS_TOOLS)
+        with open(stamp, "w") as f:
+            f.write(wanted)
+    return python
+
+
+def build_macos(platform, run_tests=True):
+    """Builds libsubdiv_pia.dylib for `platform` (macos-arm64, macos-x64;
+    macOS 11 and newer) with Zig's clang and linker: OpenSubdiv's core from
+    the same source package, compiled with hidden visibility, and Zig's
+    libc++ linked in statically (see SPIA_PACKAGE's APPLE branch in
+    CMakeLists.txt).  The C tests are built too; nothing can run them here,
+    so with run_tests the library and the test programs are audited instead
+    (tests/package/macho_audit.py: libSystem only, the API only, macOS 11,
+    the arm64 signature's page hashes).  Returns the library's path."""
+    python = macos_python()
+    out = os.path.join(BUILD, "package", platform)
+    os.makedirs(out, exist_ok=True)
+    src = opensubdiv_source()
+    zig = ["-DCMAKE_TOOLCHAIN_FILE=" + MACOS_TOOLCHAIN, "-DZIG_TARGET=" + MACOS_TARGETS[platform],
+           "-DZIG_PYTHON=" + python, "-DZIG_WRAPPER_DIR=" + os.path.join(out, "zig"),
+           "-DZIG_CACHE_DIR=" + os.path.join(BUILD, "zig-cache")]
+    osd = os.path.join(out, "osd")
+    archive = os.path.join(osd, "lib", "libosdCPU.a")
+    # Hidden: Zig's linker ignores -exported_symbols_list, so whatever of
+    # OpenSubdiv had default visibility would be exported.
+    osd_args = zig + ["-DCMAKE_CXX_FLAGS=-fvisibility=hidden -fvisibility-inlines-hidden"] + OPENSUBDIV_OPTIONS
+    stamp = os.path.join(osd, ".subdiv_pia-built")
+    if not (os.path.exists(archive) and os.path.exists(stamp) and open(stamp).read() == "\n".join(osd_args)):
+        debian.run(["cmake", "-S", src, "-B", osd] + osd_args, stdout=subprocess.DEVNULL)
+        debian.run(["cmake", "--build", osd, "--target", "osd_static_cpu", "--parallel", "2"],
+                   stdout=subprocess.DEVNULL)
+        with open(stamp, "w") as f:
+            f.write("\n".join(osd_args))
+    cmake = os.path.join(out, "cmake")
+    debian.run(["cmake", "-S", ROOT, "-B", cmake] + zig +
+               ["-DSPIA_PACKAGE=ON", "-DCMAKE_BUILD_TYPE=Release", "-DSPIA_TESTS=ON",
+                "-DOPENSUBDIV_INCLUDE_DIR=" + src, "-DOPENSUBDIV_CPU_LIBRARY=" + archive], stdout=subprocess.DEVNULL)
+    debian.run(["cmake", "--build", cmake, "--parallel", "2"])
+    # A plain copy: the linker stripped it (-x -S) and, on arm64, signed it;
+    # strip or install_name_tool now would break that signature.
+    dylib = os.path.join(out, "libsubdiv_pia.dylib")
+    shutil.copy2(os.path.join(cmake, "libsubdiv_pia.dylib"), dylib)
+    zig_version = subprocess.run([python, "-m", "ziglang", "version"], check=True, stdout=subprocess.PIPE,
+                                 text=True).stdout.strip()
+    with open(os.path.join(out, "compiler.txt"), "w") as f:
+        f.write("zig %s (PyPI ziglang), target %s\n" % (zig_version, MACOS_TARGETS[platform]))
+    # The licence of the C++ runtime inside (LLVM's libc++ and libc++abi,
+    # both Apache-2.0 WITH LLVM-exception), from the Zig that linked it.
+    zig_lib = subprocess.run([python, "-c", "import os, ziglang; print(os.path.dirname(ziglang.__file__))"],
+                             check=True, stdout=subprocess.PIPE, text=True).stdout.strip()
+    shutil.copy2(os.path.join(zig_lib, "lib", "libcxx", "LICENSE.TXT"), os.path.join(out, "llvm-libcxx-license.txt"))
+    if run_tests:
+        programs = sorted(p for p in glob.glob(os.path.join(cmake, "tests", "c", "test_*"))
+                          if os.path.isfile(p) and os.access(p, os.X_OK))
+        debian.run([python, os.path.join(ROOT, "tests", "package", "macho_audit.py"), dylib] + programs)
+    return dylib
+
+
+def build_macos_arm64(run_tests=True):
+    return build_macos("macos-arm64", run_tests)
+
+
+def build_macos_x64(run_tests=True):
+    return build_macos("macos-x64", run_tests)
+
+
+# --------------------------------------------------------------------------
 # The zip
 # --------------------------------------------------------------------------
 
@@ -242,6 +332,8 @@ def licence_files(platform_dir):
              ("licenses/OpenSubdiv-LICENSE.txt", os.path.join(OPENSUBDIV_DIR, "LICENSE.txt")),
              ("licenses/OpenSubdiv-NOTICE.txt", os.path.join(OPENSUBDIV_DIR, "NOTICE.txt")),
              ("licenses/GCC-runtime-copyright.txt", os.path.join(platform_dir, "gcc-runtime-copyright.txt"))]
+    if os.path.exists(os.path.join(platform_dir, "llvm-libcxx-license.txt")):  # macOS: Zig's libc++, not GCC's
+        files[-1] = ("licenses/LLVM-libcxx-LICENSE.txt", os.path.join(platform_dir, "llvm-libcxx-license.txt"))
     if os.path.exists(os.path.join(platform_dir, "mingw-w64-copyright.txt")):  # winpthreads
         files.append(("licenses/mingw-w64-copyright.txt", os.path.join(platform_dir, "mingw-w64-copyright.txt")))
     for _name, path in files:
@@ -341,7 +433,8 @@ def repository_index(archives):
     return repo, index
 
 
-BUILDERS = {"linux-x64": build_linux, "windows-x64": build_windows}
+BUILDERS = {"linux-x64": build_linux, "windows-x64": build_windows, "macos-arm64": build_macos_arm64,
+            "macos-x64": build_macos_x64}
 
 
 def package(platforms, run_tests=True):
@@ -357,17 +450,33 @@ def package(platforms, run_tests=True):
     return archives
 
 
+def reported(step):
+    """Runs step(); a failure becomes a line on stderr and status 1."""
+    try:
+        step()
+    except (subprocess.CalledProcessError, RuntimeError, OSError) as exc:
+        print("package.py: %s" % (exc if not isinstance(exc, subprocess.CalledProcessError) else
+                                  "a step failed with status %d (its output is above)" % exc.returncode),
+              file=sys.stderr)
+        return 1
+    return 0
+
+
+def build_macos_libraries(run_tests=True):
+    """The two macOS libraries, built and (with run_tests) audited; not yet
+    packaged."""
+    for platform in ("macos-arm64", "macos-x64"):
+        library = BUILDERS[platform](run_tests)
+        print("library: %s (%.2f MB)" % (library, os.path.getsize(library) / 1e6))
+
+
 def main(argv):
     platforms = {"linux": ["linux-x64"], "windows": ["windows-x64"], "all": ["linux-x64", "windows-x64"]}
+    run_tests = "--no-tests" not in argv
     if argv[:1] and argv[0] in platforms:
-        try:
-            package(platforms[argv[0]], run_tests="--no-tests" not in argv)
-        except (subprocess.CalledProcessError, RuntimeError, OSError) as exc:
-            print("package.py: %s" % (exc if not isinstance(exc, subprocess.CalledProcessError) else
-                                      "a step failed with status %d (its output is above)" % exc.returncode),
-                  file=sys.stderr)
-            return 1
-        return 0
+        return reported(lambda: package(platforms[argv[0]], run_tests=run_tests))
+    if argv[:1] == ["macos"]:
+        return reported(lambda: build_macos_libraries(run_tests))
     if argv[:1] == ["version"]:
         print(version())
         return 0
@@ -388,7 +497,7 @@ def main(argv):
     if argv[:1] == ["name"] and len(argv) == 2:
         print(os.path.join(DIST, package_name(argv[1])))
         return 0
-    print("usage: package.py linux|windows|all [--no-tests] | version | name PLATFORM | opensubdiv-cmake-args", file=sys.stderr)
+    print("usage: package.py linux|windows|all|macos [--no-tests] | version | name PLATFORM | opensubdiv-cmake-args", file=sys.stderr)
     return 2
 
 
