@@ -41,6 +41,7 @@
 #include <opensubdiv/far/stencilTable.h>
 #include <opensubdiv/far/stencilTableFactory.h>
 #include <opensubdiv/far/topologyDescriptor.h>
+#include <opensubdiv/far/error.h>
 #include <opensubdiv/far/topologyRefinerFactory.h>
 
 #include <algorithm>
@@ -56,6 +57,18 @@
 using namespace OpenSubdiv;
 
 namespace {
+
+// OpenSubdiv reports errors and warnings by printing them unless callbacks
+// are set; the library never prints (it returns codes and messages).  Its
+// OpenSubdiv is its own, linked in statically with its names hidden, so
+// setting them once when the library is loaded, before any thread of the
+// host can call in, touches no other OpenSubdiv.
+struct QuietOpenSubdiv {
+    QuietOpenSubdiv() {
+        Far::SetErrorCallback([](Far::ErrorType, const char *) {});
+        Far::SetWarningCallback([](const char *) {});
+    }
+} quiet_opensubdiv;
 
 typedef Far::LimitStencilTableFactoryReal<double> LimitFactory;
 typedef std::pair<int32_t, double> Entry;  // column, weight
