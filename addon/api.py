@@ -1236,7 +1236,7 @@ def write_unreachable_group(obj, report):
     from a cage): the group is emptied of every vertex before the flagged
     ones are added.  Returns the group or None."""
     flags = getattr(report, "unreachable", None)
-    indices = [] if flags is None else np.flatnonzero(flags).tolist()
+    indices = [] if flags is None else report.unreachable_indices.tolist()
     group = obj.vertex_groups.get(UNREACHABLE_GROUP)
     if not indices:
         if group is not None:

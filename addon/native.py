@@ -535,7 +535,7 @@ class Report:
     max_error_relative: float
     mean_error_relative: float
     initial_max_error_relative: float
-    unreachable_count: int      # vertices whose limit points are tied to others' and cannot be reached
+    unreachable_count: int      # vertices no cage can put on their targets (least squares leaves them closest)
     reachable_max_error_relative: float   # max error over the other vertices
     weight: float               # WPIA's weight (0 for the other methods)
     stage_iterations: tuple     # staged solves: (boundary, interior) iterations
@@ -543,6 +543,11 @@ class Report:
     solve_seconds: float
     history: np.ndarray = field(repr=False)   # relative max error after each iteration
     unreachable: np.ndarray = field(repr=False)  # bool per vertex
+
+    @property
+    def unreachable_indices(self):
+        """The unreachable vertices' indices, in order (int32)."""
+        return np.flatnonzero(self.unreachable).astype(np.int32)
 
     def summary(self):
         state = "converged" if self.converged else self.status.lower().replace("_", " ")

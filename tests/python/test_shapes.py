@@ -142,6 +142,7 @@ def check_least_squares(native, what, mesh, positions, stencil_options, solve_op
         what, report.summary(), err[worst], np.linalg.norm(theirs[worst]) / d, worst)
     assert apart[worst] <= RESIDUAL_MATCH, "residuals %.3g of the diagonal apart; %s" % (apart[worst], summary)
     assert report.unreachable_count == int(flagged.sum()), summary
+    assert np.array_equal(report.unreachable_indices, np.flatnonzero(flagged)), summary
     reached = err[~flagged]
     assert reached.size == 0 or reached.max() <= TOLERANCE * (1 + 1e-6), (
         "vertex %d not flagged misses by %.3g; %s" % (np.flatnonzero(~flagged)[np.argmax(reached)], reached.max(),
