@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Builds the native library with CMake and assembles the Blender add-on.
 
-    python3 setup.py build     ->  build/addon/subdiv_pia/  (for development: the library links
+    python3 setup.py build     ->  build/addon/subdiv_pia/ with spia/ inside (for development: the library links
                                    OpenSubdiv 3.6.0 built from the same source package as the
                                    shipped one, so it computes what the package computes)
     python3 setup.py package   ->  dist/subdiv_pia-<version>-linux-x64.zip and dist/repo/
@@ -40,9 +40,12 @@ def build_library(build_type="Release"):
 def assemble(library):
     if os.path.isdir(ADDON_OUT):
         shutil.rmtree(ADDON_OUT)
-    shutil.copytree(os.path.join(ROOT, "addon"), ADDON_OUT,
-                    ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.so", "*.dll", "*.dylib"))
-    shutil.copy2(library, os.path.join(ADDON_OUT, LIBRARY))
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc", "*.so", "*.dll", "*.dylib")
+    shutil.copytree(os.path.join(ROOT, "addon"), ADDON_OUT, ignore=ignore)
+    # The numpy binding (python/spia) inside the add-on, the library inside it,
+    # as the legacy package carries them.
+    shutil.copytree(os.path.join(ROOT, "python", "spia"), os.path.join(ADDON_OUT, "spia"), ignore=ignore)
+    shutil.copy2(library, os.path.join(ADDON_OUT, "spia", LIBRARY))
     print(f"add-on: {ADDON_OUT}")
 
 

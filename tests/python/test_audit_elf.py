@@ -79,7 +79,7 @@ def test_a_glibc_floor_below_the_library_fails(tmp_path):
 
 def test_the_development_build_is_not_shippable():
     lib = os.path.join(os.environ.get("SUBDIV_PIA_ADDON_DIR", os.path.join(ROOT, "build", "addon")),
-                       "subdiv_pia", "libsubdiv_pia.so")
+                       "subdiv_pia", "spia", "libsubdiv_pia.so")
     assert os.path.exists(lib), "make build first"
     report, problems = audit_elf.audit(lib, os.path.join(ROOT, "csrc", "include", "subdiv_pia.h"))
     # It links the system's C++ runtime; OpenSubdiv (3.6.0, static, as in

@@ -9,6 +9,8 @@ import sys
 import numpy as np
 import pytest
 
+from conftest import ADDON_DIR
+
 
 def quad_sphere(n, radius=1.0):
     """A cube with every face cut into n x n quads, projected to a sphere."""
@@ -235,7 +237,7 @@ def test_fit_is_independent_of_the_thread_count(native):
         "p, t = uv_sphere(120, 60); scan = native.Scan(native.Mesh.from_faces(p, t))\n"
         "cp, cf = quad_sphere(4); out, rep = native.fit(native.Mesh.from_faces(cp, cf), scan)\n"
         "sys.stdout.write(out.tobytes().hex())\n"
-        % ([os.path.dirname(os.path.dirname(os.path.abspath(native.__file__))), os.path.dirname(__file__)],))
+        % ([ADDON_DIR, os.path.dirname(__file__)],))
     outputs = []
     for threads in ("1", "2"):
         env = dict(os.environ, OMP_NUM_THREADS=threads)

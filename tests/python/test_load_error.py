@@ -16,9 +16,9 @@ MANIFEST = 'id = "subdiv_pia"\nversion = "0.2.0"\nplatforms = ["linux-x64"]\n'
 
 @pytest.fixture
 def native(tmp_path, monkeypatch):
-    """A fresh copy of native.py in a package folder of its own (tmp_path),
+    """A fresh copy of the binding (spia) in a package folder of its own (tmp_path),
     with the manifest of a Linux x64 package and no library yet."""
-    shutil.copy(os.path.join(ADDON_DIR, "subdiv_pia", "native.py"), tmp_path / "native.py")
+    shutil.copy(os.path.join(ADDON_DIR, "subdiv_pia", "spia", "__init__.py"), tmp_path / "native.py")
     (tmp_path / "blender_manifest.toml").write_text(MANIFEST)
     spec = importlib.util.spec_from_file_location("native_copy", tmp_path / "native.py")
     module = importlib.util.module_from_spec(spec)
@@ -58,7 +58,7 @@ def test_package_for_another_platform_names_the_one_to_install(tmp_path, monkeyp
     assert not native.available()
     head, *details = native.load_error().splitlines()
     assert head == ("This package is for Linux x64; this system is %s: install "
-                    "subdiv_pia-0.2.0-%s.zip" % (name, tag))
+                    "subdiv_pia-0.2.0-legacy-%s.zip" % (name, tag.replace("-", "_")))
     # Windows, macOS: no library of theirs; Linux arm64: the x64 one does not load.
     assert len(details) == 1 and details[0].startswith("%s: " % (tmp_path / native.library_name()))
     with pytest.raises(native.PiaError) as error:
@@ -67,19 +67,20 @@ def test_package_for_another_platform_names_the_one_to_install(tmp_path, monkeyp
 
 
 def test_library_of_another_system_without_a_manifest(tmp_path, monkeypatch, native):
+    """Outside an add-on (pip's wheel, or the extension's): the wheel is named."""
     os.remove(tmp_path / "blender_manifest.toml")
     (tmp_path / "subdiv_pia.dll").write_bytes(b"MZ")
     fake_platform(monkeypatch, native, "linux", "x86_64")
     head = native.load_error().splitlines()[0]
     assert head == ("This package has the native library for another system (subdiv_pia.dll); this "
-                    "system is Linux x64: install subdiv_pia-<version>-linux-x64.zip")
+                    "system is Linux x64: install the subdiv_pia wheel for Linux x64")
 
 
 def test_library_missing_from_the_package(tmp_path, monkeypatch, native):
     fake_platform(monkeypatch, native, "linux", "x86_64")
     assert native.load_error().splitlines() == [
         "The native library (libsubdiv_pia.so) is missing from the package: install "
-        "subdiv_pia-0.2.0-linux-x64.zip again",
+        "subdiv_pia-0.2.0-legacy-linux_x64.zip again",
         "%s: not found" % (tmp_path / "libsubdiv_pia.so")]
 
 
@@ -123,7 +124,7 @@ def test_library_for_another_machine(tmp_path, monkeypatch, native):
     fake_platform(monkeypatch, native, "linux", "x86_64")
     _failing_load(monkeypatch, native, tmp_path, "{path}: wrong ELF class: ELFCLASS32")
     assert native.load_error().splitlines()[0] == \
-        "The native library is not built for this system (Linux x64): install subdiv_pia-0.2.0-linux-x64.zip"
+        "The native library is not built for this system (Linux x64): install subdiv_pia-0.2.0-legacy-linux_x64.zip"
 
 
 @pytest.mark.parametrize("kind", ("missing", "bogus"))
@@ -146,5 +147,5 @@ def test_the_real_library_loads_and_says_where_from():
     from subdiv_pia import native
     assert native.available(), native.load_error()
     assert native.load_error() is None
-    assert native.library_path() == os.path.join(os.path.abspath(ADDON_DIR), "subdiv_pia",
+    assert native.library_path() == os.path.join(os.path.abspath(ADDON_DIR), "subdiv_pia", "spia",
                                                  native.library_name())
