@@ -9,8 +9,8 @@ BLENDER_RUN = $(BLENDER) -b --factory-startup --python-exit-code 1
 # What building, testing and packaging need, on either release.  The
 # Linux package is built in a Debian 11 chroot (debootstrap) from Debian's
 # source package of OpenSubdiv (dpkg-source), the Windows one with mingw-w64
-# and tested under Wine; the machine's OpenSubdiv serves the development
-# build.
+# and tested under Wine, the macOS ones with PyPI's Zig; every build links
+# OpenSubdiv built from that source package.
 DEBIAN_PACKAGES = blender cmake g++ clang make binutils python3-numpy python3-scipy python3-pytest \
                   python3-matplotlib python3-venv libsuitesparse-dev debootstrap dpkg-dev xz-utils \
                   g++-mingw-w64-x86-64 wine64 xvfb xauth libgl1-mesa-dri
@@ -23,10 +23,13 @@ OPTIONAL_PACKAGES = libembree-dev
 OSD_ARGS = $(shell $(PYTHON) tools/package.py opensubdiv-cmake-args)
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 VERSION = $(shell $(PYTHON) tools/package.py version)
-PACKAGE = dist/subdiv_pia-$(VERSION)-linux-x64.zip
-WINDOWS_PACKAGE = dist/subdiv_pia-$(VERSION)-windows-x64.zip
+# The Linux extension (Blender 4.2 and newer: the add-on and the wheel) and
+# the legacy add-ons (Blender 3.4 to 4.1) the Blender and package tests use.
+EXTENSION = dist/subdiv_pia-$(VERSION)-linux_x64.zip
+LEGACY = dist/subdiv_pia-$(VERSION)-legacy-linux_x64.zip
+WINDOWS_LEGACY = dist/subdiv_pia-$(VERSION)-legacy-windows_x64.zip
 
-.PHONY: all deps build package macos test-macos test test-c test-asan test-tsan test-fuzz fuzz test-python test-package test-blender test-window \
+.PHONY: all deps build package macos test test-c test-asan test-tsan test-fuzz fuzz test-python test-package test-blender test-window \
         blenders demo bench bench-scale bench-solve bench-closest bench-live bench-hard bench-fit-scale bench-scan clean
 
 all: build
@@ -49,22 +52,22 @@ deps:
 build: deps
 	$(PYTHON) setup.py build
 
-# What is shipped: dist/subdiv_pia-<version>-linux-x64.zip and
-# -windows-x64.zip (Install from Disk), and dist/repo/ (a static extension
-# repository listing both).  The C tests run on each library as it is built
-# (the Windows one under Wine).
+# What is shipped, for Linux x64, Windows x64, macOS arm64 and x86_64
+# (tools/package.py): the libraries; a wheel of each (pip: `import spia`)
+# and the sdist; an extension of each (Blender 4.2 and newer: the add-on and
+# that wheel) and dist/repo/, a static extension repository listing them;
+# a legacy add-on of each (Blender 3.4 to 4.1).  The C tests run on each
+# library as it is built (the Windows one under Wine); the macOS ones, which
+# nothing here can run, are audited instead (tests/package/macho_audit.py).
 package: deps
 	$(SUDO) $(PYTHON) tools/package.py all
 
-test: build test-c test-asan test-tsan test-fuzz test-python test-package test-macos test-blender test-window
+test: build test-c test-asan test-tsan test-fuzz test-python test-package test-blender test-window
 
-# The macOS libraries (arm64 and x86_64, macOS 11 and newer), cross-built
-# with PyPI's Zig in build/venv-macos, and their Mach-O audit
-# (tests/package/macho_audit.py, with PyPI's LIEF): nothing here can run them.
+# The macOS libraries alone (arm64 and x86_64, macOS 11 and newer), cross-built
+# with PyPI's Zig in build/venv-macos and audited with PyPI's LIEF, and what
+# is made of them.
 macos: deps
-	$(PYTHON) tools/package.py macos --no-tests
-
-test-macos: deps
 	$(PYTHON) tools/package.py macos
 
 test-c: build
@@ -108,23 +111,30 @@ test-python: build
 	SUBDIV_PIA_ADDON_DIR=build/addon $(PYTHON) -m pytest -q tests/python
 
 # The packages as shipped: ELF and PE audits, loading with the system's
-# libraries hidden or Blender's preloaded, clean Debian 11 and 12/13 chroots.
+# libraries hidden or Blender's preloaded, clean Debian 11 and 12/13 chroots
+# (tests/package/run.py); the wheels, sdist and extensions: twine,
+# auditwheel, their contents and licences, Blender's validator, pip into
+# clean venvs of Python 3.9 to 3.13 with numpy 1.x and 2.x and Debian 11's,
+# a trimesh client (tests/package/dist.py).
 test-package: package
-	$(SUDO) $(PYTHON) tests/package/run.py $(PACKAGE) $(WINDOWS_PACKAGE)
+	$(SUDO) $(PYTHON) tests/package/run.py $(LEGACY) $(WINDOWS_LEGACY)
+	$(SUDO) $(PYTHON) tests/package/dist.py
 
 # The Blender suite against the installed package, in every Blender here:
-# Debian's, the other Debian release's (chroot), PyPI's bpy builds.
+# Debian's, the other Debian release's (chroot), PyPI's bpy builds; the
+# extension (through Blender's installer, which installs its wheel) from
+# 4.2 on, the legacy add-on before.
 # BLENDER_SUITE_FLAGS=--discard-venvs keeps one or two bpy venvs (1 GB each)
 # on disk at a time instead of all of them.
 BLENDER_SUITE_FLAGS ?=
 test-blender: package
-	$(SUDO) $(PYTHON) tools/blenders.py test $(BLENDER_SUITE_FLAGS) $(PACKAGE)
+	$(SUDO) $(PYTHON) tools/blenders.py test $(BLENDER_SUITE_FLAGS) $(EXTENSION) --legacy $(LEGACY)
 
 # The operator in Blender's window (Xvfb, software OpenGL), in the Blenders
 # that have one (Debian's, on the machine and in the chroot): it runs modal,
 # the window stays live, Esc cancels and leaves nothing.
 test-window: package
-	$(SUDO) $(PYTHON) tools/blenders.py window $(PACKAGE)
+	$(SUDO) $(PYTHON) tools/blenders.py window $(LEGACY)
 
 blenders:
 	$(PYTHON) tools/blenders.py list

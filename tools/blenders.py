@@ -4,8 +4,8 @@
 suite (tests/blender) run in each of them against the package.
 
     python3 tools/blenders.py list
-    python3 tools/blenders.py test PACKAGE.zip [-j 2] [--only NAME ...] [-- PYTEST ARGS]
-    python3 tools/blenders.py window PACKAGE.zip
+    python3 tools/blenders.py test EXTENSION.zip [--legacy LEGACY.zip] [-j 2] [--only NAME ...] [-- PYTEST ARGS]
+    python3 tools/blenders.py window LEGACY.zip
 
 The Blenders:
 - Debian's `blender` on the machine (3.4.1 on Debian 12, 4.3.2 on 13);
@@ -16,8 +16,11 @@ The Blenders:
   need Python 3.11, 5.1 and newer 3.13), each in a virtual environment
   under build/bpy/<release>, with the numpy that release's Blender bundles.
 
-Each suite runs with SUBDIV_PIA_PACKAGE=PACKAGE.zip: tests/blender/run.py
-installs the zip the way a user does and the tests use that copy.  Prints a
+Each suite runs with SUBDIV_PIA_PACKAGE=EXTENSION.zip and
+SUBDIV_PIA_LEGACY_PACKAGE=LEGACY.zip: tests/blender/run.py installs the
+extension (Blender 4.2 and newer: its installer installs the wheel inside)
+or the legacy add-on (3.4 to 4.1) the way a user does, and the tests use
+that copy.  Prints a
 table of Blender (and how it was installed) against passed, failed,
 skipped, and exits 1 if any suite failed or did not run.
 
@@ -215,12 +218,13 @@ def clean_environment():
     return env
 
 
-def command_for(blender, package, selection, junit):
+def command_for(blender, package, selection, junit, legacy=None):
     """argv and environment running run.py on `selection` in `blender`."""
     if blender.root:
         inner = lambda path: "/src/" + os.path.relpath(path, ROOT)  # noqa: E731
         command = " ".join(blender.command + ["--", "--junitxml=" + inner(junit)] + selection)
-        script = "cd /src && SUBDIV_PIA_PACKAGE=%s %s" % (inner(package), command)
+        script = "cd /src && SUBDIV_PIA_PACKAGE=%s %s%s" % (
+            inner(package), "SUBDIV_PIA_LEGACY_PACKAGE=%s " % inner(legacy) if legacy else "", command)
         argv = ["unshare", "--mount", "--propagation", "private", "/bin/sh", "-c",
                 'mount -t proc proc "$R/proc" && mount --rbind /dev "$R/dev" && mount --bind "$S" "$R/src" && '
                 'exec chroot "$R" /usr/bin/env -i PATH=/usr/sbin:/usr/bin:/sbin:/bin HOME=/root LANG=C.UTF-8 '
@@ -228,11 +232,14 @@ def command_for(blender, package, selection, junit):
         os.makedirs(os.path.join(blender.chroot_path, "src"), exist_ok=True)
         return argv, dict(clean_environment(), R=blender.chroot_path, S=ROOT, C=script)
     env = dict(clean_environment(), SUBDIV_PIA_PACKAGE=package)
+    env.pop("SUBDIV_PIA_LEGACY_PACKAGE", None)
+    if legacy:
+        env["SUBDIV_PIA_LEGACY_PACKAGE"] = legacy
     env.pop("SUBDIV_PIA_ADDON_DIR", None)
     return blender.command + ["--", "--junitxml=" + junit] + selection, env
 
 
-def run_suite(index, blender, package, extra):
+def run_suite(index, blender, package, extra, legacy=None):
     """The suite in one Blender, file by file; returns (counts, problems, seconds, log)."""
     os.makedirs(RESULTS, exist_ok=True)
     slug = re.sub(r"[^A-Za-z0-9.]+", "-", "%02d-%s-%s" % (index, blender.name, blender.how)).strip("-")
@@ -244,7 +251,7 @@ def run_suite(index, blender, package, extra):
     with open(log, "w") as out:
         for k, name in enumerate(files):
             junit = os.path.join(RESULTS, "%s-%02d.xml" % (slug, k))
-            argv, env = command_for(blender, package, [name] + options, junit)
+            argv, env = command_for(blender, package, [name] + options, junit, legacy)
             out.write("$ %s\n" % " ".join(argv))
             out.flush()
             code = subprocess.call(argv, cwd=ROOT, env=env, stdout=out, stderr=subprocess.STDOUT)
@@ -256,7 +263,15 @@ def run_suite(index, blender, package, extra):
     return counts(junits), problems, time.time() - t0, log
 
 
-def test(package, jobs, only, extra, discard):
+def package_kind(blender, legacy):
+    """Which package run.py installs in `blender` (named "Blender X.Y.Z")."""
+    m = re.search(r"(\d+)\.(\d+)", blender.name)
+    if legacy and m and (int(m.group(1)), int(m.group(2))) < (4, 2):
+        return "legacy add-on"
+    return "extension + wheel"
+
+
+def test(package, jobs, only, extra, discard, legacy=None):
     """The suite in every Blender; with `discard`, each bpy venv is removed
     once its suite has run and at most jobs + 1 of them exist at a time (each
     is about 1 GB: all of them together can fill a small disk)."""
@@ -287,7 +302,7 @@ def test(package, jobs, only, extra, discard):
     def one(i, b):
         try:
             print("starting the suite in %s (%s)" % (b.name, b.how), flush=True)
-            c, problems, seconds, log = run_suite(i, b, package, extra)
+            c, problems, seconds, log = run_suite(i, b, package, extra, legacy)
             print("finished %s (%s): %s%s" % (b.name, b.how, c, "; " + "; ".join(problems) if problems else ""),
                   flush=True)
             if problems or c["failed"]:
@@ -311,15 +326,17 @@ def test(package, jobs, only, extra, discard):
         for future in running:
             future.result()
     failed = 0
-    print("\n| Blender | installed as | passed | failed | skipped | expected failures | minutes |\n"
-          "|---|---|---:|---:|---:|---:|---:|")
+    print("\n| Blender | installed as | package | passed | failed | skipped | expected failures | minutes |\n"
+          "|---|---|---|---:|---:|---:|---:|---:|")
     for b in blenders:
         b, c, problems, seconds = rows[id(b)]
         if c and c["files"]:
-            print("| %s | %s | %d | %d | %d | %d | %.1f |" % (b.name, b.how, c["passed"], c["failed"], c["skipped"],
-                                                             c["xfailed"], seconds / 60))
+            print("| %s | %s | %s | %d | %d | %d | %d | %.1f |" % (
+                b.name, b.how, package_kind(b, legacy), c["passed"], c["failed"], c["skipped"], c["xfailed"],
+                seconds / 60))
         else:
-            print("| %s | %s | - | - | - | - | %s |" % (b.name, b.how, "; ".join(problems) or "no results"))
+            print("| %s | %s | %s | - | - | - | - | %s |" % (b.name, b.how, package_kind(b, legacy),
+                                                              "; ".join(problems) or "no results"))
         failed += 1 if problems or not c or not c["files"] or c["failed"] else 0
     for note in notes:
         print("not tested: " + note)
@@ -361,7 +378,8 @@ def main(argv):
     sub = parser.add_subparsers(dest="command", required=True)
     sub.add_parser("list")
     t = sub.add_parser("test")
-    t.add_argument("package")
+    t.add_argument("package", help="the extension zip (Blender 4.2 and newer)")
+    t.add_argument("--legacy", help="the legacy add-on zip, for Blender 3.4 to 4.1")
     t.add_argument("-j", "--jobs", type=int, default=2)
     t.add_argument("--only", action="append", default=[], help="only Blenders whose name or origin contains this")
     t.add_argument("--discard-venvs", action="store_true",
@@ -379,7 +397,8 @@ def main(argv):
         return 0
     if args.command == "window":
         return window(os.path.abspath(args.package))
-    return test(os.path.abspath(args.package), args.jobs, args.only, extra, args.discard_venvs)
+    return test(os.path.abspath(args.package), args.jobs, args.only, extra, args.discard_venvs,
+                os.path.abspath(args.legacy) if args.legacy else None)
 
 
 if __name__ == "__main__":

@@ -1,27 +1,41 @@
 #!/usr/bin/env python3
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Builds what is shipped: the self-contained native library and the Blender
-extension zip around it.
+"""Builds what is shipped: the self-contained native libraries, the Python
+distribution around them and the Blender packages.
 
-    python3 tools/package.py linux     # dist/subdiv_pia-<version>-linux-x64.zip and dist/repo/
-    python3 tools/package.py windows   # dist/subdiv_pia-<version>-windows-x64.zip (mingw-w64, Wine)
-    python3 tools/package.py all       # both, and dist/repo/ listing both
-    python3 tools/package.py macos     # build/package/macos-{arm64,x64}/libsubdiv_pia.dylib (Zig), audited
+    python3 tools/package.py all       # everything below, then dist/repo/
+    python3 tools/package.py linux     # the Linux x64 library and what is made of it
+    python3 tools/package.py windows   # the Windows x64 library (mingw-w64, tested under Wine) ...
+    python3 tools/package.py macos     # the macOS arm64 and x86_64 libraries (Zig), audited ...
 
-The Linux library is built in a Debian 11 (bullseye) chroot, so that it
-needs nothing newer than glibc 2.31, with OpenSubdiv 3.6.0 (the version
+What is made of each platform's library:
+- the wheel dist/subdiv_pia-<version>-py3-none-<tag>.whl (`pip install`,
+  `import spia`): the binding (python/spia) and the library, the licences of
+  everything inside in its metadata;
+- the extension dist/subdiv_pia-<version>-<platform>.zip for Blender 4.2 and
+  newer: the pure Python add-on and that wheel under ./wheels/, built by
+  Blender's own `extension build --split-platforms` and checked by its
+  validator in strict mode;
+- the legacy add-on dist/subdiv_pia-<version>-legacy-<platform>.zip for
+  Blender 3.4 to 4.1, which take no wheels: the binding and the library
+  inside the add-on's folder.
+Besides: the sdist dist/subdiv_pia-<version>.tar.gz (scikit-build-core over
+CMakeLists.txt, pyproject.toml), whose metadata the wheels carry, and
+dist/repo/, a static extension repository listing the four extensions.
+
+The Linux library is built in a Debian 11 (bullseye) chroot (glibc 2.31;
+the symbols it takes from glibc are 2.17's or older, manylinux_2_17), with OpenSubdiv 3.6.0 (the version
 official Blender 4.1 to 5.0 bundle) compiled from Debian's source package
 into a static archive, and the C++ runtime linked in statically (see
 SPIA_PACKAGE in CMakeLists.txt).  The C tests are built and run there too,
-against that library.  The zip is checked by Blender's own extension
-validator in strict mode, and dist/repo/ gets a static repository index
-(Blender's `extension server-generate`) that a user can add as a remote
-repository.
+against that library.
 
 Everything slow (the chroot, the source package, OpenSubdiv's build) is
 kept under build/ and reused while its inputs are the same.
 """
+import base64
 import glob
+import hashlib
 import json
 import os
 import re
@@ -240,18 +254,7 @@ MACOS_TARGETS = {"macos-arm64": "aarch64-macos.11.0", "macos-x64": "x86_64-macos
 
 def macos_python():
     """build/venv-macos's Python, with Zig and LIEF from PyPI (made once)."""
-    python = os.path.join(MACOS_VENV, "bin", "python")
-    stamp = os.path.join(MACOS_VENV, ".subdiv_pia-tools")
-    wanted = " ".join(MACOS_TOOLS) + "\n"
-    if not (os.path.exists(stamp) and open(stamp).read() == wanted and
-            subprocess.run([python, "-c", "import ziglang, lief"], stdout=subprocess.DEVNULL,
-                           stderr=subprocess.DEVNULL).returncode == 0):
-        if not os.path.exists(python):
-            debian.run([python_with_pip(), "-m", "venv", MACOS_VENV])
-        debian.run([python, "-m", "pip", "install", "-q", "--disable-pip-version-check"] + MACOS_TOOLS)
-        with open(stamp, "w") as f:
-            f.write(wanted)
-    return python
+    return tool_venv(MACOS_VENV, MACOS_TOOLS)
 
 
 def build_macos(platform, run_tests=True):
@@ -316,18 +319,154 @@ def build_macos_x64(run_tests=True):
 
 
 # --------------------------------------------------------------------------
-# The zip
+# The Python distribution: the sdist and one wheel per platform
 # --------------------------------------------------------------------------
 
-def manifest_for(platform):
+# The wheel's platform tag for each extension platform: the oldest systems
+# each library runs on (glibc 2.17's symbols at most, the linker's minimum
+# macOS 11.0, tests/package/macho_audit.py).
+WHEEL_TAGS = {"linux-x64": "manylinux_2_17_x86_64", "windows-x64": "win_amd64",
+              "macos-arm64": "macosx_11_0_arm64", "macos-x64": "macosx_11_0_x86_64"}
+# What is inside each wheel, as an SPDX expression: the project, OpenSubdiv
+# (Pixar's modified Apache 2.0) and the runtime each toolchain links in
+# (GCC's with its runtime exception; mingw-w64's CRT startup and winpthreads;
+# LLVM's libc++ and libc++abi).
+LICENSE_EXPRESSIONS = {
+    "linux-x64": "GPL-3.0-or-later AND Pixar AND GPL-3.0-or-later WITH GCC-exception-3.1",
+    "windows-x64": "GPL-3.0-or-later AND Pixar AND GPL-3.0-or-later WITH GCC-exception-3.1 AND ZPL-2.1 AND MIT "
+                   "AND BSD-3-Clause",
+    "macos-arm64": "GPL-3.0-or-later AND Pixar AND Apache-2.0 WITH LLVM-exception",
+    "macos-x64": "GPL-3.0-or-later AND Pixar AND Apache-2.0 WITH LLVM-exception",
+}
+DIST_VENV = os.path.join(BUILD, "venv-dist")
+# The sdist's backend and the checks of what is shipped (tests/package/dist.py).
+DIST_TOOLS = ["build>=1.2", "scikit-build-core>=0.11", "twine>=6.1", "auditwheel>=6.1", "packaging>=24.2"]
+# What the sdist is made from (pyproject.toml's backend builds it from a
+# copy of these alone, so that nothing under build/ is walked).
+SDIST_FILES = ["pyproject.toml", "CMakeLists.txt", "LICENSE", "README.md", "cmake", "csrc", "python",
+               "addon/blender_manifest.toml"]
+
+
+def tool_venv(venv, tools):
+    """A virtual environment under build/ with `tools` from PyPI (made once);
+    returns its Python."""
+    python = os.path.join(venv, "bin", "python")
+    stamp = os.path.join(venv, ".subdiv_pia-tools")
+    wanted = " ".join(tools) + "\n"
+    if not (os.path.exists(stamp) and open(stamp).read() == wanted and os.path.exists(python)):
+        if not os.path.exists(python):
+            debian.run([python_with_pip(), "-m", "venv", venv])
+        debian.run([python, "-m", "pip", "install", "-q", "--disable-pip-version-check"] + tools)
+        with open(stamp, "w") as f:
+            f.write(wanted)
+    return python
+
+
+def dist_python():
+    return tool_venv(DIST_VENV, DIST_TOOLS)
+
+
+def wheel_name(platform):
+    return "subdiv_pia-%s-py3-none-%s.whl" % (version(), WHEEL_TAGS[platform])
+
+
+def sdist_name():
+    return "subdiv_pia-%s.tar.gz" % version()
+
+
+def build_sdist():
+    """dist/subdiv_pia-<version>.tar.gz, built by pyproject.toml's backend."""
+    stage = os.path.join(BUILD, "sdist-src")
+    shutil.rmtree(stage, ignore_errors=True)
+    for name in SDIST_FILES:
+        source, target = os.path.join(ROOT, name), os.path.join(stage, name)
+        if os.path.isdir(source):
+            shutil.copytree(source, target, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+        else:
+            os.makedirs(os.path.dirname(target), exist_ok=True)
+            shutil.copy2(source, target)
+    os.makedirs(DIST, exist_ok=True)
+    debian.run([dist_python(), "-m", "build", "--sdist", "--outdir", DIST, stage])
+    return os.path.join(DIST, sdist_name())
+
+
+def sdist_metadata(sdist):
+    """The core metadata (PKG-INFO) the backend wrote into the sdist."""
+    import tarfile
+    with tarfile.open(sdist) as tar:
+        member = tar.extractfile("subdiv_pia-%s/PKG-INFO" % version())
+        return member.read().decode("utf-8")
+
+
+def wheel_metadata(pkg_info, platform, licence_names):
+    """The sdist's metadata with the licence of what this platform's wheel
+    holds (its expression, and a License-File line per text)."""
+    head, sep, body = pkg_info.partition("\n\n")
+    lines = [line for line in head.splitlines() if not line.startswith(("License-Expression:", "License-File:"))]
+    at = next(i for i, line in enumerate(lines) if line.startswith("Summary:")) + 1
+    lines[at:at] = (["License-Expression: " + LICENSE_EXPRESSIONS[platform]] +
+                    ["License-File: " + name for name in licence_names])
+    return "\n".join(lines) + sep + body
+
+
+def _record_hash(data):
+    digest = base64.urlsafe_b64encode(hashlib.sha256(data).digest()).rstrip(b"=").decode("ascii")
+    return "sha256=" + digest
+
+
+def write_wheel(platform, library, pkg_info):
+    """dist/subdiv_pia-<version>-py3-none-<tag>.whl around the built library,
+    following the wheel specification (the same bytes for the same inputs)."""
+    platform_dir = os.path.dirname(library)
+    dist_info = "subdiv_pia-%s.dist-info" % version()
+    licences = [(os.path.basename(name), path) for name, path in licence_files(platform_dir)]
+    files = [("spia/__init__.py", open(os.path.join(ROOT, "python", "spia", "__init__.py"), "rb").read(), 0o644),
+             ("spia/" + LIBRARY_NAMES[platform], open(library, "rb").read(), 0o755)]
+    files += [("%s/licenses/%s" % (dist_info, name), open(path, "rb").read(), 0o644) for name, path in licences]
+    files.append(("%s/METADATA" % dist_info,
+                  wheel_metadata(pkg_info, platform, [n for n, _p in licences]).encode("utf-8"), 0o644))
+    files.append(("%s/WHEEL" % dist_info, ("Wheel-Version: 1.0\nGenerator: subdiv_pia tools/package.py\n"
+                                           "Root-Is-Purelib: false\nTag: py3-none-%s\n" % WHEEL_TAGS[platform])
+                  .encode("ascii"), 0o644))
+    record = "".join("%s,%s,%d\n" % (name, _record_hash(data), len(data)) for name, data, _mode in files)
+    files.append(("%s/RECORD" % dist_info, (record + "%s/RECORD,,\n" % dist_info).encode("utf-8"), 0o644))
+    os.makedirs(DIST, exist_ok=True)
+    path = os.path.join(DIST, wheel_name(platform))
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED, compresslevel=9) as zf:
+        for name, data, mode in files:
+            info = zipfile.ZipInfo(name, date_time=(2020, 1, 1, 0, 0, 0))
+            info.external_attr = (0o100000 | mode) << 16
+            info.compress_type = zipfile.ZIP_DEFLATED
+            zf.writestr(info, data)
+    return path
+
+
+# --------------------------------------------------------------------------
+# The Blender packages
+# --------------------------------------------------------------------------
+
+def extension_name(platform):
+    """As Blender's `extension build --split-platforms` names it."""
+    return "subdiv_pia-%s-%s.zip" % (version(), platform.replace("-", "_"))
+
+
+def legacy_name(platform):
+    return "subdiv_pia-%s-legacy-%s.zip" % (version(), platform.replace("-", "_"))
+
+
+def manifest_for(platforms, wheels=()):
+    """addon/blender_manifest.toml for `platforms`, listing `wheels` (file names under ./wheels/)."""
     text = open(os.path.join(ROOT, "addon", "blender_manifest.toml")).read()
-    text, count = re.subn(r"^platforms\s*=.*$", 'platforms = ["%s"]' % platform, text, flags=re.M)
+    line = 'platforms = [%s]' % ", ".join('"%s"' % p for p in platforms)
+    if wheels:
+        line += "\nwheels = [\n%s]" % "".join('  "./wheels/%s",\n' % w for w in wheels)
+    text, count = re.subn(r"^platforms\s*=.*$", line, text, flags=re.M)
     assert count == 1, "blender_manifest.toml needs one platforms line"
     return text
 
 
 def licence_files(platform_dir):
-    """(name in the zip, path) of every licence text the package carries."""
+    """(name in the legacy zip, path) of every licence text a package carries."""
     files = [("LICENSE", os.path.join(ROOT, "LICENSE")),
              ("licenses/OpenSubdiv-LICENSE.txt", os.path.join(OPENSUBDIV_DIR, "LICENSE.txt")),
              ("licenses/OpenSubdiv-NOTICE.txt", os.path.join(OPENSUBDIV_DIR, "NOTICE.txt")),
@@ -342,22 +481,14 @@ def licence_files(platform_dir):
     return files
 
 
-def assemble(platform, library):
-    """The add-on with `library` inside as subdiv_pia/ in
-    dist/subdiv_pia-<version>-<platform>.zip; returns its path."""
-    platform_dir = os.path.dirname(library)
-    stage = os.path.join(platform_dir, "stage", "subdiv_pia")
+def _addon_copy(stage):
     shutil.rmtree(os.path.dirname(stage), ignore_errors=True)
     shutil.copytree(os.path.join(ROOT, "addon"), stage,
                     ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.so", "*.dll", "*.dylib"))
-    with open(os.path.join(stage, "blender_manifest.toml"), "w") as f:
-        f.write(manifest_for(platform))
-    shutil.copy2(library, os.path.join(stage, LIBRARY_NAMES[platform]))
-    for name, path in licence_files(platform_dir):
-        os.makedirs(os.path.dirname(os.path.join(stage, name)), exist_ok=True)
-        shutil.copy2(path, os.path.join(stage, name))
-    os.makedirs(DIST, exist_ok=True)
-    archive = os.path.join(DIST, package_name(platform))
+
+
+def _zip_folder(stage, archive):
+    os.makedirs(os.path.dirname(archive), exist_ok=True)
     with zipfile.ZipFile(archive, "w", zipfile.ZIP_DEFLATED, compresslevel=9) as zf:
         for folder, dirs, files in os.walk(stage):
             dirs.sort()
@@ -365,6 +496,55 @@ def assemble(platform, library):
                 path = os.path.join(folder, name)
                 zf.write(path, os.path.relpath(path, os.path.dirname(stage)))
     return archive
+
+
+def assemble_legacy(platform, library):
+    """dist/subdiv_pia-<version>-legacy-<platform>.zip for Blender 3.4 to 4.1:
+    the add-on with the binding and `library` inside (subdiv_pia/spia/) and
+    the licence texts."""
+    platform_dir = os.path.dirname(library)
+    stage = os.path.join(platform_dir, "stage", "subdiv_pia")
+    _addon_copy(stage)
+    with open(os.path.join(stage, "blender_manifest.toml"), "w") as f:
+        f.write(manifest_for([platform]))
+    shutil.copytree(os.path.join(ROOT, "python", "spia"), os.path.join(stage, "spia"),
+                    ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.so", "*.dll", "*.dylib"))
+    shutil.copy2(library, os.path.join(stage, "spia", LIBRARY_NAMES[platform]))
+    for name, path in licence_files(platform_dir):
+        os.makedirs(os.path.dirname(os.path.join(stage, name)), exist_ok=True)
+        shutil.copy2(path, os.path.join(stage, name))
+    return _zip_folder(stage, os.path.join(DIST, legacy_name(platform)))
+
+
+def build_extensions(wheels):
+    """One extension per platform in `wheels` ({platform: wheel}), each the
+    pure Python add-on and that platform's wheel under ./wheels/, made by
+    Blender's own `extension build --split-platforms` from one source folder
+    whose manifest lists them all; returns {platform: zip}."""
+    stage = os.path.join(BUILD, "package", "extension", "subdiv_pia")
+    _addon_copy(stage)
+    platforms = sorted(wheels)
+    with open(os.path.join(stage, "blender_manifest.toml"), "w") as f:
+        f.write(manifest_for(platforms, [os.path.basename(wheels[p]) for p in platforms]))
+    os.makedirs(os.path.join(stage, "wheels"))
+    for p in platforms:
+        shutil.copy2(wheels[p], os.path.join(stage, "wheels"))
+    shutil.copy2(os.path.join(ROOT, "LICENSE"), os.path.join(stage, "LICENSE"))
+    out = os.path.join(BUILD, "package", "extension", "out")
+    shutil.rmtree(out, ignore_errors=True)
+    os.makedirs(out)
+    python, tool, tags = blender_extension_tool()
+    debian.run([python, tool, "build", "--source-dir=" + stage, "--output-dir=" + out, "--split-platforms"] +
+               (["--valid-tags=" + tags] if tags else []))
+    archives = {}
+    for p in platforms:
+        made = os.path.join(out, extension_name(p))
+        if not os.path.isfile(made):
+            raise RuntimeError("Blender's extension build made no %s (made: %s)" % (
+                extension_name(p), ", ".join(sorted(os.listdir(out))) or "nothing"))
+        archives[p] = os.path.join(DIST, extension_name(p))
+        shutil.copy2(made, archives[p])
+    return archives
 
 
 # --------------------------------------------------------------------------
@@ -435,19 +615,31 @@ def repository_index(archives):
 
 BUILDERS = {"linux-x64": build_linux, "windows-x64": build_windows, "macos-arm64": build_macos_arm64,
             "macos-x64": build_macos_x64}
+PLATFORMS = list(BUILDERS)
 
 
 def package(platforms, run_tests=True):
-    archives = []
+    """The libraries of `platforms`, and the sdist, wheels, extensions,
+    legacy zips and dist/repo/ made of them; returns the list of files."""
+    if sorted(platforms) == sorted(PLATFORMS):  # a whole release: nothing older stays beside it
+        for old in glob.glob(os.path.join(DIST, "subdiv_pia-*")):
+            os.remove(old)
+    sdist = build_sdist()
+    pkg_info = sdist_metadata(sdist)
+    wheels, legacy = {}, {}
     for platform in platforms:
-        archive = assemble(platform, BUILDERS[platform](run_tests))
+        library = BUILDERS[platform](run_tests)
+        wheels[platform] = write_wheel(platform, library, pkg_info)
+        legacy[platform] = assemble_legacy(platform, library)
+    extensions = build_extensions(wheels)
+    for archive in extensions.values():
         validate(archive)
-        archives.append(archive)
-    repo, index = repository_index(archives)
-    for archive in archives:
-        print("package: %s (%.2f MB)" % (archive, os.path.getsize(archive) / 1e6))
+    repo, index = repository_index([extensions[p] for p in platforms])
+    made = [sdist] + [f for p in platforms for f in (wheels[p], extensions[p], legacy[p])]
+    for path in made:
+        print("made: %s (%.2f MB)" % (os.path.relpath(path, ROOT), os.path.getsize(path) / 1e6))
     print("repository: %s (%d packages)" % (repo, len(index.get("data", []))))
-    return archives
+    return made
 
 
 def reported(step):
@@ -462,21 +654,12 @@ def reported(step):
     return 0
 
 
-def build_macos_libraries(run_tests=True):
-    """The two macOS libraries, built and (with run_tests) audited; not yet
-    packaged."""
-    for platform in ("macos-arm64", "macos-x64"):
-        library = BUILDERS[platform](run_tests)
-        print("library: %s (%.2f MB)" % (library, os.path.getsize(library) / 1e6))
-
-
 def main(argv):
-    platforms = {"linux": ["linux-x64"], "windows": ["windows-x64"], "all": ["linux-x64", "windows-x64"]}
+    platforms = {"linux": ["linux-x64"], "windows": ["windows-x64"], "macos": ["macos-arm64", "macos-x64"],
+                 "all": PLATFORMS}
     run_tests = "--no-tests" not in argv
     if argv[:1] and argv[0] in platforms:
         return reported(lambda: package(platforms[argv[0]], run_tests=run_tests))
-    if argv[:1] == ["macos"]:
-        return reported(lambda: build_macos_libraries(run_tests))
     if argv[:1] == ["version"]:
         print(version())
         return 0
@@ -494,10 +677,12 @@ def main(argv):
             os.close(saved)
         print(" ".join(args))
         return 0
-    if argv[:1] == ["name"] and len(argv) == 2:
-        print(os.path.join(DIST, package_name(argv[1])))
+    names = {"extension": extension_name, "legacy": legacy_name, "wheel": wheel_name}
+    if argv[:1] == ["name"] and len(argv) == 3 and argv[1] in names and argv[2] in BUILDERS:
+        print(os.path.join(DIST, names[argv[1]](argv[2])))
         return 0
-    print("usage: package.py linux|windows|all|macos [--no-tests] | version | name PLATFORM | opensubdiv-cmake-args", file=sys.stderr)
+    print("usage: package.py linux|windows|macos|all [--no-tests] | version | name extension|legacy|wheel PLATFORM"
+          " | opensubdiv-cmake-args", file=sys.stderr)
     return 2
 
 

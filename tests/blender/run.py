@@ -8,12 +8,14 @@ By default the built add-on is used (build/addon/subdiv_pia, or the folder
 containing subdiv_pia named by SUBDIV_PIA_ADDON_DIR): it is put on sys.path
 and registered.
 
-With SUBDIV_PIA_PACKAGE naming a zip (as `make build` writes to
-dist/subdiv_pia.zip), the package is installed as a user installs it, into a
-fresh temporary user directory (BLENDER_USER_* set before Blender starts, so
-the suite runs in a child process): Blender 4.2 and newer as an extension of
-the user repository, older ones as a legacy add-on; the tests then import
-that installed copy as `subdiv_pia`.
+With SUBDIV_PIA_PACKAGE naming a zip (`make package` writes them to dist/),
+the package is installed as a user installs it, into a fresh temporary user
+directory (BLENDER_USER_* set before Blender starts, so the suite runs in a
+child process): Blender 4.2 and newer as an extension of the user
+repository (its installer installs the wheel inside), older ones as a
+legacy add-on, from SUBDIV_PIA_LEGACY_PACKAGE when that names one (Blender
+3.4 to 4.1 take no wheels); the tests then import that installed copy as
+`subdiv_pia`.
 
 Exits with pytest's status (1 when no test ran).
 """
@@ -123,6 +125,9 @@ def main():
     import bpy
     import pytest
 
+    legacy_zip = os.environ.get("SUBDIV_PIA_LEGACY_PACKAGE")
+    if package_zip and legacy_zip and bpy.app.version < (4, 2, 0):
+        package_zip = os.environ["SUBDIV_PIA_PACKAGE"] = legacy_zip
     if package_zip:
         name = install_package(os.path.abspath(package_zip), user_dir)
         subdiv_pia = alias_installed(name)

@@ -1,7 +1,8 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """The tests use the package they are meant to: the installed copy when
 run.py installed SUBDIV_PIA_PACKAGE (an extension in Blender 4.2 and newer,
-a legacy add-on before), else the build; and the library beside it."""
+whose wheel brings the binding and the library; a legacy add-on before,
+with both inside), else the build."""
 
 import os
 import sys
@@ -19,11 +20,32 @@ def _under(path, folder):
     return os.path.commonpath([path, folder]) == folder
 
 
+def _native_files(folder):
+    return sorted(os.path.relpath(os.path.join(d, n), folder) for d, _dirs, names in os.walk(folder)
+                  for n in names if n.endswith((".so", ".dll", ".dylib", ".pyd")))
+
+
 def test_every_module_and_the_library_come_from_one_folder():
-    for module in (api, cleanup, cli, live, native, operators, properties, ui):
+    for module in (api, cleanup, cli, live, operators, properties, ui):
         assert os.path.dirname(os.path.abspath(module.__file__)) == FOLDER, module.__file__
     assert native.available(), native.load_error()
-    assert native.library_path() == os.path.join(FOLDER, native.library_name())
+    binding = os.path.dirname(os.path.abspath(native.__file__))
+    assert native.library_path() == os.path.join(binding, native.library_name())
+    if bpy.app.version >= (4, 2, 0) and os.environ.get("SUBDIV_PIA_PACKAGE"):
+        # The extension: the binding and the library are the wheel's, which
+        # Blender's installer put in the extensions' own site-packages; the
+        # add-on's folder holds no native file.
+        assert native.__name__ == "spia" and sys.modules["spia"] is native
+        site = os.path.join(bpy.utils.user_resource('EXTENSIONS'), ".local")
+        assert _under(binding, site), (binding, site)
+        assert os.path.basename(binding) == "spia" and os.path.basename(os.path.dirname(binding)) == "site-packages"
+        assert _native_files(FOLDER) == []
+    else:
+        # The legacy add-on and the development build: spia/ inside the add-on.
+        assert native.__name__ == subdiv_pia.__name__ + ".spia"
+        assert binding == os.path.join(FOLDER, "spia")
+        assert _native_files(FOLDER) == [os.path.join("spia", native.library_name())]
+    assert sys.modules[subdiv_pia.__name__ + ".native"] is native
     assert bpy.types.OBJECT_OT_subdiv_pia_interpolate.execute.__module__ == operators.__name__
 
 

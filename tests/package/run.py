@@ -2,7 +2,11 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Tests of the package as it is shipped (`make test-package`):
 
-    python3 tests/package/run.py dist/subdiv_pia-<version>-linux-x64.zip [dist/...-windows-x64.zip]
+    python3 tests/package/run.py dist/subdiv_pia-<version>-legacy-linux_x64.zip [dist/...-legacy-windows_x64.zip]
+
+The legacy zips carry the libraries as the wheels and extensions do (the
+same files: tests/package/dist.py checks that), unpacked and in the add-on's
+folder (subdiv_pia/spia/).
 
 1. audit: the ELF audit of the library (audit_elf.py).
 2. host: the unpacked package loads and works here (smoke.py).
@@ -18,7 +22,7 @@
 6. the Windows zip, if given: its manifest, and its DLL imports only
    Windows system DLLs and exports only the API (audit_pe.py).
 5. Debian 11 and the other current release (13 on a Debian 12 machine, else
-   12): clean chroots with Python and numpy only, none of those libraries
+   12): clean chroots with Python, numpy and pip only, none of those libraries
    installed; the package loads and works there.
 
 Prints a table of the checks and exits 1 if any failed.  Needs root (mount
@@ -38,6 +42,7 @@ ROOT = os.path.dirname(os.path.dirname(HERE))
 sys.path.insert(0, os.path.join(ROOT, "tools"))
 import debian  # noqa: E402
 import audit_elf  # noqa: E402  (beside this file)
+import dist  # noqa: E402
 
 WORK = os.path.join(ROOT, "build", "package-test")
 MESH = os.path.join(ROOT, "tests", "data", "mushroom.obj")
@@ -200,7 +205,7 @@ def test_preloaded(name, parent, python, preload, library_path=None):
         env["LD_LIBRARY_PATH"] = library_path
     ok, last = smoke(python, parent, env=env)
     targets, count = bindings_of_library(os.path.join(workdir, "ld"))
-    libc = libc_imports(os.path.join(parent, "subdiv_pia", LIBRARY))
+    libc = libc_imports(os.path.join(parent, "subdiv_pia", "spia", LIBRARY))
     foreign = {t: [n for n in s if n not in libc] for t, s in targets.items() if t not in ALLOWED_TARGETS}
     foreign = {t: s for t, s in foreign.items() if s}
     called = open(log).read().split() if os.path.exists(log) else []
@@ -214,7 +219,7 @@ def test_preloaded(name, parent, python, preload, library_path=None):
 
 
 def test_chroot(suite, parent):
-    root = debian.chroot(suite + "-test", suite, ["python3-numpy"])
+    root = debian.chroot(suite + "-test", suite, dist.CHROOT_PACKAGES)
     present = [p for p in glob.glob(os.path.join(root, "usr", "lib", "**", "lib*.so*"), recursive=True)
                if HIDDEN.match(os.path.basename(p))]
     inner = "/opt/subdiv_pia-test"
@@ -234,6 +239,12 @@ def test_chroot(suite, parent):
                                "; present: " + ", ".join(map(os.path.basename, present)) if present else ""))
 
 
+def native_files(parent):
+    folder = os.path.join(parent, "subdiv_pia")
+    return sorted(os.path.relpath(os.path.join(d, n), folder) for d, _dirs, names in os.walk(folder)
+                  for n in names if n.endswith((".so", ".dll", ".dylib", ".pyd")))
+
+
 def manifest_platforms(parent):
     text = open(os.path.join(parent, "subdiv_pia", "blender_manifest.toml")).read()
     m = re.search(r"^platforms\s*=\s*\[([^\]]*)\]", text, re.M)
@@ -245,11 +256,10 @@ def test_windows(archive):
     tests ran under Wine when it was built: tools/package.py)."""
     import audit_pe
     parent = unpack(archive, "unpacked-windows")
-    names = sorted(os.listdir(os.path.join(parent, "subdiv_pia")))
-    libraries = [n for n in names if n.endswith((".so", ".dll", ".dylib"))]
-    check("windows manifest", manifest_platforms(parent) == ["windows-x64"] and libraries == ["subdiv_pia.dll"],
+    libraries = native_files(parent)
+    check("windows manifest", manifest_platforms(parent) == ["windows-x64"] and libraries == ["spia/subdiv_pia.dll"],
           "platforms %s, libraries %s" % (manifest_platforms(parent), libraries))
-    report, problems = audit_pe.audit(os.path.join(parent, "subdiv_pia", "subdiv_pia.dll"), HEADER)
+    report, problems = audit_pe.audit(os.path.join(parent, "subdiv_pia", "spia", "subdiv_pia.dll"), HEADER)
     check("windows audit", not problems, "; ".join("%s %s" % kv for kv in report.items()) +
           ("; " + "; ".join(problems) if problems else ""))
 
@@ -263,10 +273,10 @@ def main(argv):
         test_windows(os.path.abspath(other))
     archive = os.path.abspath(argv[0])
     parent = unpack(archive)
-    library = os.path.join(parent, "subdiv_pia", LIBRARY)
+    library = os.path.join(parent, "subdiv_pia", "spia", LIBRARY)
     python = system_python()
-    libraries = sorted(n for n in os.listdir(os.path.join(parent, "subdiv_pia")) if n.endswith((".so", ".dll")))
-    check("linux manifest", manifest_platforms(parent) == ["linux-x64"] and libraries == [LIBRARY],
+    libraries = native_files(parent)
+    check("linux manifest", manifest_platforms(parent) == ["linux-x64"] and libraries == ["spia/" + LIBRARY],
           "platforms %s, libraries %s" % (manifest_platforms(parent), libraries))
 
     report, problems = audit_elf.audit(library, HEADER, "2.28")  # official Blender runs on glibc 2.28

@@ -4,7 +4,7 @@
     python3 smoke.py PACKAGE_PARENT MESH.obj
 
 PACKAGE_PARENT is the folder holding the unpacked `subdiv_pia/` of a zip.
-Loads its library through its own `native.py`, interpolates MESH.obj with
+Loads its library through the binding inside it (spia), interpolates MESH.obj with
 Catmull-Clark and checks the cage with the library's stencils applied in
 numpy (L V = P to 1e-6 of the diagonal), and checks closest points on the
 mesh against a brute-force search over its triangles in numpy.  Prints one
