@@ -36,7 +36,13 @@ import bpy
 import numpy as np
 from bpy.app.handlers import persistent
 
-from . import api, native
+from . import native
+from .compute import check_source, compute_cage, find_target, limit_arrays, make_scan
+from .mesh_io import (face_shape_parameters, mesh_arrays, native_mesh, non_triangle_count, read_creases,
+                      read_positions, triangulated_copy, write_positions)
+from .objects import find_limit_object, set_limit_object, store_report, stored_settings
+from .reports import format_unreachable, report_converged
+from .settings import LIMIT_SCHEMES, LIVE_CLEANUP_MESSAGE, check_settings, opensubdiv_version_of
 
 LIVE = "pia_live"
 SOURCE = "pia_source"
@@ -85,7 +91,7 @@ def source_of(cage):
 def settings_of(cage):
     """The settings a cage was made with: stored_settings, the OpenSubdiv
     version it is exact for, and its fit (target and fit settings) if it was fitted."""
-    s = api.stored_settings(cage)
+    s = stored_settings(cage)
     if cage.get("pia_scheme", 'CATMULL_CLARK') == 'CATMULL_CLARK' and cage.get("pia_opensubdiv_version"):
         s["opensubdiv_version"] = str(cage["pia_opensubdiv_version"])
     if cage.get("pia_fit_target"):
@@ -94,7 +100,7 @@ def settings_of(cage):
         for key in FIT_KEYS:
             if "pia_" + key in cage:
                 s[key] = cage["pia_" + key]
-    return api.check_settings(s)
+    return check_settings(s)
 
 
 def _ensure_handler():
@@ -142,9 +148,9 @@ def set_live(cage, enable=True, source=None):
         raise ValueError("Source '%s' of '%s' not found (deleted or renamed)" % (name, cage.name))
     if obj == cage:
         raise ValueError("'%s' cannot follow itself" % cage.name)
-    api.check_source(obj)
+    check_source(obj)
     if settings_of(cage).get("cleanup"):  # ValueError for settings that cannot be used
-        raise ValueError(api.LIVE_CLEANUP_MESSAGE % obj.name)
+        raise ValueError(LIVE_CLEANUP_MESSAGE % obj.name)
     cage[SOURCE] = obj.name
     cage[LIVE] = True
     cage[LIVE_NAME] = cage.name
@@ -159,7 +165,7 @@ def _quick_key(mesh, shapes):
     """What is cheap to read each update: element counts, creases and the
     Doo-Sabin shape values. Reading the faces themselves costs more than
     the solve; they are compared (_face_key) only when this key changes."""
-    edge, vertex = api.read_creases(mesh)
+    edge, vertex = read_creases(mesh)
     return (len(mesh.vertices), len(mesh.edges), len(mesh.loops), len(mesh.polygons),
             None if edge is None else hash(edge.tobytes()),
             None if vertex is None else hash(vertex.tobytes()),
@@ -178,37 +184,37 @@ def _stencils(cage, settings):
     options = dict(scheme=scheme, boundary_rule=settings["boundary_rule"],
                    boundary_smooth=settings["boundary_smooth"],
                    use_creases=settings["use_creases"] and scheme != 'DOO_SABIN',
-                   quality=settings["quality"], opensubdiv_version=api.opensubdiv_version_of(settings))
+                   quality=settings["quality"], opensubdiv_version=opensubdiv_version_of(settings))
     if scheme == 'DOO_SABIN':
         options.update(shape_parameter=settings["shape_parameter"],
-                       face_shape_parameters=api.face_shape_parameters(cage.data, settings))
-    return native.limit_stencils(api.native_mesh(cage.data), **options)
+                       face_shape_parameters=face_shape_parameters(cage.data, settings))
+    return native.limit_stencils(native_mesh(cage.data), **options)
 
 
 def _refresh_limit(cage, settings):
     """The `_limit` child of a Loop or Doo-Sabin cage, in place when its size stays."""
-    if settings["scheme"] not in api.LIMIT_SCHEMES:
+    if settings["scheme"] not in LIMIT_SCHEMES:
         return
-    limit = api.limit_arrays(cage.data, settings)
-    child = api.find_limit_object(cage)
+    limit = limit_arrays(cage.data, settings)
+    child = find_limit_object(cage)
     if (child is not None and child.data is not None and len(child.data.vertices) == len(limit[0])
             and len(child.data.polygons) == len(limit[1])):
-        api.write_positions(child.data, limit[0])
+        write_positions(child.data, limit[0])
     else:
-        api.set_limit_object(cage, limit)
+        set_limit_object(cage, limit)
 
 
 def _rebuild(cage, source, settings, scan):
     """A new mesh for the cage from the source's topology, swapped in under the old name."""
     mesh = source.data.copy()
-    if settings["scheme"] == 'LOOP' and settings["triangulate"] and api.non_triangle_count(mesh):
-        tri = api.triangulated_copy(mesh)
+    if settings["scheme"] == 'LOOP' and settings["triangulate"] and non_triangle_count(mesh):
+        tri = triangulated_copy(mesh)
         bpy.data.meshes.remove(mesh)
         mesh = tri
     try:
         # an update is about the cage: the scan-to-surface distances (a
         # hierarchy over the refined surface) are left to a full fit
-        positions, report = api.compute_cage(source, settings, mesh=mesh, scan=scan, measure_scan=False)
+        positions, report = compute_cage(source, settings, mesh=mesh, scan=scan, measure_scan=False)
     except BaseException:
         bpy.data.meshes.remove(mesh)
         raise
@@ -249,9 +255,9 @@ def sync(cage, force=False):
         if source.mode == 'EDIT':
             source.update_from_editmode()
         mesh = source.data
-        targets = api.read_positions(mesh)
+        targets = read_positions(mesh)
         settings = settings_of(cage)
-        shapes = api.face_shape_parameters(mesh, settings) if settings["scheme"] == 'DOO_SABIN' else None
+        shapes = face_shape_parameters(mesh, settings) if settings["scheme"] == 'DOO_SABIN' else None
         key = _quick_key(mesh, shapes)
         if (not force and state.positions is not None and key == state.topology[0]
                 and np.array_equal(state.positions, targets)):
@@ -261,12 +267,12 @@ def sync(cage, force=False):
         if not np.isfinite(targets).all():
             bad = int(np.flatnonzero(~np.isfinite(targets).all(axis=1))[0])
             raise ValueError("vertex %d of '%s' is not a finite position" % (bad, source.name))
-        target = api.find_target(cage, settings)
-        scan = api.make_scan(target, cage) if target is not None else None
+        target = find_target(cage, settings)
+        scan = make_scan(target, cage) if target is not None else None
         faces = state.topology[1] if state.topology is not None else None
         new_stencils = state.stencils is None
         if state.topology is None or key != state.topology[0]:
-            arrays = api.mesh_arrays(mesh)
+            arrays = mesh_arrays(mesh)
             new_faces = _face_key(arrays)
             if len(cage.data.vertices) != len(targets):
                 rebuild = True
@@ -282,29 +288,29 @@ def sync(cage, force=False):
             report = _rebuild(cage, source, settings, scan)
             state.stencils = None
         elif scan is not None:
-            positions, report = api.compute_cage(source, settings, scan=scan)
-            api.write_positions(cage.data, positions)
+            positions, report = compute_cage(source, settings, scan=scan)
+            write_positions(cage.data, positions)
         else:
             if new_stencils or state.stencils is None:
                 state.stencils = _stencils(cage, settings)
                 initial = None
             else:  # the same topology: start from the cage solved for the last positions
-                initial = api.read_positions(cage.data)
+                initial = read_positions(cage.data)
             positions, report = state.stencils.solve(
                 targets, initial=initial, method=settings["method"], tolerance=settings["tolerance"],
                 max_iterations=settings["max_iterations"],
                 staged=settings["staged"] and settings["scheme"] == 'LOOP')
             if not np.isfinite(positions).all():
                 raise ValueError("the solve gave non-finite positions")
-            api.write_positions(cage.data, positions)
+            write_positions(cage.data, positions)
         state.topology = (key, faces)
         state.positions = targets
-        api.store_report(cage, report, settings)  # figures and the pia_unreachable group
+        store_report(cage, report, settings)  # figures and the pia_unreachable group
         _refresh_limit(cage, settings)
         message = ""
-        if not api.report_converged(report):
+        if not report_converged(report):
             message = "Last edit: %s" % (report.status.lower().replace("_", " "))
-            unreachable = api.format_unreachable(getattr(report, "unreachable_count", 0),
+            unreachable = format_unreachable(getattr(report, "unreachable_count", 0),
                                                  getattr(report, "reachable_max_error_relative", 0.0))
             if unreachable:
                 message += "; " + unreachable
@@ -324,7 +330,7 @@ def _same_faces(mesh, arrays, settings):
     the first sync of a cage made from this source)."""
     if settings["scheme"] == 'LOOP' and settings["triangulate"]:
         return len(mesh.vertices) == len(arrays["positions"])
-    mine = api.mesh_arrays(mesh)
+    mine = mesh_arrays(mesh)
     return (np.array_equal(mine["face_sizes"], arrays["face_sizes"])
             and np.array_equal(mine["face_vertices"], arrays["face_vertices"]))
 

@@ -4,7 +4,7 @@
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
-from .api import DEFAULT_SETTINGS
+from .settings import DEFAULT_SETTINGS
 
 SCHEME_ITEMS = (
     ('CATMULL_CLARK', "Catmull-Clark",

@@ -71,22 +71,22 @@ def _broken(*args, **kwargs):
 # given, a Live registration) must be gone again, the source unchanged and
 # its selection as it was.
 WRITE_FAILURES = {
-    "modifier's settings": (shapes.cube, "api", "opensubdiv_version_string", {}),
-    "Loop limit child": (shapes.cube, "api", "set_limit_object", {"scheme": 'LOOP', "triangulate": True}),
-    "cleaned copy's figures": (shapes.cube, "api", "store_cleanup", {"cleanup": True}),
+    "modifier's settings": (shapes.cube, "objects", "opensubdiv_version_string", {}),
+    "Loop limit child": (shapes.cube, "objects", "set_limit_object", {"scheme": 'LOOP', "triangulate": True}),
+    "cleaned copy's figures": (shapes.cube, "steps", "store_cleanup", {"cleanup": True}),
     "Live": (shapes.cube, "live", "set_live", {"live": True}),
 }
 
 
 @pytest.mark.parametrize("case", sorted(WRITE_FAILURES))
 def test_api_failure_while_writing_leaves_nothing(monkeypatch, case):
-    from subdiv_pia import api, live
+    from subdiv_pia import live, objects, steps
     make, module, function, settings = WRITE_FAILURES[case]
     source = make()
     source.select_set(False)  # active, not selected: so it stays
     before = snapshot(source)
     counts = (len(bpy.data.objects), len(bpy.data.meshes))
-    module = {"api": api, "live": live}[module]
+    module = {"objects": objects, "steps": steps, "live": live}[module]
     real = getattr(module, function)
     if function == "set_live":  # only turning it on fails; turning it off again must work
         monkeypatch.setattr(module, function, lambda cage, enable=True, source=None:

@@ -19,7 +19,7 @@ from mathutils.kdtree import KDTree
 
 import shapes
 import subdiv_pia
-from subdiv_pia import api, native
+from subdiv_pia import api, native, objects
 from conftest import (DATA, assert_unchanged, evaluated_control_points, evaluated_points, expect_error, import_obj,
                       link_and_activate, link_and_activate_existing, object_from_pydata, positions,
                       run_operator, snapshot)
@@ -416,10 +416,10 @@ def test_paint_scan_failing_midway_keeps_the_last_painting(monkeypatch):
               for name in (api.SCAN_DISTANCE_ATTRIBUTE, api.SCAN_COLOR_ATTRIBUTE)}
     names = set(mesh.attributes.keys())
     counts = (len(bpy.data.objects), len(bpy.data.meshes))
-    real = api.heat_colors
+    real = objects.heat_colors
     n = len(mesh.vertices)
     # colours that only fail once converted for Blender: after both new attributes are made
-    monkeypatch.setattr(api, "heat_colors", lambda d: np.full((n, 4), "x", object) if len(d) == n else real(d))
+    monkeypatch.setattr(objects, "heat_colors", lambda d: np.full((n, 4), "x", object) if len(d) == n else real(d))
     with pytest.raises(ValueError, match="could not convert"):
         api.interpolate(cage, target=scan.name, fit_cutoff=0.2, fit_smoothing=0.1, fit_paint_scan=True)
     assert set(mesh.attributes.keys()) == names

@@ -6,7 +6,7 @@ import numpy as np
 
 import shapes
 import subdiv_pia
-from subdiv_pia import api
+from subdiv_pia import api, mesh_io
 
 
 class _Collection:
@@ -76,10 +76,10 @@ def _degenerate_faces():
 
 
 def _item_by_item(monkeypatch):
-    """Make api read every array element by element, as it does where Blender
+    """Make mesh_io read every array element by element, as it does where Blender
     keeps them neither as attributes nor as arrays it can copy at once."""
-    monkeypatch.setattr(api, "_builtin_attribute", lambda *args: None)
-    monkeypatch.setattr(api, "_items_array", lambda *args: None)
+    monkeypatch.setattr(mesh_io, "_builtin_attribute", lambda *args: None)
+    monkeypatch.setattr(mesh_io, "_items_array", lambda *args: None)
 
 
 def test_arrays_read_at_once_are_those_read_item_by_item(monkeypatch):
@@ -98,16 +98,16 @@ def test_arrays_read_at_once_are_those_read_item_by_item(monkeypatch):
 
 def test_faces_are_read_at_once(monkeypatch):
     # Blender keeps the faces (4.0+: their offsets; 3.4, 3.5 also the loops and
-    # edges) in arrays that api copies at once: each read finds its array.
+    # edges) in arrays that mesh_io copies at once: each read finds its array.
     obj = shapes.ngon_cylinder()
     found = []
-    read = api._items_array
+    read = mesh_io._items_array
 
     def recording(*args):
         fields = read(*args)
         found.append(fields is not None)
         return fields
-    monkeypatch.setattr(api, "_items_array", recording)
+    monkeypatch.setattr(mesh_io, "_items_array", recording)
     api.mesh_arrays(obj.data)
     assert found and all(found), found
 

@@ -71,13 +71,13 @@ def test_nan_coordinates():
 def test_stencils_beyond_memory(monkeypatch):
     # The estimate is set against a machine of 1 KB: refused up front, the
     # estimate in the message, nothing created, the source untouched.
-    from subdiv_pia import api
+    from subdiv_pia import api, settings
     source = shapes.cube()
     before = snapshot(source)
     sizes = [len(p.vertices) for p in source.data.polygons]
     need = api.stencil_memory_estimate(sizes, len(source.data.vertices), {})
     assert need > 1 << 10
-    monkeypatch.setattr(api, "machine_memory", lambda: 1 << 10)
+    monkeypatch.setattr(settings, "machine_memory", lambda: 1 << 10)
     expect_error(r"OUT_OF_MEMORY|would need about [0-9.]+ GB .*more than this machine's")
     assert_unchanged(source, before)
     # With the machine's own memory the same cube goes through.

@@ -10,7 +10,8 @@ import sys
 import bpy
 
 import subdiv_pia
-from subdiv_pia import api, cleanup, cli, live, native, operators, properties, ui
+from subdiv_pia import (api, cleanup, cli, compute, jobs, live, mesh_io, native, objects, operators, properties,
+                        reports, settings, steps, ui)
 
 FOLDER = os.path.dirname(os.path.abspath(subdiv_pia.__file__))
 
@@ -26,7 +27,8 @@ def _native_files(folder):
 
 
 def test_every_module_and_the_library_come_from_one_folder():
-    for module in (api, cleanup, cli, live, operators, properties, ui):
+    for module in (api, cleanup, cli, compute, jobs, live, mesh_io, objects, operators, properties, reports, settings,
+                   steps, ui):
         assert os.path.dirname(os.path.abspath(module.__file__)) == FOLDER, module.__file__
     assert native.available(), native.load_error()
     binding = os.path.dirname(os.path.abspath(native.__file__))
