@@ -84,16 +84,6 @@ static spia_result resolve_fit(const spia_fit_options *in, spia_fit_options *out
     return SPIA_OK;
 }
 
-/* Ptex faces of a face: 1 for a quad, else one per corner. */
-static inline int32_t ptex_of_face(int32_t size) { return size == 4 ? 1 : size; }
-
-int64_t spia_surface_sample_count(const spia_mesh *mesh, int32_t samples_per_edge) {
-    if (!mesh || !mesh->face_sizes || mesh->face_count <= 0 || samples_per_edge < 1 || samples_per_edge > 64) return 0;
-    int64_t ptex = 0;
-    for (int32_t f = 0; f < mesh->face_count; ++f) ptex += ptex_of_face(mesh->face_sizes[f]);
-    return ptex * samples_per_edge * samples_per_edge;
-}
-
 spia_result spia_surface_stencils_create(const spia_mesh *mesh, const spia_options *options,
                                          int32_t samples_per_edge, spia_stencils **out, spia_status *status) {
     if (!out) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "out must not be NULL");
@@ -1391,7 +1381,7 @@ static spia_result build_sample_faces(const spia_mesh *mesh, int32_t per_edge, i
     int64_t s = 0;
     const int64_t per_ptex = (int64_t)per_edge * per_edge;
     for (int32_t f = 0; f < mesh->face_count; ++f)
-        for (int64_t k = 0; k < ptex_of_face(mesh->face_sizes[f]) * per_ptex && s < S; ++k) b->sample_face[s++] = f;
+        for (int64_t k = 0; k < spia__ptex_of_face(mesh->face_sizes[f]) * per_ptex && s < S; ++k) b->sample_face[s++] = f;
     return s == S ? SPIA_OK : SPIA_ERROR_INTERNAL;
 }
 
