@@ -35,6 +35,24 @@ def load(name):
     return spia.Mesh.from_faces(positions, faces, **kwargs)
 
 
+def creased_grid(k, triangles):
+    """A wavy k x k grid (open: corners of two edges), every third row of
+    edges semi-sharp, and quads or triangles."""
+    i, j = np.meshgrid(np.arange(k + 1), np.arange(k + 1), indexing="ij")
+    z = 0.1 * np.sin(i * 0.7) * np.cos(j * 0.5)
+    positions = np.stack([i.ravel(), j.ravel(), z.ravel()], 1).astype(np.float32)
+    at = lambda a, b: a * (k + 1) + b  # noqa: E731
+    faces = []
+    for a in range(k):
+        for b in range(k):
+            q = [at(a, b), at(a + 1, b), at(a + 1, b + 1), at(a, b + 1)]
+            faces += [q[:3], [q[0], q[2], q[3]]] if triangles else [q]
+    edges = [(at(a, b), at(a, b + 1)) for a in range(0, k + 1, 3) for b in range(k)]
+    sharpness = [0.3 + 0.1 * (n % 5) for n in range(len(edges))]
+    return spia.Mesh.from_faces(positions, faces, edges=np.array(edges, np.int32),
+                                edge_creases=np.array(sharpness, np.float32))
+
+
 def feed(h, value):
     if isinstance(value, np.ndarray):
         h.update(str(value.dtype).encode() + str(value.shape).encode())
@@ -92,6 +110,13 @@ def main():
     small = ["catmark_car.obj", "catmark_nonman_edges.obj", "double-torus.obj", "mushroom.obj", "teapot.obj",
              "bunny.obj", "elephant-with-holes.obj", "bun_zipper_quadriflow_cage.obj"]
     meshes = {n: load(n) for n in small}
+    for triangles, scheme in ((False, "CATMULL_CLARK"), (True, "LOOP")):
+        grid = creased_grid(40, triangles)
+        for quality in (2, 4):
+            case(f"interpolate grid {scheme} q{quality}", lambda: spia.interpolate(grid, scheme=scheme,
+                                                                                  quality=quality, threads=2))
+            case(f"stencils grid {scheme} q{quality}", lambda: (lambda s: (s.offsets, s.indices, s.weights))(
+                spia.limit_stencils(grid, scheme=scheme, quality=quality, threads=2)))
     methods = spia.METHODS
     for n, m in meshes.items():
         for scheme in spia.SCHEMES:
