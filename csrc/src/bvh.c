@@ -807,6 +807,141 @@ spia_result spia__bvh_build_progress(spia__bvh *bvh, const float *positions, int
     return spia__bvh_build_keep(bvh, positions, triangles, triangle_count, threads, progress, NULL, NULL, status);
 }
 
+/* What the stages of a build share. */
+typedef struct build_run {
+    builder b;
+    spia__bvh *bvh;
+    int threads;
+    uint32_t n;
+    int64_t triangle_count;
+    node_vec top;       /* the top levels' nodes */
+    subtree *subtrees;  /* MAX_TOP_TASKS */
+    int open;           /* subtrees in use */
+    spia_status *status;
+} build_run;
+
+/* The triangles' boxes, and the root's, planned as the first subtree's
+ * task; bvh->extent the largest coordinate. */
+static void root_task(build_run *u, aabb *piece_box, uint32_t root_slot) {
+    const uint32_t n = u->n;
+    int64_t pieces = u->threads > 1 ? 4 * (int64_t)u->threads : 1;
+    if (pieces > MAX_PIECES) pieces = MAX_PIECES;
+    const int64_t grain = ((int64_t)n + pieces - 1) / pieces;
+    pieces = ((int64_t)n + grain - 1) / grain;
+    refs_job job = {&u->b, grain, piece_box, piece_box + MAX_PIECES};
+    spia__parallel_for(u->threads, n, grain, refs_range, &job);
+    range all;
+    memset(&all, 0, sizeof all);
+    all.end = n;
+    all.box = all.cbox = empty_box;
+    for (int64_t p = 0; p < pieces; ++p) {
+        box_merge(&all.box, &piece_box[p]);
+        box_merge(&all.cbox, &piece_box[MAX_PIECES + p]);
+    }
+    double extent = 0.0;
+    for (int k = 0; k < 3; ++k) {
+        extent = fabs(all.box.lo[k]) > extent ? fabs(all.box.lo[k]) : extent;
+        extent = fabs(all.box.hi[k]) > extent ? fabs(all.box.hi[k]) : extent;
+    }
+    u->bvh->extent = extent;
+    plan(&u->b, &all);
+    u->subtrees[0].root_task.r = all;
+    u->subtrees[0].root_task.slot = root_slot;
+    u->subtrees[0].root_task.level = 0;
+}
+
+/* The top levels: make the node of the largest open task until there are
+ * enough for the threads to share. */
+static spia_result top_levels(build_run *u) {
+    subtree *subtrees = u->subtrees;
+    const uint32_t n = u->n;
+    const int threads = u->threads;
+    const uint32_t small = n / (8 * (uint32_t)threads) > 4096 ? n / (8 * (uint32_t)threads) : 4096;
+    while (u->open + 3 <= MAX_TOP_TASKS) {
+        if (spia__build_poll(u->b.progress, 0, 0.1 * (double)u->open / MAX_TOP_TASKS)) return cancelled(u->status);
+        int largest = 0;
+        for (int i = 1; i < u->open; ++i)
+            if (task_size(&subtrees[i]) > task_size(&subtrees[largest])) largest = i;
+        if (task_size(&subtrees[largest]) <= small || subtrees[largest].root_task.r.leaf) break;
+        const task t = subtrees[largest].root_task;
+        task children[4];
+        int count;
+        if (!make_node(&u->b, &t, &u->top, NULL, children, &count)) return out_of_memory(u->status, u->triangle_count);
+        /* The largest's place goes to its last child, or to the last
+         * open task when all its children were leaves. */
+        if (count > 0) {
+            subtrees[largest].root_task = children[count - 1];
+            for (int i = 0; i + 1 < count; ++i) subtrees[u->open++].root_task = children[i];
+        } else {
+            subtrees[largest] = subtrees[--u->open];
+            if (u->open == 0) break;
+        }
+    }
+    return SPIA_OK;
+}
+
+/* The subtrees, largest first, each on one thread; *total receives the
+ * nodes of the whole hierarchy and *level its depth. */
+static spia_result build_subtrees(build_run *u, uint64_t *total, int32_t *level) {
+    subtree *subtrees = u->subtrees;
+    const int open = u->open;
+    for (int i = 1; i < open; ++i)
+        for (int j = i; j > 0 && task_size(&subtrees[j]) > task_size(&subtrees[j - 1]); --j) {
+            const subtree x = subtrees[j];
+            subtrees[j] = subtrees[j - 1];
+            subtrees[j - 1] = x;
+        }
+    for (int i = 0; i < open; ++i) subtrees[i].root = u->top.v + subtrees[i].root_task.slot;
+    u->b.subtree_count = open;
+    {
+        subtree_job job = {&u->b, subtrees};
+        spia__parallel_for(u->threads, open, 1, subtree_range, &job);
+    }
+    for (int i = 0; i < open; ++i)
+        if (subtrees[i].failed == 2) return cancelled(u->status);
+    *total = u->top.n;
+    *level = 0;
+    for (int i = 0; i < open; ++i) {
+        if (subtrees[i].failed) return out_of_memory(u->status, u->triangle_count);
+        *total += subtrees[i].nodes.n;
+        *level = subtrees[i].level > *level ? subtrees[i].level : *level;
+    }
+    return SPIA_OK;
+}
+
+/* Join: the top nodes, then each subtree's with its indices moved. */
+static spia_result join_nodes(build_run *u, uint64_t total, int32_t level) {
+    spia__bvh *bvh = u->bvh;
+    bvh->node_memory = malloc(sizeof(spia__bvh_node) * (size_t)total + 64);
+    if (!bvh->node_memory) return out_of_memory(u->status, u->triangle_count);
+    bvh->nodes = (spia__bvh_node *)(((uintptr_t)bvh->node_memory + 63) & ~(uintptr_t)63);
+    memcpy(bvh->nodes, u->top.v, sizeof(spia__bvh_node) * u->top.n);
+    {
+        uint32_t base[MAX_TOP_TASKS];
+        base[0] = u->top.n;
+        for (int i = 1; i < u->open; ++i) base[i] = base[i - 1] + u->subtrees[i - 1].nodes.n;
+        join_job job = {&u->b, u->subtrees, base, bvh->nodes, u->top.v, u->open};
+        spia__parallel_for(u->threads, u->open, 1, join_range, &job);
+    }
+    bvh->node_count = (int64_t)total;
+    bvh->depth = level;
+    return SPIA_OK;
+}
+
+/* Leaf order: the triangles sorted as the refs, through the refs' memory
+ * (28 bytes a triangle, more than the 12 needed). */
+static spia_result leaf_order(build_run *u, uint32_t *order, int32_t *triangles) {
+    order_job job = {u->b.refs, order, triangles, NULL};
+    spia__parallel_for(u->threads, u->n, 65536, order_range, &job);
+    if (spia__build_poll(u->b.progress, 0, 0.1 + SUBTREE_SHARE + 0.05)) return cancelled(u->status);
+    int32_t *copy = (int32_t *)(void *)u->b.refs;
+    memcpy(copy, triangles, sizeof(int32_t) * 3 * (size_t)u->n);
+    job.from = copy;
+    job.to = triangles;
+    spia__parallel_for(u->threads, u->n, 65536, permute_range, &job);
+    return SPIA_OK;
+}
+
 spia_result spia__bvh_build_keep(spia__bvh *bvh, const float *positions, int32_t *triangles, int64_t triangle_count,
                                  int threads, spia__build_progress *progress, void **scratch, size_t *scratch_bytes,
                                  spia_status *status) {
@@ -818,113 +953,35 @@ spia_result spia__bvh_build_keep(spia__bvh *bvh, const float *positions, int32_t
                           (long long)triangle_count);
     if (threads < 1) threads = 1;
     const uint32_t n = (uint32_t)triangle_count;
-    builder b;
-    b.positions = positions;
-    b.triangles = triangles;
-    b.refs = malloc(sizeof(prim_ref) * (size_t)n);
-    b.progress = progress;
-    spia__counter_set(&b.subtrees_done, 0);
-    b.subtree_count = 1;
+    build_run u;
+    memset(&u, 0, sizeof u);
+    u.bvh = bvh;
+    u.threads = threads;
+    u.n = n;
+    u.triangle_count = triangle_count;
+    u.status = status;
+    builder *b = &u.b;
+    b->positions = positions;
+    b->triangles = triangles;
+    b->refs = malloc(sizeof(prim_ref) * (size_t)n);
+    b->progress = progress;
+    spia__counter_set(&b->subtrees_done, 0);
+    b->subtree_count = 1;
     aabb *piece_box = malloc(sizeof(aabb) * 2 * MAX_PIECES);
-    node_vec top = {NULL, 0, 0};
-    subtree *subtrees = calloc(MAX_TOP_TASKS, sizeof(subtree));
+    u.subtrees = calloc(MAX_TOP_TASKS, sizeof(subtree));
     uint32_t *order = malloc(sizeof(uint32_t) * (size_t)n);
     uint32_t root_slot = 0;
     spia_result result = SPIA_OK;
-    if (!b.refs || !piece_box || !subtrees || !order || !node_vec_push(&top, &root_slot)) {
+    uint64_t total = 0;
+    int32_t level = 0;
+    if (!b->refs || !piece_box || !u.subtrees || !order || !node_vec_push(&u.top, &root_slot)) {
         result = out_of_memory(status, triangle_count);
         goto done;
     }
-
-    /* The triangles' boxes, and the root's. */
-    {
-        int64_t pieces = threads > 1 ? 4 * (int64_t)threads : 1;
-        if (pieces > MAX_PIECES) pieces = MAX_PIECES;
-        const int64_t grain = ((int64_t)n + pieces - 1) / pieces;
-        pieces = ((int64_t)n + grain - 1) / grain;
-        refs_job job = {&b, grain, piece_box, piece_box + MAX_PIECES};
-        spia__parallel_for(threads, n, grain, refs_range, &job);
-        range all;
-        memset(&all, 0, sizeof all);
-        all.end = n;
-        all.box = all.cbox = empty_box;
-        for (int64_t p = 0; p < pieces; ++p) {
-            box_merge(&all.box, &piece_box[p]);
-            box_merge(&all.cbox, &piece_box[MAX_PIECES + p]);
-        }
-        double extent = 0.0;
-        for (int k = 0; k < 3; ++k) {
-            extent = fabs(all.box.lo[k]) > extent ? fabs(all.box.lo[k]) : extent;
-            extent = fabs(all.box.hi[k]) > extent ? fabs(all.box.hi[k]) : extent;
-        }
-        bvh->extent = extent;
-        plan(&b, &all);
-        subtrees[0].root_task.r = all;
-        subtrees[0].root_task.slot = root_slot;
-        subtrees[0].root_task.level = 0;
-    }
-
-    /* The top levels: make the node of the largest open task until there
-     * are enough for the threads to share. */
-    int open = 1;
-    if (threads > 1) {
-        const uint32_t small = n / (8 * (uint32_t)threads) > 4096 ? n / (8 * (uint32_t)threads) : 4096;
-        while (open + 3 <= MAX_TOP_TASKS) {
-            if (spia__build_poll(progress, 0, 0.1 * (double)open / MAX_TOP_TASKS)) {
-                result = cancelled(status);
-                goto done;
-            }
-            int largest = 0;
-            for (int i = 1; i < open; ++i)
-                if (task_size(&subtrees[i]) > task_size(&subtrees[largest])) largest = i;
-            if (task_size(&subtrees[largest]) <= small || subtrees[largest].root_task.r.leaf) break;
-            const task t = subtrees[largest].root_task;
-            task children[4];
-            int count;
-            if (!make_node(&b, &t, &top, NULL, children, &count)) {
-                result = out_of_memory(status, triangle_count);
-                goto done;
-            }
-            /* The largest's place goes to its last child, or to the last
-             * open task when all its children were leaves. */
-            if (count > 0) {
-                subtrees[largest].root_task = children[count - 1];
-                for (int i = 0; i + 1 < count; ++i) subtrees[open++].root_task = children[i];
-            } else {
-                subtrees[largest] = subtrees[--open];
-                if (open == 0) break;
-            }
-        }
-    }
-
-    /* The subtrees, largest first, each on one thread. */
-    for (int i = 1; i < open; ++i)
-        for (int j = i; j > 0 && task_size(&subtrees[j]) > task_size(&subtrees[j - 1]); --j) {
-            const subtree x = subtrees[j];
-            subtrees[j] = subtrees[j - 1];
-            subtrees[j - 1] = x;
-        }
-    for (int i = 0; i < open; ++i) subtrees[i].root = top.v + subtrees[i].root_task.slot;
-    b.subtree_count = open;
-    {
-        subtree_job job = {&b, subtrees};
-        spia__parallel_for(threads, open, 1, subtree_range, &job);
-    }
-    for (int i = 0; i < open; ++i)
-        if (subtrees[i].failed == 2) {
-            result = cancelled(status);
-            goto done;
-        }
-    uint64_t total = top.n;
-    int32_t level = 0;
-    for (int i = 0; i < open; ++i) {
-        if (subtrees[i].failed) {
-            result = out_of_memory(status, triangle_count);
-            goto done;
-        }
-        total += subtrees[i].nodes.n;
-        level = subtrees[i].level > level ? subtrees[i].level : level;
-    }
+    root_task(&u, piece_box, root_slot);
+    u.open = 1;
+    if (threads > 1 && (result = top_levels(&u)) != SPIA_OK) goto done;
+    if ((result = build_subtrees(&u, &total, &level)) != SPIA_OK) goto done;
     /* The join and the leaf order take a few tenths of a second on scans
      * of millions of triangles, the join up to 0.8 s in a process whose
      * fresh pages come slowly (Blender's, on a scan of 7.3M triangles): a
@@ -934,44 +991,12 @@ spia_result spia__bvh_build_keep(spia__bvh *bvh, const float *positions, int32_t
         result = cancelled(status);
         goto done;
     }
-
-    /* Join: the top nodes, then each subtree's with its indices moved. */
-    bvh->node_memory = malloc(sizeof(spia__bvh_node) * (size_t)total + 64);
-    if (!bvh->node_memory) {
-        result = out_of_memory(status, triangle_count);
-        goto done;
-    }
-    bvh->nodes = (spia__bvh_node *)(((uintptr_t)bvh->node_memory + 63) & ~(uintptr_t)63);
-    memcpy(bvh->nodes, top.v, sizeof(spia__bvh_node) * top.n);
-    {
-        uint32_t base[MAX_TOP_TASKS];
-        base[0] = top.n;
-        for (int i = 1; i < open; ++i) base[i] = base[i - 1] + subtrees[i - 1].nodes.n;
-        join_job job = {&b, subtrees, base, bvh->nodes, top.v, open};
-        spia__parallel_for(threads, open, 1, join_range, &job);
-    }
-    bvh->node_count = (int64_t)total;
-    bvh->depth = level;
+    if ((result = join_nodes(&u, total, level)) != SPIA_OK) goto done;
     if (spia__build_poll(progress, 0, 0.1 + SUBTREE_SHARE + 0.03)) {
         result = cancelled(status);
         goto done;
     }
-
-    /* Leaf order: the triangles sorted as the refs, through the refs'
-     * memory (28 bytes a triangle, more than the 12 needed). */
-    {
-        order_job job = {b.refs, order, triangles, NULL};
-        spia__parallel_for(threads, n, 65536, order_range, &job);
-        if (spia__build_poll(progress, 0, 0.1 + SUBTREE_SHARE + 0.05)) {
-            result = cancelled(status);
-            goto done;
-        }
-        int32_t *copy = (int32_t *)(void *)b.refs;
-        memcpy(copy, triangles, sizeof(int32_t) * 3 * (size_t)n);
-        job.from = copy;
-        job.to = triangles;
-        spia__parallel_for(threads, n, 65536, permute_range, &job);
-    }
+    if ((result = leaf_order(&u, order, triangles)) != SPIA_OK) goto done;
     bvh->order = order;
     order = NULL;
     bvh->positions = positions;
@@ -979,16 +1004,16 @@ spia_result spia__bvh_build_keep(spia__bvh *bvh, const float *positions, int32_t
     bvh->triangle_count = triangle_count;
 
 done:
-    for (int i = 0; i < MAX_TOP_TASKS && subtrees; ++i) free(subtrees[i].nodes.v);
-    free(subtrees);
-    free(top.v);
+    for (int i = 0; i < MAX_TOP_TASKS && u.subtrees; ++i) free(u.subtrees[i].nodes.v);
+    free(u.subtrees);
+    free(u.top.v);
     free(order);
     free(piece_box);
     if (result == SPIA_OK && scratch && scratch_bytes) {
-        *scratch = b.refs;
+        *scratch = b->refs;
         *scratch_bytes = sizeof(prim_ref) * (size_t)n;
     } else {
-        free(b.refs);
+        free(b->refs);
     }
     if (result != SPIA_OK) spia__bvh_free(bvh);
     return result;

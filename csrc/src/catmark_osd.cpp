@@ -1375,211 +1375,256 @@ spia_result ring_rows(const spia_options *opt, const Prepared &p, const Part &pa
 //    do not depend on the thread count.  Each batch holds vertices of one
 //    level (ev.adaptive: the isolation level, or less where the patch
 //    corner is the same from a lower one, step 5).
-spia_result adaptive_rows(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, Prepared &p,
-                          const Evaluation &ev, HeldRows &held, spia_status *status) {
-    const int32_t osd_n = p.osd_n;
-    const bool blender = p.blender;
+struct FeatureBatch {
+    int32_t first, count, level;  // features[first .. first + count - 1], all of one level
+};
+
+// A batch's rows, or the failure that stopped it.
+struct BatchRows {
+    std::vector<int32_t> vertex;  // osd numbering, one per row
+    std::vector<int64_t> start;   // rows' first entries, plus the end
+    std::vector<int32_t> indices; // osd numbering
+    std::vector<double> weights;
+    spia_result code = SPIA_OK;
+    int64_t index = -1;
+    char message[SPIA_MESSAGE_SIZE] = {0};
+
+    void begin_row(int32_t o) {
+        vertex.push_back(o);
+        start.push_back((int64_t)indices.size());
+    }
+    void add(int32_t column, double weight) {
+        indices.push_back(column);
+        weights.push_back(weight);
+    }
+    void end() { start.push_back((int64_t)indices.size()); }
+    void failed(spia_result code_, int64_t index_, const char *text, int value, int value2) {
+        code = code_;
+        index = index_;
+        snprintf(message, sizeof message, text, value, value2);
+    }
+};
+
+// The adaptive vertices by level, spatially ordered within one, and their
+// batches.
+void feature_batches(const spia_mesh *m, const Prepared &p, const Evaluation &ev, std::vector<int32_t> &features,
+                     std::vector<FeatureBatch> &batch_list) {
     const int32_t feature_count = ev.adaptive_count;
-    if (feature_count == 0) return SPIA_OK;
     // (a level's last batch may be short: at most one more sub-mesh per level)
     const int32_t batch_size =
         std::max<int32_t>(kFeatureBatch, (feature_count + kMaxFeatureBatches - 1) / kMaxFeatureBatches);
-    struct Batch {
-        int32_t first, count, level;
-    };
-    std::vector<int32_t> features;  // by level, spatially ordered within one
     features.reserve((size_t)feature_count);
-    for (int32_t o = 0; o < osd_n; ++o)
+    for (int32_t o = 0; o < p.osd_n; ++o)
         if (ev.adaptive[o]) features.push_back(o);
     spatial_order(m, p, features);
     std::stable_sort(features.begin(), features.end(),
                      [&](int32_t a, int32_t b) { return ev.adaptive[a] < ev.adaptive[b]; });
-    std::vector<Batch> batch_list;
     for (int32_t i = 0; i < feature_count;) {
         const int level = ev.adaptive[features[(size_t)i]];
         int32_t end = i;
         while (end < feature_count && end - i < batch_size && ev.adaptive[features[(size_t)end]] == level) ++end;
-        batch_list.push_back(Batch{i, end - i, level});
+        batch_list.push_back(FeatureBatch{i, end - i, level});
         i = end;
     }
-    const int32_t batches = (int32_t)batch_list.size();
-    struct BatchRows {
-        std::vector<int32_t> vertex;  // osd numbering, one per row
-        std::vector<int64_t> start;   // rows' first entries, plus the end
-        std::vector<int32_t> indices; // osd numbering
-        std::vector<double> weights;
-        spia_result code = SPIA_OK;
-        int64_t index = -1;
-        char message[SPIA_MESSAGE_SIZE] = {0};
-    };
-    std::vector<BatchRows> results((size_t)batches);
-    auto run_batch = [&](int32_t b, BatchRows &out) {
-        const int32_t first_feature = batch_list[(size_t)b].first;
-        const int32_t batch_count = batch_list[(size_t)b].count;
-        const int32_t *batch = features.data() + first_feature;
-        auto failed = [&](spia_result code, int64_t index, const char *text, int value, int value2) {
-            out.code = code;
-            out.index = index;
-            snprintf(out.message, sizeof out.message, text, value, value2);
-        };
-        std::vector<int32_t> marked(batch, batch + batch_count);
-        Part sub;
-        spia_status local_status;
-        if (make_part(m, adj, opt, p, two_ring_faces(m, adj, p, marked), false, nullptr, sub, &local_status) != SPIA_OK) {
-            failed(SPIA_ERROR_TOPOLOGY, -1, "OpenSubdiv rejected the topology around sharp features", 0, 0);
-            return;
-        }
-        std::vector<int32_t> sub_face_of((size_t)m->face_count, -1);
-        for (size_t i = 0; i < sub.mesh_face_of.size(); ++i) sub_face_of[(size_t)sub.mesh_face_of[i]] = (int32_t)i;
-        const int32_t sub_n = (int32_t)sub.osd_of_local.size();
-        if (!blender) {
-            // Loop is taken at its exact limit, as refine() takes it:
-            // uniform refinement until semi-sharp creases have decayed,
-            // then OpenSubdiv's limit masks, on sparse stencils.
-            float sharpest = 0.0f;
-            for (float w : sub.crease_weights) sharpest = std::max(sharpest, w < kInfiniteSharpness ? w : 0.0f);
-            for (float w : sub.corner_weights) sharpest = std::max(sharpest, w < kInfiniteSharpness ? w : 0.0f);
-            const int levels = std::max(1, std::min(10, (int)std::ceil(sharpest)));
-            std::vector<char> batch_feature((size_t)osd_n, 0);
-            for (int32_t o : marked) batch_feature[(size_t)o] = 1;
-            auto begin_batch_row = [&](int32_t o) {
-                out.vertex.push_back(o);
-                out.start.push_back((int64_t)out.indices.size());
-            };
-            auto add_batch_weight = [&](int32_t j, double w) {
-                out.indices.push_back(j);
-                out.weights.push_back(w);
-            };
-            auto end_batch_row = [&](int32_t) {};
-            if (!exact_limit_rows(*sub.refiner, levels, sub_n, batch_feature, sub.local_of, sub.osd_of_local, osd_n,
-                                  begin_batch_row, add_batch_weight, end_batch_row))
-                failed(SPIA_ERROR_INTERNAL, -1, "OpenSubdiv's limit masks failed", 0, 0);
-            out.start.push_back((int64_t)out.indices.size());
-            return;
-        }
-        // Refined around the faces the vertices are evaluated on.
-        std::vector<Far::Index> feature_faces;
-        for (int32_t o : marked) {
-            const int32_t v = p.vertex_of[o];
-            feature_faces.push_back(sub_face_of[adj->face_of_corner[adj->corner_of[adj->first[v]]]]);
-        }
-        std::sort(feature_faces.begin(), feature_faces.end());
-        feature_faces.erase(std::unique(feature_faces.begin(), feature_faces.end()), feature_faces.end());
-        Far::TopologyRefiner::AdaptiveOptions adaptive(batch_list[(size_t)b].level);
-        adaptive.useInfSharpPatch = true;
-        adaptive.considerFVarChannels = false;
-        sub.refiner->RefineAdaptive(adaptive, Far::ConstIndexArray(feature_faces.data(), (int)feature_faces.size()));
+}
 
-        // Corners of a quad ptex face.
-        static const double corner_s[4] = {0.0, 1.0, 1.0, 0.0};
-        static const double corner_t[4] = {0.0, 0.0, 1.0, 1.0};
-        Far::PtexIndices ptex(*sub.refiner);
-        LimitFactory::LocationArrayVec locations;
-        locations.reserve((size_t)batch_count);
-        for (int32_t o : marked) {
-            const int32_t v = p.vertex_of[o];
-            const int64_t c = adj->corner_of[adj->first[v]];
-            const int32_t f = adj->face_of_corner[c];
-            const int32_t k = (int32_t)(c - adj->corner_start[f]);
-            LimitFactory::LocationArray loc;
-            loc.numLocations = 1;
-            if (m->face_sizes[f] == 4) {
-                loc.ptexIdx = ptex.GetFaceId(sub_face_of[f]);
-                loc.s = &corner_s[k];
-                loc.t = &corner_t[k];
-            } else {
-                loc.ptexIdx = ptex.GetFaceId(sub_face_of[f]) + k;
-                loc.s = &corner_s[0];
-                loc.t = &corner_t[0];
-            }
-            locations.push_back(loc);
+// Loop is taken at its exact limit, as refine() takes it: uniform
+// refinement until semi-sharp creases have decayed, then OpenSubdiv's limit
+// masks, on sparse stencils.
+void loop_batch_rows(const Part &sub, const std::vector<int32_t> &marked, int32_t osd_n, BatchRows &out) {
+    const int32_t sub_n = (int32_t)sub.osd_of_local.size();
+    float sharpest = 0.0f;
+    for (float w : sub.crease_weights) sharpest = std::max(sharpest, w < kInfiniteSharpness ? w : 0.0f);
+    for (float w : sub.corner_weights) sharpest = std::max(sharpest, w < kInfiniteSharpness ? w : 0.0f);
+    const int levels = std::max(1, std::min(10, (int)std::ceil(sharpest)));
+    std::vector<char> batch_feature((size_t)osd_n, 0);
+    for (int32_t o : marked) batch_feature[(size_t)o] = 1;
+    auto begin_batch_row = [&](int32_t o) { out.begin_row(o); };
+    auto add_batch_weight = [&](int32_t j, double w) { out.add(j, w); };
+    auto end_batch_row = [&](int32_t) {};
+    if (!exact_limit_rows(*sub.refiner, levels, sub_n, batch_feature, sub.local_of, sub.osd_of_local, osd_n,
+                          begin_batch_row, add_batch_weight, end_batch_row))
+        out.failed(SPIA_ERROR_INTERNAL, -1, "OpenSubdiv's limit masks failed", 0, 0);
+    out.end();
+}
+
+// Each marked vertex's limit location: its corner of its first face, in
+// the sub-mesh's ptex faces.
+void corner_locations(const spia_mesh *m, const spia_adjacency *adj, const Prepared &p, const Part &sub,
+                      const std::vector<int32_t> &sub_face_of, const std::vector<int32_t> &marked,
+                      LimitFactory::LocationArrayVec &locations) {
+    // Corners of a quad ptex face.
+    static const double corner_s[4] = {0.0, 1.0, 1.0, 0.0};
+    static const double corner_t[4] = {0.0, 0.0, 1.0, 1.0};
+    Far::PtexIndices ptex(*sub.refiner);
+    locations.reserve(marked.size());
+    for (int32_t o : marked) {
+        const int32_t v = p.vertex_of[o];
+        const int64_t c = adj->corner_of[adj->first[v]];
+        const int32_t f = adj->face_of_corner[c];
+        const int32_t k = (int32_t)(c - adj->corner_start[f]);
+        LimitFactory::LocationArray loc;
+        loc.numLocations = 1;
+        if (m->face_sizes[f] == 4) {
+            loc.ptexIdx = ptex.GetFaceId(sub_face_of[f]);
+            loc.s = &corner_s[k];
+            loc.t = &corner_t[k];
+        } else {
+            loc.ptexIdx = ptex.GetFaceId(sub_face_of[f]) + k;
+            loc.s = &corner_s[0];
+            loc.t = &corner_t[0];
         }
-        // What LimitStencilTableFactory computes, with the same patch
-        // options, but without its stencil for every refined point (whose
-        // merging costs the square of its length, hundreds of weights
-        // around vertices of high valence): each level's points as
-        // stencils over the previous level's (a few weights each), and each
-        // vertex's row carried down from its patch's points.
-        Far::TopologyRefiner &sr = *sub.refiner;
-        const int max_level = sr.GetMaxLevel();
-        std::vector<int64_t> level_start((size_t)max_level + 2, 0);
-        for (int l = 0; l <= max_level; ++l)
-            level_start[(size_t)l + 1] = level_start[(size_t)l] + sr.GetLevel(l).GetNumVertices();
-        std::vector<std::vector<SparseStencil>> steps((size_t)max_level + 1);
-        {
-            Far::PrimvarRefinerReal<double> primvar(sr);
-            std::vector<SparseStencil> identity;
-            for (int l = 1; l <= max_level; ++l) {
-                const int32_t prev = sr.GetLevel(l - 1).GetNumVertices();
-                identity.resize((size_t)prev);
-                for (int32_t i = 0; i < prev; ++i) identity[(size_t)i].w.assign(1, std::make_pair(i, 1.0));
-                steps[(size_t)l].resize((size_t)sr.GetLevel(l).GetNumVertices());
-                SparseStencil *src = identity.data(), *dst = steps[(size_t)l].data();
-                primvar.Interpolate(l, src, dst);
-                for (SparseStencil &st : steps[(size_t)l]) st.Compact();
-            }
+        locations.push_back(loc);
+    }
+}
+
+// What LimitStencilTableFactory computes, with the same patch options, but
+// without its stencil for every refined point (whose merging costs the
+// square of its length, hundreds of weights around vertices of high
+// valence): each level's points as stencils over the previous level's (a
+// few weights each, steps[l]), level l's points numbered from
+// level_start[l]; each vertex's row is carried down from its patch's
+// points (patch_rows).
+void level_steps(Far::TopologyRefiner &sr, std::vector<int64_t> &level_start,
+                 std::vector<std::vector<SparseStencil>> &steps) {
+    const int max_level = sr.GetMaxLevel();
+    level_start.assign((size_t)max_level + 2, 0);
+    for (int l = 0; l <= max_level; ++l)
+        level_start[(size_t)l + 1] = level_start[(size_t)l] + sr.GetLevel(l).GetNumVertices();
+    steps.resize((size_t)max_level + 1);
+    Far::PrimvarRefinerReal<double> primvar(sr);
+    std::vector<SparseStencil> identity;
+    for (int l = 1; l <= max_level; ++l) {
+        const int32_t prev = sr.GetLevel(l - 1).GetNumVertices();
+        identity.resize((size_t)prev);
+        for (int32_t i = 0; i < prev; ++i) identity[(size_t)i].w.assign(1, std::make_pair(i, 1.0));
+        steps[(size_t)l].resize((size_t)sr.GetLevel(l).GetNumVertices());
+        SparseStencil *src = identity.data(), *dst = steps[(size_t)l].data();
+        primvar.Interpolate(l, src, dst);
+        for (SparseStencil &st : steps[(size_t)l]) st.Compact();
+    }
+}
+
+// The marked vertices' rows from the patches at their locations, carried
+// down the levels to the sub-mesh's control vertices (osd numbering).
+// false when a row fails (out's failure says why).
+bool patch_rows(const Prepared &p, const Part &sub, const std::vector<int32_t> &marked,
+                const LimitFactory::LocationArrayVec &locations, const Far::PatchTable &patches,
+                const std::vector<int64_t> &level_start, const std::vector<std::vector<SparseStencil>> &steps,
+                BatchRows &out) {
+    const int32_t sub_n = (int32_t)sub.osd_of_local.size();
+    const int max_level = (int)steps.size() - 1;
+    const Far::StencilTableReal<double> *local = patches.GetLocalPointStencilTable<double>();
+    Far::PatchMap patch_map(patches);
+    const int64_t total = level_start[(size_t)max_level + 1];
+    std::vector<std::pair<int64_t, double>> row, wider;  // global point index, weight
+    double basis[64];
+    for (size_t i = 0; i < marked.size(); ++i) {
+        const int32_t o = marked[i];
+        const LimitFactory::LocationArray &loc = locations[i];
+        const Far::PatchTable::PatchHandle *handle = patch_map.FindPatch(loc.ptexIdx, loc.s[0], loc.t[0]);
+        if (!handle) {
+            out.failed(SPIA_ERROR_INTERNAL, p.vertex_of[o], "OpenSubdiv found no patch at vertex %d", p.vertex_of[o], 0);
+            return false;
         }
-        Far::PatchTableFactory::Options patch_options;
-        patch_options.SetPatchPrecision<double>();
-        patch_options.includeBaseLevelIndices = true;
-        patch_options.SetEndCapType(Far::PatchTableFactory::Options::ENDCAP_GREGORY_BASIS);
-        patch_options.useInfSharpPatch = true;
-        std::unique_ptr<Far::PatchTable> patches(Far::PatchTableFactory::Create(
-            sr, patch_options, Far::ConstIndexArray(feature_faces.data(), (int)feature_faces.size())));
-        if (!patches) {
-            failed(SPIA_ERROR_INTERNAL, -1, "OpenSubdiv built no patches around %d vertices", (int)batch_count, 0);
-            return;
-        }
-        const Far::StencilTableReal<double> *local = patches->GetLocalPointStencilTable<double>();
-        Far::PatchMap patch_map(*patches);
-        const int64_t total = level_start[(size_t)max_level + 1];
-        std::vector<std::pair<int64_t, double>> row, wider;  // global point index, weight
-        double basis[64];
-        for (int32_t i = 0; i < batch_count; ++i) {
-            const int32_t o = marked[(size_t)i];
-            const LimitFactory::LocationArray &loc = locations[(size_t)i];
-            const Far::PatchTable::PatchHandle *handle = patch_map.FindPatch(loc.ptexIdx, loc.s[0], loc.t[0]);
-            if (!handle) {
-                failed(SPIA_ERROR_INTERNAL, p.vertex_of[o], "OpenSubdiv found no patch at vertex %d", p.vertex_of[o], 0);
-                return;
-            }
-            Far::ConstIndexArray cvs = patches->GetPatchVertices(*handle);
-            if (cvs.size() > 64) {
-                failed(SPIA_ERROR_INTERNAL, p.vertex_of[o], "a patch with %d points at vertex %d", cvs.size(),
+        Far::ConstIndexArray cvs = patches.GetPatchVertices(*handle);
+        if (cvs.size() > 64) {
+            out.failed(SPIA_ERROR_INTERNAL, p.vertex_of[o], "a patch with %d points at vertex %d", cvs.size(),
                        p.vertex_of[o]);
-                return;
-            }
-            patches->EvaluateBasis(*handle, loc.s[0], loc.t[0], basis);
-            row.clear();
-            for (int k = 0; k < cvs.size(); ++k) {
-                if (cvs[k] < total) {
-                    row.emplace_back(cvs[k], basis[k]);
-                } else if (local) {
-                    const Far::StencilReal<double> st = local->GetStencil((Far::Index)(cvs[k] - total));
-                    for (int j = 0; j < st.GetSize(); ++j)
-                        row.emplace_back(st.GetVertexIndices()[j], basis[k] * st.GetWeights()[j]);
-                }
-            }
-            // Down the levels: points of level l in terms of level l - 1's.
-            for (int l = max_level; l >= 1; --l)
-                carry_down<int64_t>(row, steps[(size_t)l], level_start[(size_t)l], level_start[(size_t)l + 1],
-                                    level_start[(size_t)l - 1], wider);
-            merge_entries(row, true);  // (already merged, unless no level was refined)
-            out.vertex.push_back(o);
-            out.start.push_back((int64_t)out.indices.size());
-            for (const auto &e : row) {
-                if (e.first < 0 || e.first >= sub_n) {
-                    failed(SPIA_ERROR_INTERNAL, p.vertex_of[o],
-                           "OpenSubdiv stencil refers to point %d, not a control vertex", (int)e.first, 0);
-                    return;
-                }
-                out.indices.push_back(sub.osd_of_local[(size_t)e.first]);
-                out.weights.push_back(e.second);
+            return false;
+        }
+        patches.EvaluateBasis(*handle, loc.s[0], loc.t[0], basis);
+        row.clear();
+        for (int k = 0; k < cvs.size(); ++k) {
+            if (cvs[k] < total) {
+                row.emplace_back(cvs[k], basis[k]);
+            } else if (local) {
+                const Far::StencilReal<double> st = local->GetStencil((Far::Index)(cvs[k] - total));
+                for (int j = 0; j < st.GetSize(); ++j)
+                    row.emplace_back(st.GetVertexIndices()[j], basis[k] * st.GetWeights()[j]);
             }
         }
-        out.start.push_back((int64_t)out.indices.size());
-    };
-    run_batches(opt->threads, batches, [&](int32_t b) { run_batch(b, results[(size_t)b]); }, [&](int32_t b) {
+        // Down the levels: points of level l in terms of level l - 1's.
+        for (int l = max_level; l >= 1; --l)
+            carry_down<int64_t>(row, steps[(size_t)l], level_start[(size_t)l], level_start[(size_t)l + 1],
+                                level_start[(size_t)l - 1], wider);
+        merge_entries(row, true);  // (already merged, unless no level was refined)
+        out.begin_row(o);
+        for (const auto &e : row) {
+            if (e.first < 0 || e.first >= sub_n) {
+                out.failed(SPIA_ERROR_INTERNAL, p.vertex_of[o],
+                           "OpenSubdiv stencil refers to point %d, not a control vertex", (int)e.first, 0);
+                return false;
+            }
+            out.add(sub.osd_of_local[(size_t)e.first], e.second);
+        }
+    }
+    return true;
+}
+
+// One batch: its sub-mesh, refined adaptively around the faces its
+// vertices are evaluated on (Catmull-Clark), and their rows.
+void adaptive_batch(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, Prepared &p,
+                    const std::vector<int32_t> &marked, int level, BatchRows &out) {
+    Part sub;
+    spia_status local_status;
+    if (make_part(m, adj, opt, p, two_ring_faces(m, adj, p, marked), false, nullptr, sub, &local_status) != SPIA_OK) {
+        out.failed(SPIA_ERROR_TOPOLOGY, -1, "OpenSubdiv rejected the topology around sharp features", 0, 0);
+        return;
+    }
+    std::vector<int32_t> sub_face_of((size_t)m->face_count, -1);
+    for (size_t i = 0; i < sub.mesh_face_of.size(); ++i) sub_face_of[(size_t)sub.mesh_face_of[i]] = (int32_t)i;
+    if (!p.blender) {
+        loop_batch_rows(sub, marked, p.osd_n, out);
+        return;
+    }
+    // Refined around the faces the vertices are evaluated on.
+    std::vector<Far::Index> feature_faces;
+    for (int32_t o : marked) {
+        const int32_t v = p.vertex_of[o];
+        feature_faces.push_back(sub_face_of[adj->face_of_corner[adj->corner_of[adj->first[v]]]]);
+    }
+    std::sort(feature_faces.begin(), feature_faces.end());
+    feature_faces.erase(std::unique(feature_faces.begin(), feature_faces.end()), feature_faces.end());
+    Far::TopologyRefiner::AdaptiveOptions adaptive(level);
+    adaptive.useInfSharpPatch = true;
+    adaptive.considerFVarChannels = false;
+    sub.refiner->RefineAdaptive(adaptive, Far::ConstIndexArray(feature_faces.data(), (int)feature_faces.size()));
+
+    LimitFactory::LocationArrayVec locations;
+    corner_locations(m, adj, p, sub, sub_face_of, marked, locations);
+    Far::TopologyRefiner &sr = *sub.refiner;
+    std::vector<int64_t> level_start;
+    std::vector<std::vector<SparseStencil>> steps;
+    level_steps(sr, level_start, steps);
+    Far::PatchTableFactory::Options patch_options;
+    patch_options.SetPatchPrecision<double>();
+    patch_options.includeBaseLevelIndices = true;
+    patch_options.SetEndCapType(Far::PatchTableFactory::Options::ENDCAP_GREGORY_BASIS);
+    patch_options.useInfSharpPatch = true;
+    std::unique_ptr<Far::PatchTable> patches(Far::PatchTableFactory::Create(
+        sr, patch_options, Far::ConstIndexArray(feature_faces.data(), (int)feature_faces.size())));
+    if (!patches) {
+        out.failed(SPIA_ERROR_INTERNAL, -1, "OpenSubdiv built no patches around %d vertices", (int)marked.size(), 0);
+        return;
+    }
+    if (patch_rows(p, sub, marked, locations, *patches, level_start, steps, out)) out.end();
+}
+
+spia_result adaptive_rows(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, Prepared &p,
+                          const Evaluation &ev, HeldRows &held, spia_status *status) {
+    if (ev.adaptive_count == 0) return SPIA_OK;
+    std::vector<int32_t> features;
+    std::vector<FeatureBatch> batch_list;
+    feature_batches(m, p, ev, features, batch_list);
+    const int32_t batches = (int32_t)batch_list.size();
+    std::vector<BatchRows> results((size_t)batches);
+    run_batches(opt->threads, batches, [&](int32_t b) {
+        const FeatureBatch &batch = batch_list[(size_t)b];
+        const int32_t *first = features.data() + batch.first;
+        const std::vector<int32_t> marked(first, first + batch.count);
+        adaptive_batch(m, adj, opt, p, marked, batch.level, results[(size_t)b]);
+    }, [&](int32_t b) {
         results[(size_t)b].code = SPIA_ERROR_INTERNAL;
         snprintf(results[(size_t)b].message, SPIA_MESSAGE_SIZE, "unexpected failure around sharp features");
     });

@@ -84,16 +84,6 @@ static spia_result resolve_fit(const spia_fit_options *in, spia_fit_options *out
     return SPIA_OK;
 }
 
-/* Ptex faces of a face: 1 for a quad, else one per corner. */
-static inline int32_t ptex_of_face(int32_t size) { return size == 4 ? 1 : size; }
-
-int64_t spia_surface_sample_count(const spia_mesh *mesh, int32_t samples_per_edge) {
-    if (!mesh || !mesh->face_sizes || mesh->face_count <= 0 || samples_per_edge < 1 || samples_per_edge > 64) return 0;
-    int64_t ptex = 0;
-    for (int32_t f = 0; f < mesh->face_count; ++f) ptex += ptex_of_face(mesh->face_sizes[f]);
-    return ptex * samples_per_edge * samples_per_edge;
-}
-
 spia_result spia_surface_stencils_create(const spia_mesh *mesh, const spia_options *options,
                                          int32_t samples_per_edge, spia_stencils **out, spia_status *status) {
     if (!out) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "out must not be NULL");
@@ -1391,7 +1381,7 @@ static spia_result build_sample_faces(const spia_mesh *mesh, int32_t per_edge, i
     int64_t s = 0;
     const int64_t per_ptex = (int64_t)per_edge * per_edge;
     for (int32_t f = 0; f < mesh->face_count; ++f)
-        for (int64_t k = 0; k < ptex_of_face(mesh->face_sizes[f]) * per_ptex && s < S; ++k) b->sample_face[s++] = f;
+        for (int64_t k = 0; k < spia__ptex_of_face(mesh->face_sizes[f]) * per_ptex && s < S; ++k) b->sample_face[s++] = f;
     return s == S ? SPIA_OK : SPIA_ERROR_INTERNAL;
 }
 
@@ -1418,6 +1408,447 @@ static int evaluate(const spia_scan *scan, fit_buffers *b, const double *V, int6
     return cancelled;
 }
 
+/* What the stages of a fit share: the arguments resolved, the buffers and
+ * the progress clock. */
+typedef struct fit_run {
+    const spia_mesh *cage;
+    const spia_scan *scan;
+    spia_options opt;
+    spia_options surface_opt; /* opt for Catmull-Clark: the samples' and the grid's */
+    spia_fit_options fo;
+    spia_fit_report *report;
+    spia_status *status;
+    fit_buffers b;
+    spia_adjacency adj;
+    fit_clock clock;
+    int32_t n;
+    int64_t N3, S;
+    double diagonal, cutoff_abs;
+    int sign;          /* see orientation */
+    int measured_best; /* the samples' last measure is of the best cage */
+    /* The samples serve the report in both modes; for Loop and Doo-Sabin
+     * (VERTICES only) there are none, and the limit points are measured. */
+    int surface_samples;
+} fit_run;
+
+static spia_result fit_oom(fit_run *u) {
+    return spia__fail(u->status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory fitting the cage");
+}
+
+static spia_result fit_cancelled(fit_run *u) {
+    return spia__fail(u->status, SPIA_ERROR_CANCELLED, -1, "cancelled during fitting round %d", u->clock.round + 1);
+}
+
+/* Every field of the report but the caller's buffers starts afresh. */
+static void report_start(spia_fit_report *report) {
+    spia_fit_report fresh;
+    memset(&fresh, 0, sizeof fresh);
+    fresh.vertex_distances = report->vertex_distances;
+    fresh.history = report->history;
+    fresh.history_capacity = report->history_capacity;
+    fresh.scan_distances = report->scan_distances;
+    *report = fresh;
+}
+
+/* The arguments checked and the options resolved into u (report->result
+ * set where the check follows the options). */
+static spia_result fit_arguments(const spia_mesh *cage, const spia_scan *scan, const spia_options *options,
+                                 const spia_fit_options *fit_options, const float *cage_out, fit_run *u) {
+    spia_status *status = u->status;
+    spia_fit_report *report = u->report;
+    if (!scan) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "the scan must not be NULL");
+    if (!cage_out) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "cage_out must not be NULL");
+    spia_result r = spia__resolve_options(options, &u->opt, status);
+    if (r != SPIA_OK) return r;
+    u->opt.initial_cage = NULL; /* each round's solve starts from its own targets */
+    if ((r = resolve_fit(fit_options, &u->fo, status)) != SPIA_OK) return report->result = r;
+    report->mode = u->fo.mode;
+    if (u->fo.mode == SPIA_FIT_SURFACE && u->opt.scheme != SPIA_SCHEME_CATMULL_CLARK)
+        return report->result = spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1,
+                                           "fitting the surface is available for Catmull-Clark only; "
+                                           "use the VERTICES fit for Loop and Doo-Sabin");
+    if ((r = spia_mesh_validate(cage, status)) != SPIA_OK) return report->result = r;
+    if (u->opt.scheme == SPIA_SCHEME_LOOP && (r = spia__require_triangles(cage, status)) != SPIA_OK)
+        return report->result = r;
+    return SPIA_OK;
+}
+
+/* Sampling: the sample stencils (Catmull-Clark), and the cage given as the
+ * first iterate and the best so far. */
+static spia_result sample_surface(fit_run *u) {
+    fit_buffers *b = &u->b;
+    const double t0 = spia__now();
+    if (u->surface_samples) {
+        const spia_result r = blocks_build(u->cage, &u->adj, &u->surface_opt, u->fo.samples_per_edge, 0, &b->blocks,
+                                           &u->clock, u->status);
+        if (r != SPIA_OK) return r;
+        u->S = b->blocks.groups * b->blocks.per;
+    }
+    u->report->sample_count = u->S;
+    u->report->stencil_seconds += spia__now() - t0;
+
+    const int64_t N3 = u->N3;
+    b->V0 = malloc(sizeof(double) * (size_t)N3);
+    b->V = malloc(sizeof(double) * (size_t)N3);
+    b->best = malloc(sizeof(double) * (size_t)N3);
+    if (!b->V0 || !b->V || !b->best) return fit_oom(u);
+    for (int64_t i = 0; i < N3; ++i) b->V0[i] = b->V[i] = b->best[i] = u->cage->positions[i];
+    return SPIA_OK;
+}
+
+/* The scan's vertices measured against the cage given's surface (see
+ * scan_side_prepare). */
+static spia_result measure_scan_given(fit_run *u) {
+    fit_buffers *b = &u->b;
+    const double t0 = spia__now();
+    spia_result r = scan_side_prepare(u->cage, &u->adj, &u->surface_opt, u->fo.samples_per_edge, u->scan, b,
+                                      &u->clock, u->status);
+    if (r != SPIA_OK) return r == SPIA_ERROR_OUT_OF_MEMORY ? fit_oom(u) : r;
+    if ((r = scan_side_measure(b, b->V0, u->cutoff_abs, u->diagonal, u->opt.threads, 0, &u->clock,
+                               &u->report->scan_before, u->status)) != SPIA_OK)
+        return r;
+    u->report->scan_point_count = b->scan_count;
+    u->report->query_seconds += spia__now() - t0;
+    return SPIA_OK;
+}
+
+/* Closest points of the cage given's samples: its distances, folds and
+ * orientation, and the scan side's first measure. */
+static spia_result measure_given(fit_run *u) {
+    fit_buffers *b = &u->b;
+    spia_fit_report *report = u->report;
+    const int64_t S = u->S;
+    b->X = malloc(sizeof(double) * 3 * (size_t)S);
+    b->T = malloc(sizeof(float) * 3 * (size_t)S);
+    b->N = malloc(sizeof(float) * 3 * (size_t)S);
+    b->d = malloc(sizeof(float) * (size_t)S);
+    b->scratch = malloc(sizeof(float) * (size_t)S);
+    b->on_boundary = malloc((size_t)S);
+    b->near = malloc(sizeof(int32_t) * (size_t)S);
+    if (!b->X || !b->T || !b->N || !b->d || !b->scratch || !b->on_boundary || !b->near) return fit_oom(u);
+    spia_result r = build_sample_faces(u->cage, u->fo.samples_per_edge, S, b);
+    if (r != SPIA_OK) {
+        if (r == SPIA_ERROR_OUT_OF_MEMORY) return fit_oom(u);
+        return spia__fail(u->status, SPIA_ERROR_INTERNAL, -1, "the samples do not match the cage's faces");
+    }
+    if (evaluate(u->scan, b, b->V, S, u->opt.threads, &report->query_seconds, &u->clock)) return fit_cancelled(u);
+    report->before = distance_stats(b->d, S, u->cutoff_abs, u->diagonal, b->scratch);
+    u->measured_best = 1;
+    u->clock.mean = report->before.mean;
+    if (report->before.ignored >= S) return nothing_to_fit(u->status, "sample of the cage's limit surface", u->fo.cutoff);
+    b->dots = malloc(sizeof(float) * (size_t)S);
+    b->folded = malloc((size_t)S);
+    if (!b->dots || !b->folded) return fit_oom(u);
+    normal_agreement(b->X, b->N, S, u->fo.samples_per_edge, b->dots);
+    u->sign = orientation(b->dots, b->d, b->on_boundary, S, u->cutoff_abs);
+    report->folded_before = find_folds(b->dots, b->d, b->on_boundary, S, u->cutoff_abs, u->sign, b->folded);
+    if (u->fo.samples_per_edge < 2) report->folded_before = -1;
+    if (!(u->fo.flags & SPIA_FIT_NO_SCAN_DISTANCES)) return measure_scan_given(u);
+    return SPIA_OK;
+}
+
+/* VERTICES: the targets, each limit point's closest scan point (within the
+ * cut-off, not on the scan's boundary; else the limit point itself). */
+static spia_result vertex_targets(fit_run *u) {
+    fit_buffers *b = &u->b;
+    const int32_t n = u->n;
+    const int64_t N3 = u->N3;
+    double *Y = malloc(sizeof(double) * (size_t)N3);
+    b->targets = malloc(sizeof(float) * (size_t)N3);
+    b->solved = malloc(sizeof(float) * (size_t)N3);
+    float *closest = malloc(sizeof(float) * (size_t)N3), *dist = malloc(sizeof(float) * (size_t)(n + 1));
+    uint8_t *edge = malloc((size_t)n + 1);
+    if (!Y || !b->targets || !b->solved || !closest || !dist || !edge) {
+        free(Y), free(closest), free(dist), free(edge);
+        return fit_oom(u);
+    }
+    const double t0 = spia__now();
+    spia_stencils_apply(b->L, b->V0, Y);
+    spia__scan_closest_points_double(u->scan, n, Y, NULL, closest, NULL, dist, NULL, edge, u->opt.threads);
+    u->report->query_seconds += spia__now() - t0;
+    int32_t pulled = 0;
+    for (int32_t v = 0; v < n; ++v) {
+        const int keep = u->adj.first[v + 1] == u->adj.first[v] || dist[v] > u->cutoff_abs || edge[v];
+        pulled += !keep;
+        for (int c = 0; c < 3; ++c) {
+            const int64_t i = 3 * (int64_t)v + c;
+            b->targets[i] = keep ? (float)Y[i] : closest[i];
+        }
+    }
+    if (!pulled) {
+        free(Y), free(closest), free(dist), free(edge);
+        return nothing_to_fit(u->status, "limit point of the cage", u->fo.cutoff);
+    }
+    if (!u->surface_samples) { /* Loop, Doo-Sabin: the limit points are what is measured */
+        float *scratch = malloc(sizeof(float) * (size_t)(n + 1));
+        if (!scratch) {
+            free(Y), free(closest), free(dist), free(edge);
+            return fit_oom(u);
+        }
+        u->report->before = distance_stats(dist, n, u->cutoff_abs, u->diagonal, scratch);
+        free(scratch);
+    }
+    free(Y), free(closest), free(dist), free(edge);
+    return SPIA_OK;
+}
+
+/* VERTICES: the cage interpolating the targets; returns the solve's result
+ * (SPIA_MAX_ITERATIONS and SPIA_STAGNATED go on to the report). */
+static spia_result fit_vertices(fit_run *u) {
+    fit_buffers *b = &u->b;
+    spia_fit_report *report = u->report;
+    double t0 = spia__now();
+    spia_result r = spia_limit_stencils_create(u->cage, &u->opt, &b->L, u->status);
+    report->stencil_seconds += spia__now() - t0;
+    if (r != SPIA_OK) return r;
+    if ((r = vertex_targets(u)) != SPIA_OK) return r;
+    spia_report rep;
+    memset(&rep, 0, sizeof rep);
+    t0 = spia__now();
+    spia_options solve_opt = u->opt;
+    if (u->opt.progress) solve_opt.progress = clock_forward, solve_opt.progress_user_data = &u->clock;
+    r = spia_solve(b->L, b->targets, &solve_opt, b->solved, &rep, u->status);
+    report->solve_seconds += spia__now() - t0;
+    report->iterations = rep.iterations;
+    report->max_error_relative = rep.max_error_relative;
+    if (r < 0) return r;
+    /* Vertices no face uses stay where they are (the solve keeps their
+     * limit points, which loose edges tie to moving vertices). */
+    for (int32_t v = 0; v < u->n; ++v)
+        for (int c = 0; c < 3; ++c) {
+            const int64_t i = 3 * (int64_t)v + c;
+            b->best[i] = u->adj.first[v + 1] > u->adj.first[v] ? (double)b->solved[i] : b->V0[i];
+        }
+    u->measured_best = 0;
+    report->rounds = 1;
+    return r;
+}
+
+/* SURFACE: the buffers of the rounds and the system f they solve. */
+static spia_result surface_system(fit_run *u, int guard, fit_system *f) {
+    fit_buffers *b = &u->b;
+    const int32_t n = u->n;
+    const int64_t N3 = u->N3, S = u->S;
+    b->work = malloc(sizeof(double) * 5 * (size_t)N3);
+    b->precond = malloc(sizeof(double) * 9 * (size_t)n);
+    b->tmp_n = malloc(sizeof(double) * (size_t)N3);
+    b->tmp_diag = malloc(sizeof(double) * 6 * (size_t)(n > 0 ? n : 1));
+    b->wts = malloc(sizeof(float) * (size_t)S);
+    b->hold = malloc(sizeof(double) * (size_t)(n > 0 ? n : 1));
+    b->smooth = malloc(sizeof(double) * (size_t)(n > 0 ? n : 1));
+    b->mark = malloc((size_t)n + 1);
+    if (!b->work || !b->precond || !b->tmp_n || !b->tmp_diag || !b->wts || !b->hold || !b->smooth || !b->mark)
+        return fit_oom(u);
+    for (int32_t v = 0; v < n; ++v) b->hold[v] = b->smooth[v] = 1.0;
+    if (build_neighbours(u->cage, &u->adj, b) != SPIA_OK) return fit_oom(u);
+    int64_t counted = S - u->report->before.ignored;
+    int32_t free_count = 0;
+    for (int32_t v = 0; v < n; ++v) free_count += b->free_vertex[v];
+    f->blocks = &b->blocks, f->n = n, f->S = S, f->normals = b->N, f->dist = b->d, f->weight = b->wts;
+    f->on_boundary = b->on_boundary, f->cutoff_abs = u->cutoff_abs;
+    f->alpha = u->fo.point_weight;
+    f->beta = u->fo.slide_weight;
+    f->X = b->X;
+    f->bar = NULL, f->bar_start = NULL, f->bar_weight = FOLD_BARRIER_WEIGHT;
+    if (guard) {
+        b->bar_start = malloc(sizeof(int64_t) * ((size_t)b->blocks.groups + 1));
+        if (!b->bar_start) return fit_oom(u);
+    }
+    f->lambda = u->fo.smoothing * (double)(counted > 0 ? counted : S) / (double)(free_count > 0 ? free_count : 1);
+    /* A whisper of damping towards the current iterate keeps vertices no
+     * sample reaches (and global drift) determined. */
+    f->damping = 1e-6 * (1.0 + f->lambda) * (double)S / (double)(free_count > 0 ? free_count : 1);
+    f->nb_start = b->nb_start, f->nb = b->nb, f->free_vertex = b->free_vertex;
+    f->hold = b->hold, f->smooth = b->smooth;
+    f->tmp_n = b->tmp_n, f->tmp_diag = b->tmp_diag;
+    return SPIA_OK;
+}
+
+/* A round's weights: the cut-off's and the robust kernel's, and with the
+ * fold guard the folded samples let go, their faces stiffened and the
+ * barrier's pairs. */
+static spia_result round_weights(fit_run *u, int guard, fit_system *f) {
+    fit_buffers *b = &u->b;
+    const int64_t S = u->S;
+    cutoff_weights(b->d, b->on_boundary, S, u->cutoff_abs, b->wts);
+    const double kernel_scale = u->fo.robust_scale * median_pulling(b->d, b->wts, S, b->scratch);
+    if (!(u->fo.flags & SPIA_FIT_HARD_CUTOFF)) robust_weights(b->d, S, kernel_scale, b->wts);
+    if (guard) {
+        for (int64_t q = 0; q < S; ++q)
+            if (b->folded[q]) b->wts[q] = 0.0f;
+        stiffen(u->cage, &u->adj, b->folded, b->d, kernel_scale, b->sample_face, S, b->mark, b->hold, b->smooth);
+        const double reach = FOLD_BARRIER_REACH * kernel_scale < u->cutoff_abs ? FOLD_BARRIER_REACH * kernel_scale
+                                                                               : u->cutoff_abs;
+        if (barrier_pairs(b->X, b->N, b->d, b->on_boundary, S, u->fo.samples_per_edge, u->sign, reach, &b->bar,
+                          &b->bar_capacity, b->bar_start))
+            return fit_oom(u);
+        f->bar = b->bar, f->bar_start = b->bar_start;
+    }
+    return SPIA_OK;
+}
+
+static double relative(const fit_run *u, double distance) {
+    return distance / (u->diagonal > 0.0 ? u->diagonal : 1.0);
+}
+
+/* A round's new closest points, folds and mean distance, into the report,
+ * the history and the progress callback. */
+static spia_result round_measure(fit_run *u, int32_t round) {
+    fit_buffers *b = &u->b;
+    spia_fit_report *report = u->report;
+    const int64_t S = u->S;
+    if (evaluate(u->scan, b, b->V, S, u->opt.threads, &report->query_seconds, &u->clock)) return fit_cancelled(u);
+    normal_agreement(b->X, b->N, S, u->fo.samples_per_edge, b->dots);
+    find_folds(b->dots, b->d, b->on_boundary, S, u->cutoff_abs, u->sign, b->folded);
+    const double mean = mean_within(b->d, S, u->cutoff_abs);
+    report->rounds = round;
+    if (report->history && round < report->history_capacity) {
+        report->history[round] = relative(u, mean);
+        report->history_count = round + 1;
+    }
+    u->clock.mean = relative(u, mean);
+    u->clock.round = round;
+    u->clock.last = spia__now();
+    if (u->opt.progress && u->opt.progress(u->opt.progress_user_data, round, u->clock.mean))
+        return spia__fail(u->status, SPIA_ERROR_CANCELLED, -1, "cancelled after fitting round %d", round);
+    return SPIA_OK;
+}
+
+/* SURFACE: the rounds (weights, one least-squares solve, new closest
+ * points), keeping the best cage; SPIA_MAX_ITERATIONS when they had not
+ * settled by max_rounds. */
+static spia_result fit_surface(fit_run *u) {
+    fit_buffers *b = &u->b;
+    spia_fit_report *report = u->report;
+    const int64_t S = u->S;
+    const int guard = !(u->fo.flags & SPIA_FIT_ALLOW_FOLDS) && u->fo.samples_per_edge >= 2;
+    fit_system f;
+    spia_result r = surface_system(u, guard, &f);
+    if (r != SPIA_OK) return r;
+    double best_score = mean_clamped(b->d, guard ? b->folded : NULL, S, u->cutoff_abs);
+    if (report->history && report->history_capacity > 0) {
+        report->history[0] = relative(u, mean_within(b->d, S, u->cutoff_abs));
+        report->history_count = 1;
+    }
+    int stale = 0, settled = 0;
+    for (int round = 1; round <= u->fo.max_rounds; ++round) {
+        const double t0 = spia__now();
+        if ((r = round_weights(u, guard, &f)) != SPIA_OK) return r;
+        report->iterations +=
+            least_squares_round(&f, b->T, b->V0, b->V, u->fo.solver_iterations, b->work, b->precond, &u->clock);
+        if (u->clock.cancelled) return fit_cancelled(u);
+        report->solve_seconds += spia__now() - t0;
+        if ((r = round_measure(u, round)) != SPIA_OK) return r;
+        /* The distances do not fall monotonically (new closest points,
+         * new planes): keep the best cage, and stop after two rounds in
+         * a row that improved it by less than round_tolerance. */
+        const double score = mean_clamped(b->d, guard ? b->folded : NULL, S, u->cutoff_abs);
+        const double gain = best_score > 0.0 ? (best_score - score) / best_score : 0.0;
+        u->measured_best = score < best_score;
+        if (u->measured_best) {
+            best_score = score;
+            memcpy(b->best, b->V, sizeof(double) * (size_t)u->N3);
+        }
+        stale = gain < u->fo.round_tolerance ? stale + 1 : 0;
+        if (stale >= 2) {
+            settled = 1;
+            break;
+        }
+    }
+    if (!settled && u->fo.max_rounds > 0) {
+        r = SPIA_MAX_ITERATIONS;
+        spia__fail(u->status, SPIA_MAX_ITERATIONS, -1,
+                   "stopped after max_rounds (%d) rounds with the distances still falling by more than "
+                   "round_tolerance; the best cage so far is written",
+                   u->fo.max_rounds);
+    }
+    return r;
+}
+
+/* The scan's vertices measured against the written cage's surface, into
+ * the report and its per-vertex buffer. */
+static spia_result measure_scan_written(fit_run *u) {
+    fit_buffers *b = &u->b;
+    spia_fit_report *report = u->report;
+    const double t0 = spia__now();
+    const spia_result r = scan_side_measure(b, b->best, u->cutoff_abs, u->diagonal, u->opt.threads, 1, &u->clock,
+                                            &report->scan_after, u->status);
+    if (r != SPIA_OK) return r;
+    report->query_seconds += spia__now() - t0;
+    if (report->scan_distances) {
+        int32_t scan_n = 0;
+        spia__scan_positions(u->scan, &scan_n, NULL);
+        const double unit = u->diagonal > 0.0 ? u->diagonal : 1.0;
+        for (int32_t v = 0; v < scan_n; ++v) report->scan_distances[v] = -1.0f;
+        for (int64_t k = 0; k < b->scan_count; ++k)
+            report->scan_distances[b->scan_vertex[k]] = (float)(b->scan_d[k] / unit);
+    }
+    return SPIA_OK;
+}
+
+/* Per cage vertex, the largest relative distance of the samples within the
+ * cut-off on the faces around it. */
+static void sample_vertex_distances(fit_run *u) {
+    const fit_buffers *b = &u->b;
+    float *vd = u->report->vertex_distances;
+    memset(vd, 0, sizeof(float) * (size_t)u->n);
+    const double unit = u->diagonal > 0.0 ? u->diagonal : 1.0;
+    for (int64_t s = 0; s < u->S; ++s) {
+        if (b->d[s] > u->cutoff_abs) continue;
+        const int32_t face = b->sample_face[s];
+        const float rel = (float)(b->d[s] / unit);
+        for (int64_t c = u->adj.corner_start[face]; c < u->adj.corner_start[face + 1]; ++c) {
+            const int32_t v = u->cage->face_vertices[c];
+            if (rel > vd[v]) vd[v] = rel;
+        }
+    }
+}
+
+/* Distances of the cage written: measured already when it is the last
+ * cage measured (the samples, their closest points, their normals'
+ * agreement are those of the best cage).  Returns r, or what the scan
+ * side's measure returns when there is one. */
+static spia_result measure_samples_written(fit_run *u, spia_result r) {
+    fit_buffers *b = &u->b;
+    spia_fit_report *report = u->report;
+    const int64_t S = u->S;
+    if (!u->measured_best) {
+        if (evaluate(u->scan, b, b->best, S, u->opt.threads, &report->query_seconds, &u->clock))
+            return fit_cancelled(u);
+        normal_agreement(b->X, b->N, S, u->fo.samples_per_edge, b->dots);
+    }
+    report->after = distance_stats(b->d, S, u->cutoff_abs, u->diagonal, b->scratch);
+    report->folded_after = u->fo.samples_per_edge < 2
+                               ? -1
+                               : find_folds(b->dots, b->d, b->on_boundary, S, u->cutoff_abs, u->sign, b->folded);
+    if (b->grid.groups && (r = measure_scan_written(u)) != SPIA_OK) return r;
+    if (report->vertex_distances) sample_vertex_distances(u);
+    return r;
+}
+
+/* Loop and Doo-Sabin: the limit points of the cage written. */
+static spia_result measure_limit_points_written(fit_run *u) {
+    spia_fit_report *report = u->report;
+    const int32_t n = u->n;
+    double *Y = malloc(sizeof(double) * (size_t)u->N3);
+    float *dist = malloc(sizeof(float) * (size_t)(n + 1)), *scratch = malloc(sizeof(float) * (size_t)(n + 1));
+    if (!Y || !dist || !scratch) {
+        free(Y), free(dist), free(scratch);
+        return fit_oom(u);
+    }
+    const double t0 = spia__now();
+    spia_stencils_apply(u->b.L, u->b.best, Y);
+    spia__scan_closest_points_double(u->scan, n, Y, NULL, NULL, NULL, dist, NULL, NULL, u->opt.threads);
+    report->query_seconds += spia__now() - t0;
+    report->after = distance_stats(dist, n, u->cutoff_abs, u->diagonal, scratch);
+    report->sample_count = n;
+    if (report->vertex_distances)
+        for (int32_t v = 0; v < n; ++v)
+            report->vertex_distances[v] = dist[v] <= u->cutoff_abs ? (float)relative(u, dist[v]) : 0.0f;
+    free(Y), free(dist), free(scratch);
+    return SPIA_OK;
+}
+
 spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_options *options,
                      const spia_fit_options *fit_options, float *cage_out, spia_fit_report *report,
                      spia_status *status) {
@@ -1426,347 +1857,47 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
         memset(&local, 0, sizeof local);
         report = &local;
     }
-    {   /* every field but the caller's buffers starts afresh */
-        spia_fit_report fresh;
-        memset(&fresh, 0, sizeof fresh);
-        fresh.vertex_distances = report->vertex_distances;
-        fresh.history = report->history;
-        fresh.history_capacity = report->history_capacity;
-        fresh.scan_distances = report->scan_distances;
-        *report = fresh;
-    }
+    report_start(report);
     report->result = SPIA_ERROR_INVALID_ARGUMENT;
-    if (!scan) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "the scan must not be NULL");
-    if (!cage_out) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "cage_out must not be NULL");
-    spia_options opt;
-    spia_fit_options fo = {0};
-    spia_result r = spia__resolve_options(options, &opt, status);
+    fit_run u;
+    memset(&u, 0, sizeof u);
+    u.report = report;
+    u.status = status;
+    spia_result r = fit_arguments(cage, scan, options, fit_options, cage_out, &u);
     if (r != SPIA_OK) return r;
-    opt.initial_cage = NULL; /* each round's solve starts from its own targets */
-    if ((r = resolve_fit(fit_options, &fo, status)) != SPIA_OK) return report->result = r;
-    report->mode = fo.mode;
-    if (fo.mode == SPIA_FIT_SURFACE && opt.scheme != SPIA_SCHEME_CATMULL_CLARK)
-        return report->result = spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1,
-                                           "fitting the surface is available for Catmull-Clark only; "
-                                           "use the VERTICES fit for Loop and Doo-Sabin");
-    if ((r = spia_mesh_validate(cage, status)) != SPIA_OK) return report->result = r;
-    if (opt.scheme == SPIA_SCHEME_LOOP && (r = spia__require_triangles(cage, status)) != SPIA_OK)
-        return report->result = r;
-
-    const int32_t n = cage->vertex_count;
-    const double diagonal = spia_scan_diagonal(scan);
-    const double cutoff_abs = fo.cutoff * diagonal;
-    report->diagonal = diagonal;
+    u.cage = cage;
+    u.scan = scan;
+    u.n = cage->vertex_count;
+    u.N3 = 3 * (int64_t)u.n;
+    u.diagonal = spia_scan_diagonal(scan);
+    u.cutoff_abs = u.fo.cutoff * u.diagonal;
+    report->diagonal = u.diagonal;
     report->stencil_seconds = report->query_seconds = report->solve_seconds = 0.0;
-    fit_buffers b;
-    memset(&b, 0, sizeof b);
-    spia_adjacency adj;
-    if ((r = spia__adjacency_build(cage, &adj, status)) != SPIA_OK) return report->result = r;
+    if ((r = spia__adjacency_build(cage, &u.adj, status)) != SPIA_OK) return report->result = r;
+    u.sign = 1;
+    u.clock = (fit_clock){u.opt.progress, u.opt.progress_user_data, spia__now(), 0.0, 0, 0};
+    u.surface_opt = u.opt;
+    u.surface_opt.scheme = SPIA_SCHEME_CATMULL_CLARK;
+    u.surface_samples = u.opt.scheme == SPIA_SCHEME_CATMULL_CLARK;
 
-    double t0 = spia__now();
-    int sign = 1;
-    int measured_best = 0; /* the samples' last measure is of the best cage */
-    fit_clock clock = {opt.progress, opt.progress_user_data, spia__now(), 0.0, 0, 0};
-    spia_options surface_opt = opt;
-    surface_opt.scheme = SPIA_SCHEME_CATMULL_CLARK;
-    int64_t S = 0;
-    /* The samples serve the report in both modes; for Loop and Doo-Sabin
-     * (VERTICES only) there are none, and the limit points are measured. */
-    const int surface_samples = opt.scheme == SPIA_SCHEME_CATMULL_CLARK;
-    if (surface_samples) {
-        r = blocks_build(cage, &adj, &surface_opt, fo.samples_per_edge, 0, &b.blocks, &clock, status);
-        if (r != SPIA_OK) goto done;
-        S = b.blocks.groups * b.blocks.per;
+    /* A negative result stops the fit; SPIA_MAX_ITERATIONS and
+     * SPIA_STAGNATED go on to the cage written. */
+    if ((r = sample_surface(&u)) < 0) goto done;
+    if (u.S > 0 && (r = measure_given(&u)) < 0) goto done;
+    r = u.fo.mode == SPIA_FIT_VERTICES ? fit_vertices(&u) : fit_surface(&u);
+    if (r < 0) goto done;
+    if (u.S > 0)
+        r = measure_samples_written(&u, r);
+    else if (u.b.L) {
+        const spia_result m = measure_limit_points_written(&u);
+        if (m != SPIA_OK) r = m;
     }
-    report->sample_count = S;
-    report->stencil_seconds += spia__now() - t0;
-
-    const int64_t N3 = 3 * (int64_t)n;
-    b.V0 = malloc(sizeof(double) * (size_t)N3);
-    b.V = malloc(sizeof(double) * (size_t)N3);
-    b.best = malloc(sizeof(double) * (size_t)N3);
-    if (!b.V0 || !b.V || !b.best) goto oom;
-    for (int64_t i = 0; i < N3; ++i) b.V0[i] = b.V[i] = b.best[i] = cage->positions[i];
-    if (S > 0) {
-        b.X = malloc(sizeof(double) * 3 * (size_t)S);
-        b.T = malloc(sizeof(float) * 3 * (size_t)S);
-        b.N = malloc(sizeof(float) * 3 * (size_t)S);
-        b.d = malloc(sizeof(float) * (size_t)S);
-        b.scratch = malloc(sizeof(float) * (size_t)S);
-        b.on_boundary = malloc((size_t)S);
-        b.near = malloc(sizeof(int32_t) * (size_t)S);
-        if (!b.X || !b.T || !b.N || !b.d || !b.scratch || !b.on_boundary || !b.near)
-            goto oom;
-        if ((r = build_sample_faces(cage, fo.samples_per_edge, S, &b)) != SPIA_OK) {
-            if (r == SPIA_ERROR_OUT_OF_MEMORY) goto oom;
-            r = spia__fail(status, SPIA_ERROR_INTERNAL, -1, "the samples do not match the cage's faces");
-            goto done;
-        }
-        if (evaluate(scan, &b, b.V, S, opt.threads, &report->query_seconds, &clock)) goto cancelled;
-        report->before = distance_stats(b.d, S, cutoff_abs, diagonal, b.scratch);
-        measured_best = 1;
-        clock.mean = report->before.mean;
-        if (report->before.ignored >= S) {
-            r = nothing_to_fit(status, "sample of the cage's limit surface", fo.cutoff);
-            goto done;
-        }
-        b.dots = malloc(sizeof(float) * (size_t)S);
-        b.folded = malloc((size_t)S);
-        if (!b.dots || !b.folded) goto oom;
-        normal_agreement(b.X, b.N, S, fo.samples_per_edge, b.dots);
-        sign = orientation(b.dots, b.d, b.on_boundary, S, cutoff_abs);
-        report->folded_before = find_folds(b.dots, b.d, b.on_boundary, S, cutoff_abs, sign, b.folded);
-        if (fo.samples_per_edge < 2) report->folded_before = -1;
-        if (!(fo.flags & SPIA_FIT_NO_SCAN_DISTANCES)) {
-            t0 = spia__now();
-            r = scan_side_prepare(cage, &adj, &surface_opt, fo.samples_per_edge, scan, &b, &clock, status);
-            if (r != SPIA_OK) {
-                if (r == SPIA_ERROR_OUT_OF_MEMORY) goto oom;
-                goto done;
-            }
-            if ((r = scan_side_measure(&b, b.V0, cutoff_abs, diagonal, opt.threads, 0, &clock, &report->scan_before,
-                                       status)) !=
-                SPIA_OK)
-                goto done;
-            report->scan_point_count = b.scan_count;
-            report->query_seconds += spia__now() - t0;
-        }
-    }
-
-    if (fo.mode == SPIA_FIT_VERTICES) {
-        t0 = spia__now();
-        r = spia_limit_stencils_create(cage, &opt, &b.L, status);
-        report->stencil_seconds += spia__now() - t0;
-        if (r != SPIA_OK) goto done;
-        double *Y = malloc(sizeof(double) * (size_t)N3);
-        b.targets = malloc(sizeof(float) * (size_t)N3);
-        b.solved = malloc(sizeof(float) * (size_t)N3);
-        float *closest = malloc(sizeof(float) * (size_t)N3), *dist = malloc(sizeof(float) * (size_t)(n + 1));
-        uint8_t *edge = malloc((size_t)n + 1);
-        if (!Y || !b.targets || !b.solved || !closest || !dist || !edge) {
-            free(Y), free(closest), free(dist), free(edge);
-            goto oom;
-        }
-        t0 = spia__now();
-        spia_stencils_apply(b.L, b.V0, Y);
-        spia__scan_closest_points_double(scan, n, Y, NULL, closest, NULL, dist, NULL, edge, opt.threads);
-        report->query_seconds += spia__now() - t0;
-        int32_t pulled = 0;
-        for (int32_t v = 0; v < n; ++v) {
-            const int keep = adj.first[v + 1] == adj.first[v] || dist[v] > cutoff_abs || edge[v];
-            pulled += !keep;
-            for (int c = 0; c < 3; ++c) {
-                const int64_t i = 3 * (int64_t)v + c;
-                b.targets[i] = keep ? (float)Y[i] : closest[i];
-            }
-        }
-        if (!pulled) {
-            free(Y), free(closest), free(dist), free(edge);
-            r = nothing_to_fit(status, "limit point of the cage", fo.cutoff);
-            goto done;
-        }
-        if (!surface_samples) { /* Loop, Doo-Sabin: the limit points are what is measured */
-            float *scratch = malloc(sizeof(float) * (size_t)(n + 1));
-            if (!scratch) {
-                free(Y), free(closest), free(dist), free(edge);
-                goto oom;
-            }
-            report->before = distance_stats(dist, n, cutoff_abs, diagonal, scratch);
-            free(scratch);
-        }
-        free(Y), free(closest), free(dist), free(edge);
-        spia_report rep;
-        memset(&rep, 0, sizeof rep);
-        t0 = spia__now();
-        spia_options solve_opt = opt;
-        if (opt.progress) solve_opt.progress = clock_forward, solve_opt.progress_user_data = &clock;
-        r = spia_solve(b.L, b.targets, &solve_opt, b.solved, &rep, status);
-        report->solve_seconds += spia__now() - t0;
-        report->iterations = rep.iterations;
-        report->max_error_relative = rep.max_error_relative;
-        if (r < 0) goto done;
-        /* Vertices no face uses stay where they are (the solve keeps their
-         * limit points, which loose edges tie to moving vertices). */
-        for (int32_t v = 0; v < n; ++v)
-            for (int c = 0; c < 3; ++c) {
-                const int64_t i = 3 * (int64_t)v + c;
-                b.best[i] = adj.first[v + 1] > adj.first[v] ? (double)b.solved[i] : b.V0[i];
-            }
-        measured_best = 0;
-        report->rounds = 1;
-    } else {
-        b.work = malloc(sizeof(double) * 5 * (size_t)N3);
-        b.precond = malloc(sizeof(double) * 9 * (size_t)n);
-        b.tmp_n = malloc(sizeof(double) * (size_t)N3);
-        b.tmp_diag = malloc(sizeof(double) * 6 * (size_t)(n > 0 ? n : 1));
-        b.wts = malloc(sizeof(float) * (size_t)S);
-        b.hold = malloc(sizeof(double) * (size_t)(n > 0 ? n : 1));
-        b.smooth = malloc(sizeof(double) * (size_t)(n > 0 ? n : 1));
-        b.mark = malloc((size_t)n + 1);
-        if (!b.work || !b.precond || !b.tmp_n || !b.tmp_diag || !b.wts || !b.hold || !b.smooth ||
-            !b.mark)
-            goto oom;
-        for (int32_t v = 0; v < n; ++v) b.hold[v] = b.smooth[v] = 1.0;
-        const int guard = !(fo.flags & SPIA_FIT_ALLOW_FOLDS) && fo.samples_per_edge >= 2;
-        if (build_neighbours(cage, &adj, &b) != SPIA_OK) goto oom;
-        int64_t counted = S - report->before.ignored;
-        int32_t free_count = 0;
-        for (int32_t v = 0; v < n; ++v) free_count += b.free_vertex[v];
-        fit_system f;
-        f.blocks = &b.blocks, f.n = n, f.S = S, f.normals = b.N, f.dist = b.d, f.weight = b.wts, f.on_boundary = b.on_boundary, f.cutoff_abs = cutoff_abs;
-        f.alpha = fo.point_weight;
-        f.beta = fo.slide_weight;
-        f.X = b.X;
-        f.bar = NULL, f.bar_start = NULL, f.bar_weight = FOLD_BARRIER_WEIGHT;
-        if (guard) {
-            b.bar_start = malloc(sizeof(int64_t) * ((size_t)b.blocks.groups + 1));
-            if (!b.bar_start) goto oom;
-        }
-        f.lambda = fo.smoothing * (double)(counted > 0 ? counted : S) / (double)(free_count > 0 ? free_count : 1);
-        /* A whisper of damping towards the current iterate keeps vertices no
-         * sample reaches (and global drift) determined. */
-        f.damping = 1e-6 * (1.0 + f.lambda) * (double)S / (double)(free_count > 0 ? free_count : 1);
-        f.nb_start = b.nb_start, f.nb = b.nb, f.free_vertex = b.free_vertex;
-        f.hold = b.hold, f.smooth = b.smooth;
-        f.tmp_n = b.tmp_n, f.tmp_diag = b.tmp_diag;
-        double best_score = mean_clamped(b.d, guard ? b.folded : NULL, S, cutoff_abs);
-        if (report->history && report->history_capacity > 0) {
-            report->history[0] = mean_within(b.d, S, cutoff_abs) / (diagonal > 0.0 ? diagonal : 1.0);
-            report->history_count = 1;
-        }
-        int stale = 0, settled = 0;
-        for (int round = 1; round <= fo.max_rounds; ++round) {
-            t0 = spia__now();
-            cutoff_weights(b.d, b.on_boundary, S, cutoff_abs, b.wts);
-            const double kernel_scale = fo.robust_scale * median_pulling(b.d, b.wts, S, b.scratch);
-            if (!(fo.flags & SPIA_FIT_HARD_CUTOFF)) robust_weights(b.d, S, kernel_scale, b.wts);
-            if (guard) {
-                for (int64_t q = 0; q < S; ++q)
-                    if (b.folded[q]) b.wts[q] = 0.0f;
-                stiffen(cage, &adj, b.folded, b.d, kernel_scale, b.sample_face, S, b.mark, b.hold, b.smooth);
-                const double reach = FOLD_BARRIER_REACH * kernel_scale < cutoff_abs ? FOLD_BARRIER_REACH * kernel_scale
-                                                                                : cutoff_abs;
-                if (barrier_pairs(b.X, b.N, b.d, b.on_boundary, S, fo.samples_per_edge, sign, reach, &b.bar,
-                                  &b.bar_capacity, b.bar_start))
-                    goto oom;
-                f.bar = b.bar, f.bar_start = b.bar_start;
-            }
-            report->iterations +=
-                least_squares_round(&f, b.T, b.V0, b.V, fo.solver_iterations, b.work, b.precond, &clock);
-            if (clock.cancelled) goto cancelled;
-            report->solve_seconds += spia__now() - t0;
-            if (evaluate(scan, &b, b.V, S, opt.threads, &report->query_seconds, &clock)) goto cancelled;
-            normal_agreement(b.X, b.N, S, fo.samples_per_edge, b.dots);
-            find_folds(b.dots, b.d, b.on_boundary, S, cutoff_abs, sign, b.folded);
-            const double mean = mean_within(b.d, S, cutoff_abs);
-            report->rounds = round;
-            if (report->history && round < report->history_capacity) {
-                report->history[round] = mean / (diagonal > 0.0 ? diagonal : 1.0);
-                report->history_count = round + 1;
-            }
-            clock.mean = mean / (diagonal > 0.0 ? diagonal : 1.0);
-            clock.round = round;
-            clock.last = spia__now();
-            if (opt.progress && opt.progress(opt.progress_user_data, round, clock.mean)) {
-                r = spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled after fitting round %d", round);
-                goto done;
-            }
-            /* The distances do not fall monotonically (new closest points,
-             * new planes): keep the best cage, and stop after two rounds in
-             * a row that improved it by less than round_tolerance. */
-            const double score = mean_clamped(b.d, guard ? b.folded : NULL, S, cutoff_abs);
-            const double gain = best_score > 0.0 ? (best_score - score) / best_score : 0.0;
-            measured_best = score < best_score;
-            if (measured_best) {
-                best_score = score;
-                memcpy(b.best, b.V, sizeof(double) * (size_t)N3);
-            }
-            stale = gain < fo.round_tolerance ? stale + 1 : 0;
-            if (stale >= 2) {
-                settled = 1;
-                break;
-            }
-        }
-        if (!settled && fo.max_rounds > 0) {
-            r = SPIA_MAX_ITERATIONS;
-            spia__fail(status, SPIA_MAX_ITERATIONS, -1,
-                       "stopped after max_rounds (%d) rounds with the distances still falling by more than "
-                       "round_tolerance; the best cage so far is written",
-                       fo.max_rounds);
-        }
-    }
-
-    /* Distances of the cage written: measured already when it is the last
-     * cage measured (the samples, their closest points, their normals'
-     * agreement are those of the best cage). */
-    if (S > 0) {
-        if (!measured_best) {
-            if (evaluate(scan, &b, b.best, S, opt.threads, &report->query_seconds, &clock))
-                goto cancelled;
-            normal_agreement(b.X, b.N, S, fo.samples_per_edge, b.dots);
-        }
-        report->after = distance_stats(b.d, S, cutoff_abs, diagonal, b.scratch);
-        report->folded_after =
-            fo.samples_per_edge < 2 ? -1 : find_folds(b.dots, b.d, b.on_boundary, S, cutoff_abs, sign, b.folded);
-        if (b.grid.groups) {
-            t0 = spia__now();
-            if ((r = scan_side_measure(&b, b.best, cutoff_abs, diagonal, opt.threads, 1, &clock, &report->scan_after,
-                                       status)) !=
-                SPIA_OK)
-                goto done;
-            report->query_seconds += spia__now() - t0;
-            if (report->scan_distances) {
-                int32_t scan_n = 0;
-                spia__scan_positions(scan, &scan_n, NULL);
-                const double unit = diagonal > 0.0 ? diagonal : 1.0;
-                for (int32_t v = 0; v < scan_n; ++v) report->scan_distances[v] = -1.0f;
-                for (int64_t k = 0; k < b.scan_count; ++k)
-                    report->scan_distances[b.scan_vertex[k]] = (float)(b.scan_d[k] / unit);
-            }
-        }
-        if (report->vertex_distances) {
-            float *vd = report->vertex_distances;
-            memset(vd, 0, sizeof(float) * (size_t)n);
-            const double unit = diagonal > 0.0 ? diagonal : 1.0;
-            for (int64_t s = 0; s < S; ++s) {
-                if (b.d[s] > cutoff_abs) continue;
-                const int32_t face = b.sample_face[s];
-                const float rel = (float)(b.d[s] / unit);
-                for (int64_t c = adj.corner_start[face]; c < adj.corner_start[face + 1]; ++c) {
-                    const int32_t v = cage->face_vertices[c];
-                    if (rel > vd[v]) vd[v] = rel;
-                }
-            }
-        }
-    } else if (b.L) { /* the limit points of the cage written */
-        double *Y = malloc(sizeof(double) * (size_t)N3);
-        float *dist = malloc(sizeof(float) * (size_t)(n + 1)), *scratch = malloc(sizeof(float) * (size_t)(n + 1));
-        if (!Y || !dist || !scratch) {
-            free(Y), free(dist), free(scratch);
-            goto oom;
-        }
-        t0 = spia__now();
-        spia_stencils_apply(b.L, b.best, Y);
-        spia__scan_closest_points_double(scan, n, Y, NULL, NULL, NULL, dist, NULL, NULL, opt.threads);
-        report->query_seconds += spia__now() - t0;
-        report->after = distance_stats(dist, n, cutoff_abs, diagonal, scratch);
-        report->sample_count = n;
-        if (report->vertex_distances)
-            for (int32_t v = 0; v < n; ++v)
-                report->vertex_distances[v] = dist[v] <= cutoff_abs ? (float)(dist[v] / (diagonal > 0.0 ? diagonal : 1.0)) : 0.0f;
-        free(Y), free(dist), free(scratch);
-    }
-    for (int64_t i = 0; i < N3; ++i) cage_out[i] = (float)b.best[i];
+    if (r < 0) goto done;
+    for (int64_t i = 0; i < u.N3; ++i) cage_out[i] = (float)u.b.best[i];
     if (r == SPIA_OK) spia__ok(status);
-    goto done;
-cancelled:
-    r = spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled during fitting round %d", clock.round + 1);
-    goto done;
-oom:
-    r = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory fitting the cage");
 done:
-    buffers_free(&b);
-    spia__adjacency_free(&adj);
+    buffers_free(&u.b);
+    spia__adjacency_free(&u.adj);
     report->result = r;
     return r;
 }

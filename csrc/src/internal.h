@@ -296,7 +296,7 @@ enum { SPIA__ROW_NOT_CLOSED = -1, SPIA__ROW_OUT_OF_MEMORY = -2 };
 int32_t spia__catmark_closed_row(const spia_mesh *mesh, const spia_adjacency *adj, const spia_catmark_sharpness *sh,
                                  int32_t v, spia_row_scratch *scratch);
 
-/* spia_refine's progress (interpolate.c): the options' callback at the end
+/* spia_refine's progress (refine.c): the options' callback at the end
  * of each level (the last one's once its limit positions are computed,
  * before any output is written; levels 0: once) and, from
  * spia__refine_tick, once REFINE_INTERVAL seconds have passed since the
@@ -348,6 +348,9 @@ spia_result spia__loop_hoppe_limit_stencils(const spia_mesh *mesh, spia_adjacenc
 
 /* Rejects Loop input that is not all triangles, naming how many faces are not. */
 spia_result spia__require_triangles(const spia_mesh *mesh, spia_status *status);
+
+/* Ptex faces of a face: 1 for a quad, else one per corner. */
+static inline int32_t spia__ptex_of_face(int32_t size) { return size == 4 ? 1 : size; }
 
 /* Catmull-Clark limit stencils at samples inside faces (catmark_osd.cpp). */
 spia_result spia__osd_surface_stencils(const spia_mesh *mesh, const spia_adjacency *adj, const spia_options *options,

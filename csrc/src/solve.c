@@ -825,6 +825,47 @@ static int choose_auto(solver_state *s, double contraction) {
     return krylov_arrays(s);
 }
 
+/* One step of s->method (GS-PIA's sweep also estimates the error it
+ * leaves: *sweep_error, else left alone); returns 1 when the step kept the
+ * residual up to date (CG). */
+static int take_step(solver_state *s, int32_t steps, double contraction, spia_report *report, double *sweep_error) {
+    switch (s->method) {
+    case SPIA_METHOD_CG:
+        if (step_cg(s)) return 1;
+        /* not positive definite after all: Chebyshev from here on */
+        s->method = SPIA_METHOD_CHEBYSHEV;
+        if (report) report->method = s->method;
+        step_richardson(s, 1.0);
+        return 0;
+    case SPIA_METHOD_GS_PIA:
+        *sweep_error = s->colour_rows ? step_gs_pia_multicolour(s) : step_gs_pia(s);
+        return 0;
+    case SPIA_METHOD_WPIA:
+        step_richardson(s, s->weight);
+        return 0;
+    case SPIA_METHOD_CHEBYSHEV:
+        if (steps >= ESTIMATE_STEPS) {
+            /* PIA's residual contracts by 1 - lambda_min per step once
+             * the slowest mode dominates; after a few steps it has not
+             * yet, and the contraction seen then overestimates
+             * lambda_min by a factor of three to five on the meshes
+             * measured (eigenvalues computed with numpy). */
+            if (s->cheb_steps == 0) {
+                double a = (1.0 - contraction) / 3.0;
+                s->cheb_a = a < CHEB_A_MIN ? CHEB_A_MIN : a > CHEB_A_MAX ? CHEB_A_MAX : a;
+            }
+            step_chebyshev(s);
+            return 0;
+        }
+        /* the first steps are PIA's */
+        step_richardson(s, 1.0);
+        return 0;
+    default:
+        step_richardson(s, 1.0);
+        return 0;
+    }
+}
+
 /* Iterates on the active rows until their max error is at most threshold.
  * *it counts iterations over all stages (for the history and the limit). */
 static spia_result run_stage(solver_state *s, const spia_options *opt, double threshold, double scale, int32_t *it,
@@ -846,46 +887,8 @@ static spia_result run_stage(solver_state *s, const spia_options *opt, double th
                 return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver");
             if (report) report->method = s->method;
         }
-        int residual_kept = 0;
         double sweep_error = -1.0;
-        switch (s->method) {
-        case SPIA_METHOD_CG:
-            if (step_cg(s)) {
-                residual_kept = 1;
-                break;
-            }
-            /* not positive definite after all: Chebyshev from here on */
-            s->method = SPIA_METHOD_CHEBYSHEV;
-            if (report) report->method = s->method;
-            step_richardson(s, 1.0);
-            break;
-        case SPIA_METHOD_GS_PIA:
-            sweep_error = s->colour_rows ? step_gs_pia_multicolour(s) : step_gs_pia(s);
-            break;
-        case SPIA_METHOD_WPIA:
-            step_richardson(s, s->weight);
-            break;
-        case SPIA_METHOD_CHEBYSHEV:
-            if (steps >= ESTIMATE_STEPS) {
-                /* PIA's residual contracts by 1 - lambda_min per step once
-                 * the slowest mode dominates; after a few steps it has not
-                 * yet, and the contraction seen then overestimates
-                 * lambda_min by a factor of three to five on the meshes
-                 * measured (eigenvalues computed with numpy). */
-                if (s->cheb_steps == 0) {
-                    double a = (1.0 - contraction) / 3.0;
-                    s->cheb_a = a < CHEB_A_MIN ? CHEB_A_MIN : a > CHEB_A_MAX ? CHEB_A_MAX : a;
-                }
-                step_chebyshev(s);
-                break;
-            }
-            /* the first steps are PIA's */
-            step_richardson(s, 1.0);
-            break;
-        default:
-            step_richardson(s, 1.0);
-            break;
-        }
+        const int residual_kept = take_step(s, steps, contraction, report, &sweep_error);
         ++*it;
         ++steps;
         if (sweep_error > threshold && *it - it_best < STAGNATION_WINDOW) {
@@ -936,281 +939,341 @@ static int with_arrays(const spia_stencils *given, const spia_stencils **L, spia
     return 1;
 }
 
-spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_options *options, float *cage,
-                       spia_report *report, spia_status *status) {
-    report_reset(report);
-    spia_options opt;
-    const double t0 = spia__now();
-    solver_state s;
-    memset(&s, 0, sizeof s);
-    float *handover = NULL;
-    int32_t it0 = 0;
-    /* L's CSR arrays, for whatever is not GS_PIA_FAST (see
-     * spia__stencils_expand): L points at `table` from there on. */
-    const spia_stencils *const given = L;
+/* What the stages of a solve share besides the solver's state. */
+typedef struct solve_call {
+    const spia_stencils *given; /* the caller's table */
+    /* given, or once its CSR arrays are needed (whatever is not
+     * GS_PIA_FAST: see spia__stencils_expand) `table`, which holds them */
+    const spia_stencils *L;
     spia_stencils table;
-    memset(&table, 0, sizeof table);
-    double initial_relative = -1.0;
-    spia_result res = spia__resolve_options(options, &opt, status);
-    if (res != SPIA_OK) goto done;
-    if (!L || !targets || !cage) {
-        res = spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "stencils, targets and cage must not be NULL");
-        goto done;
-    }
-    const int32_t n = L->rows;
-    if (n == 0) {
-        res = spia__fail(status, SPIA_ERROR_EMPTY_MESH, -1, "the stencil table has no rows");
-        goto done;
-    }
+    spia_options opt;
+    const float *targets;
+    float *cage;
+    spia_report *report;
+    spia_status *status;
+    int32_t n;
     double diagonal;
-    {
-        const int64_t bad = scan_targets(targets, n, n >= PARALLEL_ROWS ? opt.threads : 1, &diagonal);
-        if (bad == -2) {
-            res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
-            goto done;
-        }
-        if (bad >= 0) {
-            res = spia__fail(status, SPIA_ERROR_NONFINITE, bad, "target %lld is NaN or infinite", (long long)bad);
-            goto done;
-        }
-    }
-    if (opt.initial_cage) {
-        for (int64_t k = 0; k < 3 * (int64_t)n; ++k)
-            if (!isfinite(opt.initial_cage[k])) {
-                res = spia__fail(status, SPIA_ERROR_NONFINITE, k / 3, "initial cage vertex %lld is NaN or infinite",
-                                 (long long)(k / 3));
-                goto done;
-            }
-    }
+    float *handover;         /* GS_PIA_FAST's cage for GS-PIA to go on from */
+    int32_t it0;             /* iterations before the iterative method's */
+    double initial_relative; /* the report's initial error, when GS_PIA_FAST measured it; else -1 */
+    int least_squares;
+} solve_call;
 
-    /* GS_PIA_FAST, asked for or AUTO's choice on rough targets (where it
-     * would take GS_PIA), where the table has a plan for it. */
+static spia_result solver_oom(const solve_call *c) {
+    return spia__fail(c->status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)",
+                      (int)c->n);
+}
+
+/* The targets and the first iterate finite; c->diagonal the targets'. */
+static spia_result check_targets(solve_call *c) {
+    const int32_t n = c->n;
+    const int64_t bad = scan_targets(c->targets, n, n >= PARALLEL_ROWS ? c->opt.threads : 1, &c->diagonal);
+    if (bad == -2) return solver_oom(c);
+    if (bad >= 0) return spia__fail(c->status, SPIA_ERROR_NONFINITE, bad, "target %lld is NaN or infinite", (long long)bad);
+    if (c->opt.initial_cage) {
+        for (int64_t k = 0; k < 3 * (int64_t)n; ++k)
+            if (!isfinite(c->opt.initial_cage[k]))
+                return spia__fail(c->status, SPIA_ERROR_NONFINITE, k / 3,
+                                  "initial cage vertex %lld is NaN or infinite", (long long)(k / 3));
+    }
+    return SPIA_OK;
+}
+
+/* Method selection: GS_PIA_FAST, asked for or AUTO's choice on rough
+ * targets (where it would take GS_PIA), where the table has a plan for it
+ * (*fast; *automatic: chosen by AUTO); else the method asked for. */
+static spia_result select_method(solve_call *c, int *fast, int *automatic) {
+    const spia_stencils *L = c->L;
+    const int32_t n = c->n;
     const int fast_fits = L->plan && L->plan->diagonal_first;
-    const int staged_solve = opt.staged && L->boundary_count > 0 && L->boundary_count < n;
-    int fast = 0, automatic = 0;
-    if (opt.method == SPIA_METHOD_GS_PIA_FAST) {
+    const int staged_solve = c->opt.staged && L->boundary_count > 0 && L->boundary_count < n;
+    *fast = 0, *automatic = 0;
+    if (c->opt.method == SPIA_METHOD_GS_PIA_FAST) {
         if (fast_fits)
-            fast = 1;
+            *fast = 1;
         else
-            opt.method = SPIA_METHOD_GS_PIA; /* no plan (or a row without its own weight, refused below) */
-    } else if (opt.method == SPIA_METHOD_AUTO && fast_fits && !staged_solve) {
+            c->opt.method = SPIA_METHOD_GS_PIA; /* no plan (or a row without its own weight, refused below) */
+    } else if (c->opt.method == SPIA_METHOD_AUTO && fast_fits && !staged_solve) {
         /* From AUTO_FAST_ROWS rows on, GS_PIA_FAST on smooth targets too:
          * it was faster there than CG and Chebyshev on every target
          * measured (a smooth 1M torus: 4 sweeps in 0.1 s against CG's one
          * iteration and its setup in 0.35 s; 30k: 3.4 ms against 8 ms);
          * below, the probe decides. */
-        if (n < AUTO_FAST_ROWS && !with_arrays(given, &L, &table, opt.threads)) {
-            res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
-            goto done;
-        }
-        const double probe = n >= AUTO_FAST_ROWS
-                                 ? 1.0
-                                 : first_contraction_probe(L, targets, opt.initial_cage ? opt.initial_cage : targets);
-        if (probe < 0.0) {
-            res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
-            goto done;
-        }
+        if (n < AUTO_FAST_ROWS && !with_arrays(c->given, &c->L, &c->table, c->opt.threads)) return solver_oom(c);
+        const double probe =
+            n >= AUTO_FAST_ROWS
+                ? 1.0
+                : first_contraction_probe(c->L, c->targets, c->opt.initial_cage ? c->opt.initial_cage : c->targets);
+        if (probe < 0.0) return solver_oom(c);
         if (!(probe < AUTO_SMOOTH)) {
-            fast = 1;
-            automatic = 1;
-            opt.solve_flags |= AUTO_FAST_FLAGS;
+            *fast = 1;
+            *automatic = 1;
+            c->opt.solve_flags |= AUTO_FAST_FLAGS;
         }
     }
     /* Least squares (see least_squares.c): asked for, or where the
      * iteration stagnates or diverges. */
-    int least_squares = opt.method == SPIA_METHOD_LEAST_SQUARES;
-    if (fast) {
-        res = spia__solve_fast(L, targets, &opt, diagonal, automatic, cage, &handover, &it0, report, status);
-        if (res == SPIA_STAGNATED || res == SPIA_ERROR_DIVERGED) {
-            /* From the cage the sweeps wrote, or after a blow-up from the
-             * first iterate. */
-            if (report) initial_relative = report->initial_max_error_relative;
-            if (res == SPIA_STAGNATED) opt.initial_cage = cage;
-            if (report) it0 = report->iterations;
-            least_squares = 1;
-        } else if (res != SPIA__HAND_OVER) {
-            goto done;
-        } else {
-            /* Beyond float32: GS-PIA goes on from where the sweeps got to. */
-            if (report) initial_relative = report->initial_max_error_relative;
-            opt.method = SPIA_METHOD_GS_PIA;
-            opt.solve_flags &= ~SPIA_SOLVE_FIRST_STEP;
-            if (handover) opt.initial_cage = handover;
-        }
-    }
+    c->least_squares = c->opt.method == SPIA_METHOD_LEAST_SQUARES;
+    return SPIA_OK;
+}
 
-    if (!with_arrays(given, &L, &table, opt.threads)) {
-        res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
-        goto done;
+/* GS_PIA_FAST (fast.c): returns 1 when it has finished the solve (*res its
+ * result), 0 when another method is to go on: least squares where the
+ * sweeps stagnated or diverged, GS-PIA from where they got to where float32
+ * cannot reach the tolerance. */
+static int solve_fast(solve_call *c, int automatic, spia_result *res) {
+    spia_report *report = c->report;
+    *res = spia__solve_fast(c->L, c->targets, &c->opt, c->diagonal, automatic, c->cage, &c->handover, &c->it0,
+                            report, c->status);
+    if (*res == SPIA_STAGNATED || *res == SPIA_ERROR_DIVERGED) {
+        /* From the cage the sweeps wrote, or after a blow-up from the
+         * first iterate. */
+        if (report) c->initial_relative = report->initial_max_error_relative;
+        if (*res == SPIA_STAGNATED) c->opt.initial_cage = c->cage;
+        if (report) c->it0 = report->iterations;
+        c->least_squares = 1;
+        return 0;
     }
-    s.method = least_squares ? SPIA_METHOD_LEAST_SQUARES : opt.method;
-    s.L = L;
-    s.n = n;
-    s.P = targets;
-    s.V = (double *)malloc(sizeof(double) * 3 * (size_t)n);
-    s.R = (double *)malloc(sizeof(double) * 3 * (size_t)n);
-    s.diag = (double *)malloc(sizeof(double) * (size_t)n);
-    s.initial = (double *)malloc(sizeof(double) * (size_t)n);
-    s.stuck = (unsigned char *)calloc((size_t)n, 1);
-    s.frozen = (unsigned char *)calloc((size_t)n, 1);
+    if (*res != SPIA__HAND_OVER) return 1;
+    /* Beyond float32: GS-PIA goes on from where the sweeps got to. */
+    if (report) c->initial_relative = report->initial_max_error_relative;
+    c->opt.method = SPIA_METHOD_GS_PIA;
+    c->opt.solve_flags &= ~SPIA_SOLVE_FIRST_STEP;
+    if (c->handover) c->opt.initial_cage = c->handover;
+    return 0;
+}
+
+/* The solver's arrays, and the first iterate in s->V. */
+static spia_result state_setup(solve_call *c, solver_state *s) {
+    const int32_t n = c->n;
+    if (!with_arrays(c->given, &c->L, &c->table, c->opt.threads)) return solver_oom(c);
+    s->method = c->least_squares ? SPIA_METHOD_LEAST_SQUARES : c->opt.method;
+    s->L = c->L;
+    s->n = n;
+    s->P = c->targets;
+    s->V = (double *)malloc(sizeof(double) * 3 * (size_t)n);
+    s->R = (double *)malloc(sizeof(double) * 3 * (size_t)n);
+    s->diag = (double *)malloc(sizeof(double) * (size_t)n);
+    s->initial = (double *)malloc(sizeof(double) * (size_t)n);
+    s->stuck = (unsigned char *)calloc((size_t)n, 1);
+    s->frozen = (unsigned char *)calloc((size_t)n, 1);
     /* Threads pay off on large tables only (a parallel region costs
      * microseconds, more on a busy machine); the blocks, and so the
      * results, are the same either way. */
-    s.threads = opt.threads > 0 && n >= PARALLEL_ROWS ? opt.threads : 1;
-    s.blocks = ((int64_t)n + BLOCK - 1) / BLOCK;
-    s.partial = (double *)malloc(sizeof(double) * PARTS * (size_t)s.blocks);
-    if (!s.partial) {
-        res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
-        goto done;
-    }
-    if (!s.V || !s.R || !s.diag || !s.initial || !s.stuck || !s.frozen ||
-        (s.method != SPIA_METHOD_PIA && s.method != SPIA_METHOD_GS_PIA && s.method != SPIA_METHOD_AUTO &&
-         s.method != SPIA_METHOD_LEAST_SQUARES && !krylov_arrays(&s))) {
-        res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
-        goto done;
-    }
-    s.start = opt.initial_cage ? opt.initial_cage : targets;
-    for (int64_t k = 0; k < 3 * (int64_t)n; ++k) s.V[k] = (double)s.start[k];
-    if (s.method == SPIA_METHOD_CG) {
-        const int cg = cg_scaling(&s);
-        if (cg < 0) {
-            res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
-            goto done;
-        }
-        if (!cg) {
-            res = spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1,
-                             "CG needs a limit matrix that is a positive diagonal times a symmetric one, as "
-                             "closed meshes have (boundary rules break the symmetry); use AUTO");
-            goto done;
-        }
-    }
-    s.diag_positive = 1;
-    for (int32_t r = 0; r < n; ++r) {
-        s.diag[r] = 0.0;
-        for (int64_t k = L->offsets[r]; k < L->offsets[r + 1]; ++k)
-            if (L->indices[k] == r) s.diag[r] = L->weights[k];
-        if (!(s.diag[r] > 0.0)) s.diag_positive = 0;
-        if (s.method == SPIA_METHOD_GS_PIA && !(s.diag[r] > 0.0)) {
-            res = spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, r,
-                             "stencil of vertex %d has weight %g on itself; GS-PIA needs a positive one", (int)r,
-                             s.diag[r]);
-            goto done;
-        }
-    }
-    if (s.method == SPIA_METHOD_GS_PIA && (opt.solve_flags & SPIA_SOLVE_MULTICOLOUR) && !multicolour_order(&s)) {
-        res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
-        goto done;
-    }
-    if (s.method == SPIA_METHOD_WPIA) {
-        if (opt.weight < 0.0 || opt.weight >= 2.0 || !isfinite(opt.weight)) {
-            res = spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "the WPIA weight must be in (0, 2), got %g",
-                             opt.weight);
-            goto done;
-        }
-        s.weight = opt.weight > 0.0 ? opt.weight : best_weight(L, s.D);
-    }
+    s->threads = c->opt.threads > 0 && n >= PARALLEL_ROWS ? c->opt.threads : 1;
+    s->blocks = ((int64_t)n + BLOCK - 1) / BLOCK;
+    s->partial = (double *)malloc(sizeof(double) * PARTS * (size_t)s->blocks);
+    if (!s->partial) return solver_oom(c);
+    if (!s->V || !s->R || !s->diag || !s->initial || !s->stuck || !s->frozen ||
+        (s->method != SPIA_METHOD_PIA && s->method != SPIA_METHOD_GS_PIA && s->method != SPIA_METHOD_AUTO &&
+         s->method != SPIA_METHOD_LEAST_SQUARES && !krylov_arrays(s)))
+        return solver_oom(c);
+    s->start = c->opt.initial_cage ? c->opt.initial_cage : c->targets;
+    for (int64_t k = 0; k < 3 * (int64_t)n; ++k) s->V[k] = (double)s->start[k];
+    return SPIA_OK;
+}
 
-    const double scale = diagonal > 0.0 ? diagonal : 1.0;
-    const double threshold = opt.tolerance * scale;
+/* What the method needs of the table: CG a symmetric scaling, GS-PIA a
+ * positive weight of every row on itself (and a colouring), WPIA its
+ * weight; s->diag the rows' own weights. */
+static spia_result method_setup(solve_call *c, solver_state *s) {
+    const spia_stencils *L = c->L;
+    if (s->method == SPIA_METHOD_CG) {
+        const int cg = cg_scaling(s);
+        if (cg < 0) return solver_oom(c);
+        if (!cg)
+            return spia__fail(c->status, SPIA_ERROR_INVALID_ARGUMENT, -1,
+                              "CG needs a limit matrix that is a positive diagonal times a symmetric one, as "
+                              "closed meshes have (boundary rules break the symmetry); use AUTO");
+    }
+    s->diag_positive = 1;
+    for (int32_t r = 0; r < c->n; ++r) {
+        s->diag[r] = 0.0;
+        for (int64_t k = L->offsets[r]; k < L->offsets[r + 1]; ++k)
+            if (L->indices[k] == r) s->diag[r] = L->weights[k];
+        if (!(s->diag[r] > 0.0)) s->diag_positive = 0;
+        if (s->method == SPIA_METHOD_GS_PIA && !(s->diag[r] > 0.0))
+            return spia__fail(c->status, SPIA_ERROR_INVALID_ARGUMENT, r,
+                              "stencil of vertex %d has weight %g on itself; GS-PIA needs a positive one", (int)r,
+                              s->diag[r]);
+    }
+    if (s->method == SPIA_METHOD_GS_PIA && (c->opt.solve_flags & SPIA_SOLVE_MULTICOLOUR) && !multicolour_order(s))
+        return solver_oom(c);
+    if (s->method == SPIA_METHOD_WPIA) {
+        if (c->opt.weight < 0.0 || c->opt.weight >= 2.0 || !isfinite(c->opt.weight))
+            return spia__fail(c->status, SPIA_ERROR_INVALID_ARGUMENT, -1,
+                              "the WPIA weight must be in (0, 2), got %g", c->opt.weight);
+        s->weight = c->opt.weight > 0.0 ? c->opt.weight : best_weight(L, s->D);
+    }
+    return SPIA_OK;
+}
+
+/* The iterative methods (PIA, GS-PIA, WPIA, Chebyshev, CG, AUTO's choice
+ * among them), staged or not, from the first iterate's residual; decides
+ * whether least squares is to go on (c->least_squares). */
+static spia_result solve_iterative(solve_call *c, solver_state *s, double threshold, double scale, int32_t *it,
+                                   int32_t *stuck_count) {
+    const spia_stencils *L = c->L;
+    spia_report *report = c->report;
+    const int32_t n = c->n;
+    spia_result res;
     double mean, err;
-    double err_all = residual(&s, &mean, &err);
+    double err_all = residual(s, &mean, &err);
     for (int32_t r = 0; r < n; ++r) {
-        const double *q = s.R + 3 * (int64_t)r;
-        s.initial[r] = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]);
+        const double *q = s->R + 3 * (int64_t)r;
+        s->initial[r] = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]);
     }
     if (report) {
-        report->initial_max_error_relative = initial_relative >= 0.0 ? initial_relative : err_all / scale;
-        report->method = s.method;
-        report->weight = s.weight;
+        report->initial_max_error_relative = c->initial_relative >= 0.0 ? c->initial_relative : err_all / scale;
+        report->method = s->method;
+        report->weight = s->weight;
     }
-    if ((opt.solve_flags & SPIA_SOLVE_FIRST_STEP) && s.method == SPIA_METHOD_GS_PIA && !(err <= threshold))
-        first_step(&s); /* run_stage starts from the residual of the new iterate */
+    if ((c->opt.solve_flags & SPIA_SOLVE_FIRST_STEP) && s->method == SPIA_METHOD_GS_PIA && !(err <= threshold))
+        first_step(s); /* run_stage starts from the residual of the new iterate */
 
-    int32_t it = it0, stuck_count = 0;
-    const int staged = opt.staged && L->boundary_count > 0 && L->boundary_count < n;
-    if (least_squares) {
+    const int staged = c->opt.staged && L->boundary_count > 0 && L->boundary_count < n;
+    if (c->least_squares) {
         res = SPIA_OK;
     } else if (staged) {
         /* Stage 1: the boundary rows, which refer to boundary vertices only. */
-        for (int32_t r = 0; r < n; ++r) s.frozen[r] = !L->boundary[r];
-        res = run_stage(&s, &opt, threshold, scale, &it, &stuck_count, report, status);
-        if (report) report->stage_iterations[0] = it;
+        for (int32_t r = 0; r < n; ++r) s->frozen[r] = !L->boundary[r];
+        res = run_stage(s, &c->opt, threshold, scale, it, stuck_count, report, c->status);
+        if (report) report->stage_iterations[0] = *it;
         if (res == SPIA_OK) {
-            for (int32_t r = 0; r < n; ++r) s.frozen[r] = L->boundary[r];
-            res = run_stage(&s, &opt, threshold, scale, &it, &stuck_count, report, status);
-            for (int32_t r = 0; r < n; ++r) s.frozen[r] = 0;
+            for (int32_t r = 0; r < n; ++r) s->frozen[r] = L->boundary[r];
+            res = run_stage(s, &c->opt, threshold, scale, it, stuck_count, report, c->status);
+            for (int32_t r = 0; r < n; ++r) s->frozen[r] = 0;
         }
-        if (report) report->stage_iterations[1] = it - report->stage_iterations[0];
+        if (report) report->stage_iterations[1] = *it - report->stage_iterations[0];
     } else {
-        res = run_stage(&s, &opt, threshold, scale, &it, &stuck_count, report, status);
+        res = run_stage(s, &c->opt, threshold, scale, it, stuck_count, report, c->status);
     }
-    if (s.method == SPIA_METHOD_AUTO) {
-        s.method = SPIA_METHOD_PIA; /* done before AUTO had to choose */
-        if (report) report->method = s.method;
+    if (s->method == SPIA_METHOD_AUTO) {
+        s->method = SPIA_METHOD_PIA; /* done before AUTO had to choose */
+        if (report) report->method = s->method;
     }
-    if ((res == SPIA_STAGNATED || res == SPIA_ERROR_DIVERGED || (res == SPIA_OK && stuck_count > 0)) &&
-        !least_squares) {
+    if ((res == SPIA_STAGNATED || res == SPIA_ERROR_DIVERGED || (res == SPIA_OK && *stuck_count > 0)) &&
+        !c->least_squares) {
         /* Some vertices cannot be reached, or L has eigenvalues outside
          * (0, 1] that PIA-type iterations cannot take: least squares from
          * here, or after a blow-up from the first iterate. */
-        least_squares = 1;
+        c->least_squares = 1;
         if (res == SPIA_ERROR_DIVERGED)
-            for (int64_t k = 0; k < 3 * (int64_t)n; ++k) s.V[k] = (double)s.start[k];
+            for (int64_t k = 0; k < 3 * (int64_t)n; ++k) s->V[k] = (double)s->start[k];
     }
-    if (least_squares) {
-        memset(s.stuck, 0, (size_t)n);
-        s.method = SPIA_METHOD_LEAST_SQUARES;
-        if (report) report->method = s.method;
-        res = spia__least_squares(L, targets, s.V, &opt, scale, &it, opt.max_iterations, report, status);
+    return res;
+}
+
+/* Least squares (least_squares.c) from s->V. */
+static spia_result solve_least_squares(solve_call *c, solver_state *s, double scale, int32_t *it) {
+    memset(s->stuck, 0, (size_t)c->n);
+    s->method = SPIA_METHOD_LEAST_SQUARES;
+    if (c->report) c->report->method = s->method;
+    return spia__least_squares(c->L, c->targets, s->V, &c->opt, scale, it, c->opt.max_iterations, c->report,
+                               c->status);
+}
+
+/* Writes the cage, then measures it as stored (in float): the result
+ * (least squares: SPIA_STAGNATED where vertices stay beyond the
+ * tolerance), its message and the report's errors. */
+static spia_result write_cage(solve_call *c, solver_state *s, spia_result res, double threshold, double scale,
+                              int32_t it, int32_t stuck_count) {
+    spia_report *report = c->report;
+    const int32_t n = c->n;
+    double mean, err;
+    for (int64_t k = 0; k < 3 * (int64_t)n; ++k) {
+        c->cage[k] = (float)s->V[k];
+        s->V[k] = (double)c->cage[k];
     }
-    if (res >= 0) {
-        /* Write the cage, then measure it as stored (in float). */
-        for (int64_t k = 0; k < 3 * (int64_t)n; ++k) {
-            cage[k] = (float)s.V[k];
-            s.V[k] = (double)cage[k];
+    double err_all = residual(s, &mean, &err);
+    if (c->least_squares) {
+        /* The vertices the least-squares cage leaves beyond the
+         * tolerance are the ones no cage reaches. */
+        stuck_count = 0;
+        for (int32_t r = 0; r < n; ++r) {
+            const double *q = s->R + 3 * (int64_t)r;
+            s->stuck[r] = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]) > threshold;
+            stuck_count += s->stuck[r];
         }
-        err_all = residual(&s, &mean, &err);
-        if (least_squares) {
-            /* The vertices the least-squares cage leaves beyond the
-             * tolerance are the ones no cage reaches. */
-            stuck_count = 0;
-            for (int32_t r = 0; r < n; ++r) {
-                const double *q = s.R + 3 * (int64_t)r;
-                s.stuck[r] = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]) > threshold;
-                stuck_count += s.stuck[r];
-            }
-            err_all = residual_stats(&s, &mean, &err);
-            res = stuck_count > 0 ? SPIA_STAGNATED : SPIA_OK;
-        }
-        if (res == SPIA_OK)
-            spia__ok(status);
-        else if (res == SPIA_MAX_ITERATIONS)
-            spia__fail(status, res, -1,
-                       "stopped at max_iterations (%d) with max error %.3g of the diagonal, above the tolerance %.3g",
-                       (int)it, err_all / scale, opt.tolerance);
-        else /* SPIA_STAGNATED, from least squares */
-            spia__fail(status, res, -1,
-                       "%d vertices cannot be reached: no cage's limit surface passes through all the points (the "
-                       "limit matrix is singular there); the least-squares cage puts them as close as the surface "
-                       "allows, within %.3g of the diagonal. The other vertices reach %.3g",
-                       (int)stuck_count, err_all / scale, err / scale);
-        if (report) {
-            report->max_error = err_all;
-            report->mean_error = mean;
-            report->max_error_relative = err_all / scale;
-            report->mean_error_relative = mean / scale;
-            report->reachable_max_error_relative = err / scale;
-            report->unreachable_count = stuck_count;
-            if (report->unreachable) memcpy(report->unreachable, s.stuck, (size_t)n);
-        }
+        err_all = residual_stats(s, &mean, &err);
+        res = stuck_count > 0 ? SPIA_STAGNATED : SPIA_OK;
     }
+    if (res == SPIA_OK)
+        spia__ok(c->status);
+    else if (res == SPIA_MAX_ITERATIONS)
+        spia__fail(c->status, res, -1,
+                   "stopped at max_iterations (%d) with max error %.3g of the diagonal, above the tolerance %.3g",
+                   (int)it, err_all / scale, c->opt.tolerance);
+    else /* SPIA_STAGNATED, from least squares */
+        spia__fail(c->status, res, -1,
+                   "%d vertices cannot be reached: no cage's limit surface passes through all the points (the "
+                   "limit matrix is singular there); the least-squares cage puts them as close as the surface "
+                   "allows, within %.3g of the diagonal. The other vertices reach %.3g",
+                   (int)stuck_count, err_all / scale, err / scale);
     if (report) {
-        report->iterations = it;
-        report->diagonal = diagonal;
+        report->max_error = err_all;
+        report->mean_error = mean;
+        report->max_error_relative = err_all / scale;
+        report->mean_error_relative = mean / scale;
+        report->reachable_max_error_relative = err / scale;
+        report->unreachable_count = stuck_count;
+        if (report->unreachable) memcpy(report->unreachable, s->stuck, (size_t)n);
     }
+    return res;
+}
+
+/* The method selected, then GS_PIA_FAST, the iterative methods and least
+ * squares, each going on where the one before left off. */
+static spia_result solve_stages(solve_call *c, solver_state *s) {
+    spia_result res;
+    int fast, automatic;
+    if ((res = select_method(c, &fast, &automatic)) != SPIA_OK) return res;
+    if (fast && solve_fast(c, automatic, &res)) return res;
+    if ((res = state_setup(c, s)) != SPIA_OK) return res;
+    if ((res = method_setup(c, s)) != SPIA_OK) return res;
+    const double scale = c->diagonal > 0.0 ? c->diagonal : 1.0;
+    const double threshold = c->opt.tolerance * scale;
+    int32_t it = c->it0, stuck_count = 0;
+    res = solve_iterative(c, s, threshold, scale, &it, &stuck_count);
+    if (c->least_squares) res = solve_least_squares(c, s, scale, &it);
+    if (res >= 0) res = write_cage(c, s, res, threshold, scale, it, stuck_count);
+    if (c->report) {
+        c->report->iterations = it;
+        c->report->diagonal = c->diagonal;
+    }
+    return res;
+}
+
+spia_result spia_solve(const spia_stencils *L, const float *targets, const spia_options *options, float *cage,
+                       spia_report *report, spia_status *status) {
+    report_reset(report);
+    const double t0 = spia__now();
+    solver_state s;
+    memset(&s, 0, sizeof s);
+    solve_call c;
+    memset(&c, 0, sizeof c);
+    c.given = c.L = L;
+    c.targets = targets;
+    c.cage = cage;
+    c.report = report;
+    c.status = status;
+    c.initial_relative = -1.0;
+    spia_result res = spia__resolve_options(options, &c.opt, status);
+    if (res != SPIA_OK) goto done;
+    if (!L || !targets || !cage) {
+        res = spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "stencils, targets and cage must not be NULL");
+        goto done;
+    }
+    c.n = L->rows;
+    if (c.n == 0) {
+        res = spia__fail(status, SPIA_ERROR_EMPTY_MESH, -1, "the stencil table has no rows");
+        goto done;
+    }
+    if ((res = check_targets(&c)) != SPIA_OK) goto done;
+    res = solve_stages(&c, &s);
 done:
-    if (L == &table) spia__stencils_expanded_free(given, &table);
-    free(handover);
+    if (c.L == &c.table) spia__stencils_expanded_free(c.given, &c.table);
+    free(c.handover);
     free(s.colour_rows);
     free(s.V);
     free(s.R);

@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
-/* Mesh validation and vertex-to-corner adjacency. */
+/* Mesh validation, vertex-to-corner adjacency and the surface samples' count. */
 #include "internal.h"
 #include "threads.h"
 
@@ -322,4 +322,11 @@ spia_result spia__require_triangles(const spia_mesh *m, spia_status *status) {
                           "triangulate the mesh first",
                           (long long)other, (int)m->face_count, (long long)first);
     return SPIA_OK;
+}
+
+int64_t spia_surface_sample_count(const spia_mesh *mesh, int32_t samples_per_edge) {
+    if (!mesh || !mesh->face_sizes || mesh->face_count <= 0 || samples_per_edge < 1 || samples_per_edge > 64) return 0;
+    int64_t ptex = 0;
+    for (int32_t f = 0; f < mesh->face_count; ++f) ptex += spia__ptex_of_face(mesh->face_sizes[f]);
+    return ptex * samples_per_edge * samples_per_edge;
 }
