@@ -70,8 +70,11 @@ test: build test-c test-asan test-tsan test-fuzz test-python test-package test-b
 macos: deps
 	$(PYTHON) tools/package.py macos
 
+# The C tests, and no circle among the library's source files (which file
+# calls which, read from the build's objects).
 test-c: build
 	ctest --test-dir build/cmake --output-on-failure
+	$(PYTHON) tools/file_deps.py build/cmake
 
 test-asan: deps
 	cmake -S . -B build/asan $(OSD_ARGS) -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSPIA_SANITIZE=ON
