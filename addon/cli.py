@@ -195,7 +195,10 @@ def load_input(path, object_name=None):
             raise ValueError("No mesh object in %s" % path)
         return meshes[0]
 
-    bpy.ops.wm.read_factory_settings(use_empty=True)
+    # An empty scene, the preferences kept: read_factory_settings would reset
+    # them, and with them disable an extension that is not enabled there
+    # (this one, run as a script) and have Blender remove its wheel.
+    bpy.ops.wm.read_homefile(use_empty=True)
     return import_mesh_file(path, object_name)
 
 

@@ -19,8 +19,10 @@ the tests complete the import from the file the way 4.4 does
 (complete_import), and test_import_mapping pins what each version reads.
 
 Only Blenders built with USD (bpy.app.build_options.usd) can import it;
-Debian's blender 3.4.1 is built without. There this module collects no
-tests (``__test__`` below), rather than skipping them.
+Debian's blender (3.4.1 on Debian 12, 4.3.2 on 13) is built without. There
+the export alone is checked inside that Blender's Python
+(test_export_where_blender_has_no_usd, the only test defined there), rather
+than the others skipped.
 """
 
 import math
@@ -35,8 +37,6 @@ import shapes
 import subdiv_pia
 from subdiv_pia import api, native
 from conftest import DATA, MATCH, diagonal, evaluated_control_points, import_obj, positions
-
-__test__ = bool(bpy.app.build_options.usd)
 
 READS_CREASES = bpy.app.version >= (4, 4, 0)
 BOUNDARY_OF_TOKEN = {"edgeOnly": 'ALL', "edgeAndCorner": 'PRESERVE_CORNERS'}
@@ -369,3 +369,40 @@ def test_loop_imports_without_modifier(tmp_path):
     imported, text = export_and_import(tmp_path, source, cage_obj, scheme="LOOP")
     assert usd_token(text, "subdivisionScheme") == "loop"
     assert subsurf(imported) is None and len(imported.modifiers) == 0
+
+
+def test_export_where_blender_has_no_usd(tmp_path):
+    """Without USD in Blender: a cage the add-on made, written from
+    Blender's own Python, holds the cage's points to the bit, its faces,
+    and the crease sharpness Blender's modifier gives OpenSubdiv."""
+    assert not bpy.app.build_options.usd
+    source = car()
+    cage_obj, targets = interpolate(source, levels=1)
+    assert misses(cage_obj, targets).max() <= MATCH
+    cage = positions(cage_obj.data)
+    path = tmp_path / "car.usda"
+    mesh = api.native_mesh(source.data)  # the edges and creases as this Blender stores them
+    native.write_usd(path, mesh, cage)
+    text = path.read_text(encoding="utf-8")
+    written = np.array(usd_array(text, "points"), np.float64).astype(np.float32).reshape(-1, 3)
+    assert written.tobytes() == cage.tobytes()
+    counts = [int(n) for n in usd_array(text, "faceVertexCounts")]
+    indices = [int(i) for i in usd_array(text, "faceVertexIndices")]
+    assert [tuple(indices[sum(counts[:k]):sum(counts[:k + 1])]) for k in range(len(counts))] == \
+        [tuple(f) for f in faces_of(source.data)]
+    assert usd_token(text, "subdivisionScheme") == "catmullClark"
+    assert usd_token(text, "interpolateBoundary") == "edgeOnly"
+    edges, corners = file_sharpness(text)
+    expected = {(min(a, b), max(a, b)): float(np.float32(c) * np.float32(c) * np.float32(10))
+                for (a, b), c in zip(mesh.edges.tolist(), mesh.edge_creases.tolist()) if c * c * 10 >= 1e-6}
+    assert edges.keys() == expected.keys() and len(edges) == 314
+    assert max(abs(edges[k] - expected[k]) for k in edges) <= 1e-6
+    assert len(corners) >= len(range(0, len(cage), 37))
+
+
+if not bpy.app.build_options.usd:
+    # Nothing can import the file here: the import tests are not defined.
+    for _name in [n for n in globals() if n.startswith("test_") and n != "test_export_where_blender_has_no_usd"]:
+        del globals()[_name]
+else:
+    del test_export_where_blender_has_no_usd
