@@ -68,6 +68,13 @@ import traceback
 
 import numpy as np
 
+HERE = os.path.dirname(os.path.abspath(__file__))
+# The sphere meshes of the plain Python tests (tests/python/spheres.py, numpy
+# alone), or the copy beside this file where it runs on its own.
+sys.path.insert(0, HERE if os.path.isfile(os.path.join(HERE, "spheres.py")) else
+                os.path.join(os.path.dirname(HERE), "python"))
+from spheres import cube_sphere, icosphere  # noqa: E402
+
 failures = []
 
 
@@ -87,59 +94,6 @@ def bump(points, amount=0.08):
     p = points / np.linalg.norm(points, axis=1)[:, None]
     r = 1.0 + amount * np.sin(3.0 * p[:, 0] + 1.0) * np.cos(2.0 * p[:, 1]) + 0.3 * amount * p[:, 2] ** 2
     return p * r[:, None]
-
-
-def cube_sphere(k):
-    """A cube with a k x k grid of quads on each side, its vertices on the
-    unit sphere: valence 3 at the cube's corners, 4 elsewhere."""
-    index, positions, faces = {}, [], []
-    g = np.linspace(-1.0, 1.0, k + 1)
-
-    def vertex(p):
-        key = tuple(np.round(p, 9))
-        if key not in index:
-            index[key] = len(positions)
-            positions.append(p)
-        return index[key]
-    for axis in range(3):
-        for sign in (-1.0, 1.0):
-            for i in range(k):
-                for j in range(k):
-                    quad = []
-                    for a, b in ((i, j), (i + 1, j), (i + 1, j + 1), (i, j + 1)):
-                        p = np.zeros(3)
-                        p[axis], p[(axis + 1) % 3], p[(axis + 2) % 3] = sign, g[a], g[b]
-                        quad.append(vertex(p))
-                    faces.append(quad[::-1] if sign < 0 else quad)
-    p = np.asarray(positions)
-    return p / np.linalg.norm(p, axis=1)[:, None], np.asarray(faces, np.int64)
-
-
-def icosphere(levels):
-    """An icosahedron split `levels` times into four triangles per
-    triangle, on the unit sphere: valence 5 at its 12 corners, 6 elsewhere."""
-    t = (1.0 + 5.0 ** 0.5) / 2.0
-    points = [(-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t), (0, -1, -t), (0, 1, -t),
-              (t, 0, -1), (t, 0, 1), (-t, 0, -1), (-t, 0, 1)]
-    faces = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4), (11, 10, 2),
-             (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8), (3, 8, 9), (4, 9, 5), (2, 4, 11),
-             (6, 2, 10), (8, 6, 7), (9, 8, 1)]
-    points = [np.asarray(p, np.float64) for p in points]
-    for _ in range(levels):
-        middle, split = {}, []
-
-        def mid(a, b):
-            key = (min(a, b), max(a, b))
-            if key not in middle:
-                middle[key] = len(points)
-                points.append((points[a] + points[b]) / 2.0)
-            return middle[key]
-        for a, b, c in faces:
-            ab, bc, ca = mid(a, b), mid(b, c), mid(c, a)
-            split += [(a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca)]
-        faces = split
-    p = np.asarray(points)
-    return p / np.linalg.norm(p, axis=1)[:, None], np.asarray(faces, np.int64)
 
 
 def quadrangulate(points, faces):

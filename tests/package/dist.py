@@ -309,6 +309,7 @@ def debian_11():
     wheel = package.wheel_name("linux-x64")
     shutil.copy2(os.path.join(DIST, wheel), target)
     shutil.copy2(os.path.join(HERE, "client_check.py"), target)
+    shutil.copy2(os.path.join(ROOT, "tests", "python", "spheres.py"), target)
     script = ("cd {d} && python3 -m venv --system-site-packages venv && "
               "venv/bin/pip install -q --no-index --disable-pip-version-check {d}/{w} && "
               "cat /etc/debian_version && venv/bin/pip --version && venv/bin/python client_check.py"

@@ -9,33 +9,14 @@ import sys
 import numpy as np
 import pytest
 
+import spheres
 from conftest import ADDON_DIR
 
 
 def quad_sphere(n, radius=1.0):
     """A cube with every face cut into n x n quads, projected to a sphere."""
-    index, positions, faces = {}, [], []
-    g = np.linspace(-1.0, 1.0, n + 1)
-
-    def vertex(p):
-        key = tuple(np.round(p, 9))
-        if key not in index:
-            index[key] = len(positions)
-            positions.append(p)
-        return index[key]
-    for axis in range(3):
-        for sign in (-1.0, 1.0):
-            for i in range(n):
-                for j in range(n):
-                    quad = []
-                    for a, b in ((i, j), (i + 1, j), (i + 1, j + 1), (i, j + 1)):
-                        p = np.zeros(3)
-                        p[axis], p[(axis + 1) % 3], p[(axis + 2) % 3] = sign, g[a], g[b]
-                        quad.append(vertex(p))
-                    faces.append(quad[::-1] if sign < 0 else quad)
-    p = np.asarray(positions)
-    p = radius * p / np.linalg.norm(p, axis=1)[:, None]
-    return p.astype(np.float32), np.asarray(faces, np.int32)
+    p, faces = spheres.cube_sphere(n, radius)
+    return p.astype(np.float32), faces.astype(np.int32)
 
 
 def uv_sphere(nu, nv, cap_angle=0.0):

@@ -4,6 +4,7 @@ built here (loop_oracle.py), interpolation, solvers, the staged procedure."""
 import numpy as np
 import pytest
 
+import spheres
 from conftest import load
 from loop_oracle import hoppe_mask, loop_matrix, refine_boundary_vertex
 
@@ -11,29 +12,9 @@ SCANS = ["bunny", "elephant-with-holes", "bun_zipper", "teapot"]
 
 
 def icosphere(subdivisions=2):
-    t = (1 + 5 ** 0.5) / 2
-    P = [(-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t), (0, -1, -t), (0, 1, -t),
-         (t, 0, -1), (t, 0, 1), (-t, 0, -1), (-t, 0, 1)]
-    F = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4), (11, 10, 2), (10, 7, 6),
-         (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8), (3, 8, 9), (4, 9, 5), (2, 4, 11), (6, 2, 10),
-         (8, 6, 7), (9, 8, 1)]
-    P = [np.array(p, float) for p in P]
-    for _ in range(subdivisions):
-        mid, newF = {}, []
-        def m(a, b):
-            key = (min(a, b), max(a, b))
-            if key not in mid:
-                mid[key] = len(P)
-                P.append((P[a] + P[b]) / 2)
-            return mid[key]
-        for a, b, c in F:
-            ab, bc, ca = m(a, b), m(b, c), m(c, a)
-            newF += [(a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca)]
-        F = newF
-    P = np.array(P)
-    P /= np.linalg.norm(P, axis=1)[:, None]
+    P, F = spheres.icosphere(subdivisions)
     P *= 1 + 0.05 * np.sin(5 * P[:, :1])  # not a perfect sphere
-    return P.astype(np.float32), [list(f) for f in F]
+    return P.astype(np.float32), F.tolist()
 
 
 def torus(nu=16, nv=9):
