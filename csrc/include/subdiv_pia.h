@@ -498,6 +498,34 @@ SPIA_API spia_result spia_refine(const spia_mesh *mesh, const spia_options *opti
                                  int32_t *face_sizes, int32_t *face_vertices, spia_status *status);
 
 
+/*
+ * The cage itself subdivided `levels` times (1 to 6) by Catmull-Clark: the
+ * control mesh of the same limit surface with four times the faces a level,
+ * as the levels of a Multires modifier are built.  Sharpness carries over as OpenSubdiv refines it
+ * (one step softer a level), written back as Blender's creases so that the
+ * refined mesh, read with the same options, has the cage's limit surface:
+ * every edge of the last level with its crease, and every vertex's crease
+ * (where Blender adds the smaller sharpness of a vertex's two edges, that
+ * share is taken off the vertex crease first).  Catmull-Clark only.
+ *
+ * Vertex i of the result is the child of vertex i of the cage (vertices no
+ * face uses stay where they are; loose edges are not carried, but the
+ * vertex sharpness they gave their ends is); the vertices made on edges
+ * and faces follow, in OpenSubdiv's order.  Every face is a quad.
+ * spia_subdivide_size writes the counts in closed form; spia_subdivide then
+ * fills caller buffers of vertex_count * 3 floats, face_count * 4 ints and,
+ * where not NULL, edge_count * 2 ints, edge_count floats and vertex_count
+ * floats.  The options' progress callback is called at the end of each
+ * level (iteration: the level; relative_error: the share done), and
+ * cancels as elsewhere.
+ */
+SPIA_API spia_result spia_subdivide_size(const spia_mesh *mesh, const spia_options *options, int32_t levels,
+                                         int32_t *vertex_count, int32_t *face_count, int32_t *edge_count,
+                                         spia_status *status);
+SPIA_API spia_result spia_subdivide(const spia_mesh *mesh, const spia_options *options, int32_t levels,
+                                    float *positions, int32_t *face_vertices, int32_t *edges, float *edge_creases,
+                                    float *vertex_creases, spia_status *status);
+
 /* ------------------------------------------------------------------------ */
 /* Limit surface samples                                                     */
 /* ------------------------------------------------------------------------ */

@@ -2213,6 +2213,114 @@ spia_result refine(const spia_mesh *m, const spia_adjacency *adj, const spia_opt
     return SPIA_OK;
 }
 
+// Catmull-Clark refinement of the control mesh (spia_subdivide): OpenSubdiv's
+// uniform refinement of the refiner prepare() makes, so the refined mesh
+// carries the cage's sharpness one step softer per level and its limit
+// surface is the cage's.  Child vertices of vertices come first at every
+// level, in their parents' order: the output puts them at the caller's
+// indices, then the others in OpenSubdiv's order.  The sharpness goes back
+// into Blender's creases (c = sqrt(s / 10)), with the two-edge rule
+// (applied again when the mesh is read) taken off the vertex creases
+// beforehand, so that reading the refined mesh gives the refined sharpness.
+spia_result subdivide(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, int32_t levels,
+                      int32_t *vertex_count, int32_t *face_count, int32_t *edge_count, float *positions,
+                      int32_t *face_vertices, int32_t *edges, float *edge_creases, float *vertex_creases,
+                      spia__refine_clock *clock, spia_status *status) {
+    Prepared p;
+    spia_result r = prepare(m, adj, opt, p, status);
+    if (r != SPIA_OK) return r;
+    Far::TopologyRefiner &refiner = *p.refiner;
+    // Counts in closed form: a Catmull-Clark step puts a vertex on every edge
+    // and face, splits an n-gon into n quads and makes 2 edges of each edge
+    // and one of each face corner.
+    const Far::TopologyLevel &base = refiner.GetLevel(0);
+    int64_t nv = base.GetNumVertices(), ne = base.GetNumEdges(), nf = base.GetNumFaces(), corners = 0;
+    for (int f = 0; f < base.GetNumFaces(); ++f) corners += base.GetFaceVertices(f).size();
+    for (int32_t l = 0; l < levels; ++l) {
+        nv += ne + nf;
+        ne = 2 * ne + corners;
+        nf = corners;
+        corners = 4 * nf;
+    }
+    const int32_t n = m->vertex_count;
+    const int64_t total = n + (nv - p.osd_n);
+    if (total > INT32_MAX || 4 * nf > INT32_MAX || 2 * ne > INT32_MAX)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "%d levels make %lld faces, too many", (int)levels,
+                          (long long)nf);
+    *vertex_count = (int32_t)total;
+    *face_count = (int32_t)nf;
+    *edge_count = (int32_t)ne;
+    if (!positions) return SPIA_OK;
+    Far::TopologyRefiner::UniformOptions uniform(levels);
+    uniform.fullTopologyInLastLevel = true;
+    refiner.RefineUniform(uniform);
+    const Far::TopologyLevel &last = refiner.GetLevel(levels);
+    if (last.GetNumVertices() != nv || last.GetNumFaces() != nf || last.GetNumEdges() != ne)
+        return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "refined to %d vertices and %d faces, not the %lld and %lld counted",
+                          last.GetNumVertices(), last.GetNumFaces(), (long long)nv, (long long)nf);
+    if (spia__refine_tick(clock, 0)) return spia__refine_cancelled(status, clock);
+    std::vector<Point> src((size_t)refiner.GetNumVerticesTotal());
+    for (int32_t o = 0; o < p.osd_n; ++o)
+        for (int a = 0; a < 3; ++a) src[o].p[a] = m->positions[3 * (int64_t)p.vertex_of[o] + a];
+    Far::PrimvarRefinerReal<float> primvar(refiner);
+    Point *level_src = src.data();
+    for (int level = 1; level <= levels; ++level) {
+        Point *level_dst = level_src + refiner.GetLevel(level - 1).GetNumVertices();
+        primvar.Interpolate(level, level_src, level_dst);
+        level_src = level_dst;
+        if (spia__refine_level_done(clock, level)) return spia__refine_cancelled(status, clock);
+    }
+    auto out_index = [&](int32_t i) { return i < p.osd_n ? p.vertex_of[i] : n + (i - p.osd_n); };
+    for (int32_t v = 0; v < n; ++v)
+        if (p.osd_of[v] < 0)
+            for (int a = 0; a < 3; ++a) positions[3 * (int64_t)v + a] = m->positions[3 * (int64_t)v + a];
+    for (int32_t i = 0; i < last.GetNumVertices(); ++i)
+        for (int a = 0; a < 3; ++a) positions[3 * (int64_t)out_index(i) + a] = (float)level_src[i].p[a];
+    int64_t k = 0;
+    for (int32_t f = 0; f < last.GetNumFaces(); ++f) {
+        Far::ConstIndexArray fv = last.GetFaceVertices(f);
+        if (fv.size() != 4)
+            return spia__fail(status, SPIA_ERROR_INTERNAL, f, "refined face %d has %d vertices", (int)f, fv.size());
+        for (int c = 0; c < 4; ++c) face_vertices[k++] = out_index(fv[c]);
+    }
+    const bool creased = !opt->ignore_creases;
+    auto crease_of = [](float s) {
+        return s >= kInfiniteSharpness ? 1.0f : (s > 0.0f ? (float)std::sqrt((double)s / 10.0) : 0.0f);
+    };
+    if (edges || edge_creases)
+        for (int32_t e = 0; e < last.GetNumEdges(); ++e) {
+            Far::ConstIndexArray ev = last.GetEdgeVertices(e);
+            if (edges) {
+                edges[2 * (int64_t)e] = out_index(ev[0]);
+                edges[2 * (int64_t)e + 1] = out_index(ev[1]);
+            }
+            if (edge_creases) edge_creases[e] = creased ? crease_of(last.GetEdgeSharpness(e)) : 0.0f;
+        }
+    if (vertex_creases) {
+        // Loose vertices keep theirs (the refined mesh has no loose edges,
+        // so vertices they sharpened carry it as a vertex crease below).
+        for (int32_t v = 0; v < n; ++v)
+            vertex_creases[v] = (p.osd_of[v] < 0 && creased && m->vertex_creases) ? m->vertex_creases[v] : 0.0f;
+        for (int32_t i = 0; i < last.GetNumVertices(); ++i) {
+            float s = last.GetVertexSharpness(i);
+            if (s <= 0.0f || !creased) {
+                vertex_creases[out_index(i)] = 0.0f;
+                continue;
+            }
+            Far::ConstIndexArray ve = last.GetVertexEdges(i);
+            if (s < kInfiniteSharpness && p.blender && ve.size() == 2) {
+                // Blender adds the smaller sharpness of a vertex's two edges.
+                const float added = std::min(crease_to_sharpness(crease_of(last.GetEdgeSharpness(ve[0]))),
+                                             crease_to_sharpness(crease_of(last.GetEdgeSharpness(ve[1]))));
+                s = std::max(0.0f, s - added);
+            }
+            vertex_creases[out_index(i)] = crease_of(s);
+        }
+    }
+    spia__ok(status);
+    return SPIA_OK;
+}
+
 // Limit stencils at samples inside the faces: per ptex face (a quad, or each
 // corner's sub-quad of another polygon), samples_per_edge^2 points at the
 // centres of a regular grid over (s, t), in t, then s order, on Blender's
@@ -2578,5 +2686,20 @@ extern "C" spia_result spia__osd_surface_blocks(const spia_mesh *mesh, const spi
         return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory computing sample stencils");
     } catch (...) {
         return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "unexpected failure computing sample stencils");
+    }
+}
+
+extern "C" spia_result spia__osd_subdivide(const spia_mesh *mesh, const spia_adjacency *adj, const spia_options *options,
+                                           int32_t levels, int32_t *vertex_count, int32_t *face_count,
+                                           int32_t *edge_count, float *positions, int32_t *face_vertices,
+                                           int32_t *edges, float *edge_creases, float *vertex_creases,
+                                           spia__refine_clock *clock, spia_status *status) {
+    try {
+        return subdivide(mesh, adj, options, levels, vertex_count, face_count, edge_count, positions, face_vertices,
+                         edges, edge_creases, vertex_creases, clock, status);
+    } catch (const std::bad_alloc &) {
+        return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory subdividing the cage");
+    } catch (...) {
+        return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "unexpected failure subdividing the cage");
     }
 }

@@ -329,6 +329,13 @@ spia_result spia__loop_hoppe_refine_limit(const spia_mesh *mesh, const spia_opti
                                           int32_t *vertex_count, int32_t *face_count, float *positions,
                                           int32_t *faces, spia__refine_clock *clock, spia_status *status);
 
+/* Catmull-Clark refinement of the control mesh (spia_subdivide), in
+ * catmark_osd.cpp.  Counts only when positions is NULL. */
+spia_result spia__osd_subdivide(const spia_mesh *mesh, const spia_adjacency *adj, const spia_options *options,
+                                int32_t levels, int32_t *vertex_count, int32_t *face_count, int32_t *edge_count,
+                                float *positions, int32_t *face_vertices, int32_t *edges, float *edge_creases,
+                                float *vertex_creases, spia__refine_clock *clock, spia_status *status);
+
 /* Two-phase Doo-Sabin (doosabin.c): limit stencils (paper eq. 2) and
  * refinement (phase one, then regular Doo-Sabin); counts only when
  * positions is NULL (the first step's checks, then the counts in closed

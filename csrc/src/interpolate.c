@@ -151,3 +151,48 @@ spia_result spia_refine(const spia_mesh *mesh, const spia_options *options, int3
     int64_t nc = 0;
     return refine_dispatch(mesh, options, levels, &nv, &nf, &nc, positions, face_sizes, face_vertices, status);
 }
+
+/* ---- subdivision of the cage ---------------------------------------------- */
+
+static spia_result subdivide_dispatch(const spia_mesh *mesh, const spia_options *options, int32_t levels,
+                                      int32_t *vertex_count, int32_t *face_count, int32_t *edge_count,
+                                      float *positions, int32_t *face_vertices, int32_t *edges, float *edge_creases,
+                                      float *vertex_creases, spia_status *status) {
+    spia_options opt;
+    spia_result r = spia__resolve_options(options, &opt, status);
+    if (r != SPIA_OK) return r;
+    if (opt.scheme != SPIA_SCHEME_CATMULL_CLARK)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1,
+                          "subdivision of the cage is for Catmull-Clark; spia_refine refines Loop and Doo-Sabin");
+    if (levels < 1 || levels > 6)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "levels must be 1 to 6, got %d", (int)levels);
+    r = spia_mesh_validate(mesh, status);
+    if (r != SPIA_OK) return r;
+    spia__refine_clock clock;
+    spia__refine_clock_start(&clock, &opt, levels);
+    spia_adjacency adj;
+    r = spia__adjacency_build(mesh, &adj, status);
+    if (r != SPIA_OK) return r;
+    r = spia__osd_subdivide(mesh, &adj, &opt, levels, vertex_count, face_count, edge_count, positions, face_vertices,
+                            edges, edge_creases, vertex_creases, positions ? &clock : NULL, status);
+    spia__adjacency_free(&adj);
+    return r;
+}
+
+spia_result spia_subdivide_size(const spia_mesh *mesh, const spia_options *options, int32_t levels,
+                                int32_t *vertex_count, int32_t *face_count, int32_t *edge_count, spia_status *status) {
+    if (!vertex_count || !face_count || !edge_count)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "the count pointers must not be NULL");
+    return subdivide_dispatch(mesh, options, levels, vertex_count, face_count, edge_count, NULL, NULL, NULL, NULL, NULL,
+                              status);
+}
+
+spia_result spia_subdivide(const spia_mesh *mesh, const spia_options *options, int32_t levels, float *positions,
+                           int32_t *face_vertices, int32_t *edges, float *edge_creases, float *vertex_creases,
+                           spia_status *status) {
+    if (!positions || !face_vertices)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "positions and face_vertices must not be NULL");
+    int32_t nv = 0, nf = 0, ne = 0;
+    return subdivide_dispatch(mesh, options, levels, &nv, &nf, &ne, positions, face_vertices, edges, edge_creases,
+                              vertex_creases, status);
+}
