@@ -43,6 +43,7 @@ import numpy as np
 __all__ = [
     "Mesh", "Report", "Stencils", "PiaError", "PiaCancelled",
     "available", "load_error", "library_path", "platform_tag", "version", "opensubdiv_version_number", "validate", "limit_stencils", "solve", "interpolate", "refine",
+    "subdivide", "fit", "fit_detail", "detail_samples", "DetailResult", "Scan",
     "usd_text", "write_usd",
     "SCHEMES", "BOUNDARY_SMOOTH", "BOUNDARY_RULES", "METHODS", "SOLVE_FLAGS",
 ]
@@ -322,6 +323,11 @@ def _declare(lib):
        _i32p, _i32p, _i64p, ctypes.POINTER(_Status))
     fn("spia_refine", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(_Options), ctypes.c_int32,
        _f32p, _i32p, _i32p, ctypes.POINTER(_Status))
+    fn("spia_stencils_apply", ctypes.c_int, P, _f64p, _f64p)
+    fn("spia_subdivide_size", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(_Options), ctypes.c_int32,
+       _i32p, _i32p, _i32p, ctypes.POINTER(_Status))
+    fn("spia_subdivide", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(_Options), ctypes.c_int32,
+       _f32p, _i32p, _i32p, _f32p, _f32p, ctypes.POINTER(_Status))
     fn("spia_interpolate", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(_Options), _f32p,
        ctypes.POINTER(_Report), ctypes.POINTER(_Status))
     fn("spia_surface_stencils_create", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(_Options),
@@ -677,6 +683,16 @@ class Stencils:
         np.add.at(out, rows, self.weights[:, None] * cage[self.indices])
         return out
 
+    def limit_points(self, cage):
+        """Limit points (N, 3) float64 of a cage (N, 3), computed by the library
+        (threads, no Python loop; :meth:`apply` is the numpy computation)."""
+        cage = np.ascontiguousarray(cage, dtype=np.float64).reshape(-1, 3)
+        out = np.empty((self.row_count, 3), np.float64)
+        code = self._lib.spia_stencils_apply(self._handle, _ptr(cage, ctypes.c_double), _ptr(out, ctypes.c_double))
+        if code != 0:
+            raise PiaError(_RESULT_NAMES.get(code, str(code)), "spia_stencils_apply failed")
+        return out
+
     def solve(self, targets, initial=None, **options):
         """Solves L V = targets; returns (cage, Report).  See :func:`interpolate`.
 
@@ -812,6 +828,39 @@ def refine(mesh, levels, scheme="LOOP", boundary_rule="SMOOTH", boundary_smooth=
         _raise(code, status)
     return positions, sizes, face_vertices
 
+
+
+def subdivide(mesh, levels=1, boundary_smooth="ALL", use_creases=True, quality=3, opensubdiv_version=None,
+              progress=None):
+    """The cage ``mesh`` subdivided ``levels`` times (1 to 6) by Catmull-Clark,
+    as a :class:`Mesh`: the control mesh of the same limit surface, all
+    quads, with every edge and its crease and every vertex's crease (the
+    cage's sharpness one step softer a level, in Blender's terms).  Vertex i
+    is the child of the cage's vertex i.  ``progress(level, share_done) ->
+    bool`` is called at the end of each level; True cancels."""
+    lib = _library()
+    opts, _keep = _options(boundary_smooth=boundary_smooth, use_creases=use_creases, quality=quality,
+                           opensubdiv_version=opensubdiv_version, progress=progress)
+    cm = mesh._c()
+    status = _Status()
+    nv, nf, ne = ctypes.c_int32(), ctypes.c_int32(), ctypes.c_int32()
+    code = lib.spia_subdivide_size(ctypes.byref(cm), ctypes.byref(opts), int(levels), ctypes.byref(nv),
+                                   ctypes.byref(nf), ctypes.byref(ne), ctypes.byref(status))
+    if code != 0:
+        _raise(code, status)
+    positions = np.empty((nv.value, 3), np.float32)
+    face_vertices = np.empty(4 * nf.value, np.int32)
+    edges = np.empty((ne.value, 2), np.int32)
+    edge_creases = np.empty(ne.value, np.float32)
+    vertex_creases = np.empty(nv.value, np.float32)
+    code = lib.spia_subdivide(ctypes.byref(cm), ctypes.byref(opts), int(levels), _ptr(positions, ctypes.c_float),
+                              _ptr(face_vertices, ctypes.c_int32), _ptr(edges, ctypes.c_int32),
+                              _ptr(edge_creases, ctypes.c_float), _ptr(vertex_creases, ctypes.c_float),
+                              ctypes.byref(status))
+    if code != 0:
+        _raise(code, status)
+    return Mesh(positions, np.full(nf.value, 4, np.int32), face_vertices, edges=edges, edge_creases=edge_creases,
+                vertex_creases=vertex_creases)
 
 # --------------------------------------------------------------------------
 # USD export
@@ -1273,3 +1322,62 @@ def fit(cage, scan, mode="SURFACE", samples_per_edge=4, cutoff=0.02, smoothing=1
         folded_before=rep.folded_before, folded_after=rep.folded_after, scan_point_count=rep.scan_point_count,
         scan_before=dist(rep.scan_before), scan_after=dist(rep.scan_after),
         scan_distances=per_scan[: scan.vertex_count] if rep.scan_point_count else None)
+
+
+@dataclass
+class DetailResult:
+    """What :func:`fit_detail` made: the finest level's control mesh and
+    the points of its limit surface at its vertices (what a Multires
+    modifier's finest level shows), and each level's fit."""
+    levels: int
+    mesh: Mesh                  # the finest level's control mesh, fitted (mesh.positions)
+    points: np.ndarray = field(repr=False)   # (N, 3) float32: its limit points, the finest level's vertices
+    reports: list = field(default_factory=list)  # a FitReport per level, coarse to fine
+
+    @property
+    def report(self):
+        """The finest level's fit."""
+        return self.reports[-1]
+
+
+def detail_samples(samples_per_edge, level):
+    """Samples per ptex edge for detail level ``level``: the base's count
+    halved a level (each level's faces are a quarter of the last's), down to
+    two, the fewest with which the fold guard sees a sample's neighbours."""
+    return max(2, int(samples_per_edge) >> int(level))
+
+
+def fit_detail(cage, scan, levels, samples_per_edge=4, progress=None, boundary_smooth="ALL", use_creases=True,
+               quality=3, opensubdiv_version=None, threads=0, measure_scan=True, **fit_options):
+    """Detail levels on a cage whose limit surface lies on ``scan`` (usually
+    the result of :func:`fit`): the cage subdivided one level at a time
+    (:func:`subdivide`), and each level fitted to the scan as a cage of its
+    own (:func:`fit`, with its guards: the fairness term holds each level to
+    the level above where the scan says nothing, so holes are spanned
+    smoothly; folds and outliers do not pull).  Coarse levels take the broad
+    shape, fine levels the detail.  ``levels``: 1 to 6.  Each level's samples
+    per edge: :func:`detail_samples`.  ``progress(level, round, mean) ->
+    bool`` follows each level's fit; True cancels (:class:`PiaCancelled`).
+    ``fit_options``: those of :func:`fit` (cutoff, smoothing, ...).
+    The finest level's vertices are numbered as :func:`subdivide` applied
+    one level at a time numbers them.  Returns a :class:`DetailResult`."""
+    levels = int(levels)
+    if not 1 <= levels <= 6:
+        raise PiaError("INVALID_ARGUMENT", f"levels must be 1 to 6, not {levels!r}")
+    surface = dict(boundary_smooth=boundary_smooth, use_creases=use_creases, quality=quality,
+                   opensubdiv_version=opensubdiv_version)
+    current = cage
+    reports = []
+    for level in range(1, levels + 1):
+        tick = None if progress is None else (lambda _l, _s, level=level: progress(level, 0, 0.0))
+        refined = subdivide(current, 1, progress=tick, **surface)
+        follow = None if progress is None else (lambda it, value, level=level: progress(level, it, value))
+        positions, report = fit(refined, scan, samples_per_edge=detail_samples(samples_per_edge, level),
+                                measure_scan=measure_scan and level == levels, progress=follow, threads=threads,
+                                **surface, **fit_options)
+        reports.append(report)
+        current = Mesh(positions, refined.face_sizes, refined.face_vertices, edges=refined.edges,
+                       edge_creases=refined.edge_creases, vertex_creases=refined.vertex_creases)
+    stencils = limit_stencils(current, threads=threads, **surface)
+    points = stencils.limit_points(current.positions).astype(np.float32)
+    return DetailResult(levels=levels, mesh=current, points=points, reports=reports)

@@ -1,0 +1,87 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The cage subdivided (subdivide) and detail levels fitted to a scan
+(fit_detail), checked with numpy: limit points from the stencils' CSR
+arrays, distances to an analytic sphere and brute-force distances to a
+scan's triangles."""
+import numpy as np
+import pytest
+
+from spheres import cube_sphere, icosphere
+
+
+def _mesh(native, positions, faces, **kwargs):
+    return native.Mesh.from_faces(np.asarray(positions, np.float32), [list(f) for f in faces], **kwargs)
+
+
+@pytest.mark.parametrize("levels", [1, 2, 3])
+def test_subdivided_cage_has_the_cages_limit_surface(native, levels):
+    positions, quads = cube_sphere(3)
+    positions = positions * np.array([1.0, 0.7, 1.3])
+    cage = _mesh(native, positions, quads)
+    fine = native.subdivide(cage, levels)
+    assert (fine.face_sizes == 4).all() and len(fine.face_sizes) == len(quads) * 4 ** levels
+    assert len(fine.positions) == 6 * (3 * 2 ** levels) ** 2 + 2  # a closed genus-0 quad mesh: V = F + 2
+    # numpy's products over the CSR arrays (Stencils.apply), for both meshes.
+    ours = native.limit_stencils(cage).apply(cage.positions)
+    theirs = native.limit_stencils(fine).apply(fine.positions)[: len(positions)]
+    assert np.abs(theirs - ours).max() < 1e-6
+    # Every face is a quad of distinct vertices, and the edges are the faces' edges.
+    corners = fine.face_vertices.reshape(-1, 4)
+    assert all(len(set(q)) == 4 for q in corners)
+    face_edges = {tuple(sorted((q[i], q[(i + 1) % 4]))) for q in corners for i in range(4)}
+    assert face_edges == {tuple(sorted(e)) for e in fine.edges}
+    assert not fine.edge_creases.any() and not fine.vertex_creases.any()
+
+
+def test_subdivided_creases_are_one_step_softer(native):
+    positions, quads = cube_sphere(2)
+    ring = [(quads[0][i], quads[0][(i + 1) % 4]) for i in range(4)]
+    cage = _mesh(native, positions, quads, edges=np.array(ring, np.int32),
+                 edge_creases=np.array([1.0, 0.5, 0.5, 0.5], np.float32))
+    fine = native.subdivide(cage, 1)
+    sharpness = 10.0 * fine.edge_creases.astype(np.float64) ** 2
+    # Each creased edge's two halves: sharpness 10 stays 10 (infinite); 2.5 becomes 1.5.
+    values = np.sort(sharpness[sharpness > 0])
+    assert len(values) == 8
+    assert np.allclose(values[:6], 1.5, atol=1e-5) and np.allclose(values[6:], 10.0)
+
+
+def test_subdivide_refuses(native):
+    positions, quads = cube_sphere(1)
+    cage = _mesh(native, positions, quads)
+    for levels in (0, 7):
+        with pytest.raises(native.PiaError, match="levels must be 1 to 6"):
+            native.subdivide(cage, levels)
+    with pytest.raises(native.PiaCancelled):
+        native.subdivide(cage, 2, progress=lambda level, share: True)
+
+
+def test_detail_levels_lie_on_the_sphere(native):
+    scan_positions, triangles = icosphere(5)
+    scan = native.Scan(_mesh(native, scan_positions, triangles))
+    positions, quads = cube_sphere(2, radius=0.85)
+    cage = _mesh(native, positions, quads)
+    fitted, report = native.fit(cage, scan, cutoff=0.3)
+    base = native.Mesh(fitted, cage.face_sizes, cage.face_vertices)
+    calls = []
+    detail = native.fit_detail(base, scan, 2, cutoff=0.3, progress=lambda *a: calls.append(a) and False)
+    assert detail.levels == 2 and len(detail.reports) == 2
+    assert len(detail.points) == len(detail.mesh.positions) == 6 * 8 * 8 + 2
+    assert {c[0] for c in calls} == {1, 2}
+    # The icosphere's flat facets lie within 1 - cos(half the edge angle) of the unit sphere.
+    edge = np.linalg.norm(scan_positions[triangles[:, 0]] - scan_positions[triangles[:, 1]], axis=1).max()
+    sagitta = 1.0 - np.cos(np.arcsin(edge / 2.0))
+    radius = np.linalg.norm(detail.points, axis=1)
+    assert np.abs(radius - 1.0).max() < 2.0 * sagitta
+    base_radius = np.linalg.norm(native.limit_stencils(base).apply(base.positions), axis=1)
+    assert np.abs(radius - 1.0).mean() <= np.abs(base_radius - 1.0).mean() + 1e-6
+    assert detail.report.after.mean < 2.0 * sagitta
+    with pytest.raises(native.PiaCancelled):
+        native.fit_detail(base, scan, 2, cutoff=0.3, progress=lambda level, it, value: level == 2)
+    with pytest.raises(native.PiaError, match="levels must be 1 to 6"):
+        native.fit_detail(base, scan, 0)
+
+
+def test_detail_samples_halve_down_to_two(native):
+    assert [native.detail_samples(8, level) for level in range(1, 5)] == [4, 2, 2, 2]
+    assert native.detail_samples(4, 1) == 2
