@@ -154,6 +154,9 @@ def parse_args(argv):
                      help="samples farther than this from the scan do not pull (default 0.02)")
     fit.add_argument("--fit-smoothing", type=float, help="fairness weight (default 1e-5)")
     fit.add_argument("--fit-samples", type=int, help="samples per face edge (default 4)")
+    fit.add_argument("--fit-detail-levels", type=int, metavar="LEVELS",
+                     help="SURFACE: a Multires modifier with this many levels (1 to 6), each fitted "
+                          "to the scan, the finest on it (default 0: none)")
     fit.add_argument("--fit-paint-scan", action="store_true",
                      help="also write each scan vertex's distance to the fitted surface onto the "
                           "target (attributes pia_scan_distance and pia_scan_distance_color), saved "
@@ -289,7 +292,7 @@ def main(argv):
                 raise ValueError("Target %r is neither a mesh file (.obj, .ply, .stl) nor an object "
                                  "in %s" % (args.target, args.input))
         settings["target"] = target.name
-    for name in ("fit", "fit_cutoff", "fit_smoothing", "fit_samples"):
+    for name in ("fit", "fit_cutoff", "fit_smoothing", "fit_samples", "fit_detail_levels"):
         value = getattr(args, name)
         if value is not None:
             settings[name] = value

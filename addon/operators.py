@@ -115,6 +115,7 @@ def draw_fit_settings(layout, settings, has_target):
     sub.enabled = settings.fit == 'SURFACE'
     sub.prop(settings, "fit_smoothing")
     sub.prop(settings, "fit_samples")
+    sub.prop(settings, "fit_detail_levels")
     col.prop(settings, "fit_paint_scan")
 
 

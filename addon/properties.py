@@ -137,6 +137,11 @@ def settings_annotations():
                                    soft_max=8,
                                    description="Surface fit: samples per face edge (the square "
                                                "per quad, or per corner of another polygon)"),
+        "fit_detail_levels": IntProperty(name="Detail", default=d["fit_detail_levels"], min=0, max=6,
+                                         description="Surface fit: a Multires modifier with this many "
+                                                     "levels on the new object, each fitted to the "
+                                                     "target, the finest on it (the scan's detail to "
+                                                     "sculpt on and bake from). 0: none"),
         "fit_paint_scan": BoolProperty(name="Paint Scan", default=d["fit_paint_scan"],
                                        description="Write each target vertex's distance to the fitted "
                                                    "surface onto the target: the point attribute "

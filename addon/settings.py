@@ -36,6 +36,9 @@ DEFAULT_SETTINGS = {
     "fit_cutoff": 0.02,
     "fit_smoothing": 1e-5,
     "fit_samples": 4,
+    # Surface fit: that many Multires levels on the new object, fitted to the
+    # scan level by level (0: none).
+    "fit_detail_levels": 0,
     # Write each scan vertex's distance to the fitted surface onto the scan.
     "fit_paint_scan": False,
     # Catmull-Clark: the OpenSubdiv version whose rules the modifier follows,
@@ -56,6 +59,7 @@ BOUNDARY_RULES = ('SMOOTH', 'HOPPE')
 # symmetrizable limit matrix (closed meshes) and says so otherwise.
 METHODS = tuple(native.METHODS)
 LOOP_MAX_LEVELS = 8  # native.refine's limit
+MAX_DETAIL_LEVELS = 6  # native.fit_detail's limit
 SCHEME_NAMES = {'CATMULL_CLARK': "Catmull-Clark", 'LOOP': "Loop", 'DOO_SABIN': "Doo-Sabin"}
 
 # A live cage follows its source's vertices one to one, which a cleaned copy's are not.
@@ -189,6 +193,9 @@ def check_settings(settings):
         raise ValueError("fit_smoothing must be zero or a positive number")
     if not 1 <= s["fit_samples"] <= 64:
         raise ValueError("fit_samples must be in 1..64, not %d" % s["fit_samples"])
+    s["fit_detail_levels"] = int(s["fit_detail_levels"])
+    if not 0 <= s["fit_detail_levels"] <= MAX_DETAIL_LEVELS:
+        raise ValueError("fit_detail_levels must be in 0..%d, not %d" % (MAX_DETAIL_LEVELS, s["fit_detail_levels"]))
     version = s["opensubdiv_version"]
     if version is None:
         version = ""
@@ -203,6 +210,9 @@ def check_settings(settings):
     if target and s["fit"] == 'SURFACE' and s["scheme"] != 'CATMULL_CLARK':
         raise ValueError("The Surface fit works on the Catmull-Clark limit surface only: use "
                          "Fit 'Vertices' for %s" % SCHEME_NAMES[s["scheme"]])
+    if s["fit_detail_levels"] and not (target and s["fit"] == 'SURFACE'):
+        raise ValueError("Detail levels (fit_detail_levels %d) come with a Surface fit: set a target "
+                         "(the scan) and Fit 'Surface', or set the levels to 0" % s["fit_detail_levels"])
     return s
 
 

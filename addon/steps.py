@@ -9,11 +9,13 @@ import bpy
 
 from . import live as live_module
 from . import native
+from .detail import apply_detail, fit_detail_work, store_detail
 from .compute import (check_source, cleanup_hint, find_target, limit_work, prepare_cage, require_library,
                       scan_work)
-from .mesh_io import cleaned_copy, non_triangle_count, triangulated_copy
-from .objects import (build_object, discard_object, limit_cage_of, paint_scan, set_limit_object, store_cleanup,
-                      stored_settings)
+from .mesh_io import cleaned_copy, native_mesh, non_triangle_count, triangulated_copy
+from .objects import (DISTANCE_ATTRIBUTE, COLOR_ATTRIBUTE, build_object, discard_object, heat_colors,
+                      limit_cage_of, paint_scan, set_limit_object, store_cleanup, stored_settings,
+                      write_heat_map)
 from .settings import LIMIT_SCHEMES, LIVE_CLEANUP_MESSAGE, check_settings, settings_from_modifier
 
 
@@ -55,7 +57,12 @@ def interpolate(obj, *, context=None, name=None, progress=None, live=False, **se
     'VERTICES' (each control vertex's limit point moves to its closest point
     on the target; any scheme). fit_cutoff (relative to the target's
     bounding-box diagonal): samples farther away do not pull (holes);
-    fit_smoothing: fairness weight. The report is then a native.FitReport
+    fit_smoothing: fairness weight. fit_detail_levels (Surface fit, 0 to 6)
+    gives the new object a Multires modifier with that many levels, fitted
+    to the target level by level (native.fit_detail), in place of its
+    Subdivision Surface modifier; its finest level lies on the target, the
+    heat maps (pia_distance, and the scan's with fit_paint_scan) are that
+    level's, and pia_fit_detail_* hold its figures. The report is then a native.FitReport
     (before/after distances relative to the target's diagonal), and the new
     object has the point attributes pia_distance (per vertex, relative) and
     pia_distance_color (heat map, the active colour attribute).
@@ -117,6 +124,9 @@ def interpolate_steps(obj, *, context=None, name=None, progress=None, live=False
     s = check_settings(merged)
     if live and s["cleanup"]:
         raise ValueError(LIVE_CLEANUP_MESSAGE % obj.name)
+    if live and s["fit_detail_levels"]:
+        raise ValueError("'%s': Live solves the cage again on each edit, which would leave its detail "
+                         "levels behind: set the detail levels to 0 for a live cage" % obj.name)
     loop = s["scheme"] == 'LOOP'
     separate_limit = s["scheme"] in LIMIT_SCHEMES
     target = find_target(obj, s)
@@ -153,6 +163,9 @@ def interpolate_steps(obj, *, context=None, name=None, progress=None, live=False
                     raise
                 raise named from None
             limit = (yield limit_work(data, s, cage, progress=refining)) if separate_limit else None
+            detail = None
+            if scan is not None and s["fit_detail_levels"]:
+                detail = yield fit_detail_work(native_mesh(data), cage, scan, s, progress=progress)
         except native.PiaError as error:
             hinted = cleanup_hint(error, data, s)
             if hinted is not None:
@@ -173,10 +186,18 @@ def interpolate_steps(obj, *, context=None, name=None, progress=None, live=False
     try:
         if stats is not None:
             store_cleanup(new_obj, stats)
+        if detail is not None:
+            detail_levels, subdivided = detail
+            apply_detail(new_obj, detail_levels, subdivided, s, context=context)
+            store_detail(new_obj, detail_levels)
+            # The heat map at the cage's vertices: the finest level's
+            # distances there (vertex i of every level is vertex i's child).
+            near = detail_levels.report.vertex_distances[:len(new_obj.data.vertices)]
+            write_heat_map(new_obj.data, DISTANCE_ATTRIBUTE, COLOR_ATTRIBUTE, near, heat_colors(near))
         if live:
             live_module.set_live(new_obj, True, source=obj)
         if target is not None and s["fit_paint_scan"]:  # last: the one step that writes to another object
-            why_not = paint_scan(target, report)
+            why_not = paint_scan(target, report if detail is None else detail[0].report)
             new_obj["pia_fit_scan_painted"] = why_not is None
             if why_not is not None:
                 new_obj["pia_fit_scan_not_painted"] = "The scan '%s' was not painted: %s" % (target.name, why_not)

@@ -32,7 +32,7 @@ ROOT = os.path.dirname(os.path.dirname(HERE))
 # imported only below, once the environment is in place.
 IN_EXECUTABLE = "bpy" in sys.modules
 PACKAGE_NAME = "subdiv_pia"
-SUBMODULES = ("native", "cleanup", "settings", "mesh_io", "compute", "objects", "reports", "live", "steps", "jobs",
+SUBMODULES = ("native", "cleanup", "settings", "mesh_io", "compute", "objects", "reports", "detail", "live", "steps", "jobs",
               "api", "properties", "operators", "ui", "cli")
 
 
