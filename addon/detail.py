@@ -55,8 +55,7 @@ def fit_detail_work(cage_mesh, cage_positions, scan, settings, progress=None):
 
     def run():
         detail = native.fit_detail(base, scan, levels, samples_per_edge=settings["fit_samples"],
-                                   cutoff=settings["fit_cutoff"], smoothing=settings["fit_smoothing"],
-                                   progress=follow, **options)
+                                   cutoff=settings["fit_cutoff"], progress=follow, **options)
         # One level at a time, as fit_detail subdivides: each level's edge
         # vertices come in the order of that level's own edges, which a
         # subdivision of several levels at once numbers otherwise.
