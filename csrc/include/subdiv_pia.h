@@ -683,7 +683,17 @@ typedef enum spia_fit_flags {
     /* Leave out the scan-to-surface distances (scan_before, scan_after),
      * which cost a grid of limit points, a hierarchy over it and a query
      * per scan vertex. */
-    SPIA_FIT_NO_SCAN_DISTANCES = 4
+    SPIA_FIT_NO_SCAN_DISTANCES = 4,
+    /* SURFACE (samples_per_edge 2 or more): the scan pulls too.  Every
+     * round, each scan vertex within the cut-off pulls the surface's
+     * nearest sample (one that pulls itself) along the scan's normal at
+     * that sample's closest point, weighted by the robust kernel, and all
+     * of them together as much as all the samples: the surface meets the
+     * scan from both sides, reaching into the scan's detail between the
+     * samples' closest points (its vertices, its ridges) instead of
+     * cutting across it.  For fits that start on the scan (detail
+     * levels). */
+    SPIA_FIT_SCAN_PULL = 8
 } spia_fit_flags;
 
 typedef struct spia_fit_distances {
@@ -758,6 +768,25 @@ typedef struct spia_fit_report {
 SPIA_API spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_options *options,
                               const spia_fit_options *fit, float *cage_out, spia_fit_report *report,
                               spia_status *status);
+
+/*
+ * Positions for the vertices of a quad mesh `mesh` (a cage subdivided: every
+ * face a quad) such that its faces drawn flat, as Blender's Multires draws
+ * its finest level, lie as close as they can to the mesh's Catmull-Clark
+ * limit surface: the limit points at each quad's corners, edge midpoints and
+ * centre against the bilinear quad through the new positions, in least
+ * squares (the corners weighted a sixteenth, which keeps a checkerboard of
+ * the vertices determined).  The limit points of the
+ * vertices themselves draw flat faces that cut inside convex parts and
+ * outside concave ones by their sagitta; these straddle the surface
+ * instead.  `out` holds vertex_count * 3 floats; vertices no face uses keep
+ * their positions.  options as for spia_limit_stencils_create (Catmull-Clark
+ * only); its progress callback is called about every 0.1 s with iteration 0
+ * and relative_error 0, and cancels.  Fails with SPIA_ERROR_FACE_SIZE for a
+ * face that is not a quad.
+ */
+SPIA_API spia_result spia_flat_positions(const spia_mesh *mesh, const spia_options *options, float *out,
+                                         spia_status *status);
 
 #ifdef __cplusplus
 }

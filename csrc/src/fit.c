@@ -68,9 +68,12 @@ static spia_result resolve_fit(const spia_fit_options *in, spia_fit_options *out
     if (o.slide_weight < 0.0) o.slide_weight = 0.0;
     if (!(o.robust_scale > 0.0) || !isfinite(o.robust_scale))
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "robust_scale must be a positive number");
-    const uint32_t known = SPIA_FIT_ALLOW_FOLDS | SPIA_FIT_HARD_CUTOFF | SPIA_FIT_NO_SCAN_DISTANCES;
+    const uint32_t known = SPIA_FIT_ALLOW_FOLDS | SPIA_FIT_HARD_CUTOFF | SPIA_FIT_NO_SCAN_DISTANCES | SPIA_FIT_SCAN_PULL;
     if (o.flags & ~known)
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "unknown fit flags 0x%x", (unsigned)(o.flags & ~known));
+    if ((o.flags & SPIA_FIT_SCAN_PULL) && (o.mode != SPIA_FIT_SURFACE || o.samples_per_edge < 2))
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1,
+                          "the scan's pull (SPIA_FIT_SCAN_PULL) needs a Surface fit with samples_per_edge of 2 or more");
     if (!(o.cutoff > 0.0) || !isfinite(o.cutoff))
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "cutoff must be a positive number");
     if (!isfinite(o.smoothing) || !isfinite(o.point_weight) || !isfinite(o.round_tolerance) ||
@@ -1033,6 +1036,13 @@ typedef struct fit_buffers {
     int32_t *grid_sizes, *grid_quads, *scan_vertex, *scan_near;
     double *scan_pts;
     int64_t scan_count;
+    /* The scan's pull (SPIA_FIT_SCAN_PULL): the samples as the quads of
+     * each ptex face's grid, as a scan to find each scan vertex's nearest
+     * sample in; per sample the pull's weight and offset along the normal. */
+    spia_scan *pull_surface;
+    float *pull_pos, *pull_d;
+    int32_t *pull_sizes, *pull_quads, *pull_near, *pull_faces;
+    double *pull_w, *pull_off;
 } fit_buffers;
 
 static void buffers_free(fit_buffers *b) {
@@ -1049,6 +1059,9 @@ static void buffers_free(fit_buffers *b) {
     free(b->grid_quads), free(b->scan_vertex);
     free(b->scan_near);
     free(b->scan_pts);
+    spia_scan_free(b->pull_surface);
+    free(b->pull_pos), free(b->pull_d), free(b->pull_sizes), free(b->pull_quads), free(b->pull_near);
+    free(b->pull_faces), free(b->pull_w), free(b->pull_off);
 }
 
 /* ---- folds ---------------------------------------------------------------- */
@@ -1239,6 +1252,39 @@ static spia_result scan_side_cancelled(spia_status *status) {
     return spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled measuring the scan's distances to the surface");
 }
 
+/* The scan vertices its faces use, in double, and the buffers of their
+ * distances (once: the scan side's measure and the scan's pull share them). */
+static spia_result scan_points_prepare(const spia_scan *scan, fit_buffers *b) {
+    if (b->scan_pts) return SPIA_OK;
+    int32_t scan_n = 0;
+    const int32_t *original = NULL;
+    const float *P = spia__scan_positions(scan, &scan_n, &original);
+    uint8_t *used = malloc((size_t)scan_n + 1);
+    if (!used) return SPIA_ERROR_OUT_OF_MEMORY;
+    spia__scan_used_vertices(scan, used);
+    int64_t count = 0;
+    for (int32_t v = 0; v < scan_n; ++v) count += used[v];
+    b->scan_count = count;
+    b->scan_vertex = malloc(sizeof(int32_t) * (size_t)(count + 1));
+    b->scan_pts = malloc(sizeof(double) * 3 * (size_t)(count + 1));
+    b->scan_d = malloc(sizeof(float) * (size_t)(count + 1));
+    b->scan_scratch = malloc(sizeof(float) * (size_t)(count + 1));
+    b->scan_near = malloc(sizeof(int32_t) * (size_t)(count + 1));
+    if (!b->scan_vertex || !b->scan_pts || !b->scan_d || !b->scan_scratch || !b->scan_near) {
+        free(used);
+        return SPIA_ERROR_OUT_OF_MEMORY;
+    }
+    int64_t k = 0;
+    for (int32_t v = 0; v < scan_n; ++v)
+        if (used[v]) {
+            b->scan_vertex[k] = original ? original[v] : v;
+            for (int c = 0; c < 3; ++c) b->scan_pts[3 * k + c] = P[3 * (int64_t)v + c];
+            ++k;
+        }
+    free(used);
+    return SPIA_OK;
+}
+
 /* The limit surface's grid and the scan vertices to measure.  The grid
  * has 2^levels quads along each edge of a ptex face, levels one more than
  * the samples' (ceil(log2 per_edge) + 1), so that its flat quads stay
@@ -1281,39 +1327,11 @@ static spia_result scan_side_prepare(const spia_mesh *cage, const spia_adjacency
                     q += 4;
                 }
     }
-    int32_t scan_n = 0;
-    const int32_t *original = NULL;
-    const float *P = spia__scan_positions(scan, &scan_n, &original);
     b->grid_pos = malloc(sizeof(float) * 3 * (size_t)(gv > 0 ? gv : 1));
     b->grid_sizes = malloc(sizeof(int32_t) * (size_t)(gf > 0 ? gf : 1));
-    uint8_t *used = malloc((size_t)scan_n + 1);
-    if (!b->grid_pos || !b->grid_sizes || !used) {
-        free(used);
-        return SPIA_ERROR_OUT_OF_MEMORY;
-    }
+    if (!b->grid_pos || !b->grid_sizes) return SPIA_ERROR_OUT_OF_MEMORY;
     for (int32_t f = 0; f < gf; ++f) b->grid_sizes[f] = 4;
-    spia__scan_used_vertices(scan, used);
-    int64_t count = 0;
-    for (int32_t v = 0; v < scan_n; ++v) count += used[v];
-    b->scan_count = count;
-    b->scan_vertex = malloc(sizeof(int32_t) * (size_t)(count + 1));
-    b->scan_pts = malloc(sizeof(double) * 3 * (size_t)(count + 1));
-    b->scan_d = malloc(sizeof(float) * (size_t)(count + 1));
-    b->scan_scratch = malloc(sizeof(float) * (size_t)(count + 1));
-    b->scan_near = malloc(sizeof(int32_t) * (size_t)(count + 1));
-    if (!b->scan_vertex || !b->scan_pts || !b->scan_d || !b->scan_scratch || !b->scan_near) {
-        free(used);
-        return SPIA_ERROR_OUT_OF_MEMORY;
-    }
-    int64_t k = 0;
-    for (int32_t v = 0; v < scan_n; ++v)
-        if (used[v]) {
-            b->scan_vertex[k] = original ? original[v] : v;
-            for (int c = 0; c < 3; ++c) b->scan_pts[3 * k + c] = P[3 * (int64_t)v + c];
-            ++k;
-        }
-    free(used);
-    return SPIA_OK;
+    return scan_points_prepare(scan, b);
 }
 
 /* The distances of the scan vertices to the limit surface of cage V.  The
@@ -1425,6 +1443,7 @@ typedef struct fit_run {
     int64_t N3, S;
     double diagonal, cutoff_abs;
     int sign;          /* see orientation */
+    double kernel_scale; /* the round's robust kernel scale (round_weights) */
     int measured_best; /* the samples' last measure is of the best cage */
     /* The samples serve the report in both modes; for Loop and Doo-Sabin
      * (VERTICES only) there are none, and the limit points are measured. */
@@ -1672,6 +1691,7 @@ static spia_result round_weights(fit_run *u, int guard, fit_system *f) {
     const int64_t S = u->S;
     cutoff_weights(b->d, b->on_boundary, S, u->cutoff_abs, b->wts);
     const double kernel_scale = u->fo.robust_scale * median_pulling(b->d, b->wts, S, b->scratch);
+    u->kernel_scale = kernel_scale;
     if (!(u->fo.flags & SPIA_FIT_HARD_CUTOFF)) robust_weights(b->d, S, kernel_scale, b->wts);
     if (guard) {
         for (int64_t q = 0; q < S; ++q)
@@ -1683,6 +1703,122 @@ static spia_result round_weights(fit_run *u, int guard, fit_system *f) {
                           &b->bar_capacity, b->bar_start))
             return fit_oom(u);
         f->bar = b->bar, f->bar_start = b->bar_start;
+    }
+    return SPIA_OK;
+}
+
+/* The scan's pull weighs its vertices as a whole like the samples as a whole
+ * (each vertex by the samples per pulling scan vertex), within these bounds. */
+#define SCAN_PULL_MIN_RATIO 1.0
+#define SCAN_PULL_MAX_RATIO 64.0
+
+static spia_result scan_pull_prepare(fit_run *u) {
+    fit_buffers *b = &u->b;
+    const int64_t S = u->S, k = u->fo.samples_per_edge;
+    if (scan_points_prepare(u->scan, b) != SPIA_OK) return fit_oom(u);
+    const int64_t ptex = S / (k * k), quads = ptex * (k - 1) * (k - 1);
+    if (quads > INT32_MAX || S > INT32_MAX)
+        return spia__fail(u->status, SPIA_ERROR_INVALID_ARGUMENT, -1,
+                          "too many samples (%lld) for the scan's pull", (long long)S);
+    const int64_t n = b->scan_count + 1;
+    b->pull_quads = malloc(sizeof(int32_t) * 4 * (size_t)(quads + 1));
+    b->pull_sizes = malloc(sizeof(int32_t) * (size_t)(quads + 1));
+    b->pull_pos = malloc(sizeof(float) * 3 * (size_t)S);
+    b->pull_near = malloc(sizeof(int32_t) * (size_t)n);
+    b->pull_faces = malloc(sizeof(int32_t) * (size_t)n);
+    b->pull_d = malloc(sizeof(float) * (size_t)n);
+    b->pull_w = malloc(sizeof(double) * (size_t)S);
+    b->pull_off = malloc(sizeof(double) * (size_t)S);
+    if (!b->pull_quads || !b->pull_sizes || !b->pull_pos || !b->pull_near || !b->pull_faces || !b->pull_d ||
+        !b->pull_w || !b->pull_off)
+        return fit_oom(u);
+    int32_t *q = b->pull_quads;
+    for (int64_t g = 0; g < ptex; ++g)
+        for (int64_t j = 0; j + 1 < k; ++j)
+            for (int64_t i = 0; i + 1 < k; ++i) {
+                const int32_t v = (int32_t)(g * k * k + j * k + i);
+                q[0] = v, q[1] = v + 1, q[2] = (int32_t)(v + k + 1), q[3] = (int32_t)(v + k);
+                q += 4;
+            }
+    for (int64_t f = 0; f < quads; ++f) b->pull_sizes[f] = 4;
+    for (int64_t i = 0; i < b->scan_count; ++i) b->pull_near[i] = -1;
+    return SPIA_OK;
+}
+
+/* SPIA_FIT_SCAN_PULL: each scan vertex within the cut-off pulls the
+ * surface's nearest pulling sample along the scan's normal at that
+ * sample's closest point, with the robust kernel's weight: the sample's
+ * plane target and weight become those of its own pull and the scan
+ * vertices' together (the same least squares as a row for each). */
+static spia_result scan_pull(fit_run *u) {
+    fit_buffers *b = &u->b;
+    const int64_t S = u->S, k = u->fo.samples_per_edge;
+    spia_result r;
+    if (!b->pull_quads && (r = scan_pull_prepare(u)) != SPIA_OK) return r;
+    for (int64_t i = 0; i < 3 * S; ++i) b->pull_pos[i] = (float)b->X[i];
+    if (!b->pull_surface) {
+        spia_mesh view;
+        memset(&view, 0, sizeof view);
+        view.vertex_count = (int32_t)S;
+        view.positions = b->pull_pos;
+        view.face_count = (int32_t)((S / (k * k)) * (k - 1) * (k - 1));
+        view.face_sizes = b->pull_sizes;
+        view.face_vertices = b->pull_quads;
+        r = spia__scan_create_bare(&view, NULL, NULL, &b->pull_surface, u->status);
+        if (r != SPIA_OK) return r;
+    } else if ((r = spia__scan_move(b->pull_surface, b->pull_pos)) != SPIA_OK) {
+        return spia__fail(u->status, r, -1, "%s moving the samples for the scan's pull",
+                          r == SPIA_ERROR_NONFINITE ? "non-finite positions" : "out of memory");
+    }
+    if (closest_in_chunks(b->pull_surface, b->scan_count, b->scan_pts, b->pull_near, NULL, NULL, b->pull_d,
+                          b->pull_faces, NULL, u->opt.threads, &u->clock))
+        return fit_cancelled(u);
+    int64_t pulling_samples = 0, pulling_scan = 0;
+    for (int64_t i = 0; i < S; ++i) pulling_samples += b->wts[i] > 0.0f;
+    /* Each scan vertex's nearest corner of its closest quad, kept in
+     * pull_faces (-1: it does not pull). */
+    for (int64_t v = 0; v < b->scan_count; ++v) {
+        const int32_t f = b->pull_faces[v];
+        int32_t pick = -1;
+        if (f >= 0 && b->pull_d[v] <= u->cutoff_abs) {
+            double best = INFINITY;
+            for (int c = 0; c < 4; ++c) {
+                const int32_t i = b->pull_quads[4 * (int64_t)f + c];
+                double d2 = 0.0;
+                for (int a = 0; a < 3; ++a) {
+                    const double x = b->X[3 * (int64_t)i + a] - b->scan_pts[3 * v + a];
+                    d2 += x * x;
+                }
+                if (d2 < best) best = d2, pick = i;
+            }
+            if (b->wts[pick] <= 0.0f) pick = -1;
+        }
+        b->pull_faces[v] = pick;
+        pulling_scan += pick >= 0;
+    }
+    if (!pulling_scan) return SPIA_OK;
+    double ratio = (double)pulling_samples / (double)pulling_scan;
+    ratio = ratio < SCAN_PULL_MIN_RATIO ? SCAN_PULL_MIN_RATIO : ratio > SCAN_PULL_MAX_RATIO ? SCAN_PULL_MAX_RATIO : ratio;
+    memset(b->pull_w, 0, sizeof(double) * (size_t)S);
+    memset(b->pull_off, 0, sizeof(double) * (size_t)S);
+    const int hard = (u->fo.flags & SPIA_FIT_HARD_CUTOFF) != 0;
+    for (int64_t v = 0; v < b->scan_count; ++v) {
+        const int32_t i = b->pull_faces[v];
+        if (i < 0) continue;
+        const double d = b->pull_d[v], t = u->kernel_scale > 0.0 ? d / u->kernel_scale : 0.0;
+        const double w = ratio * (hard ? 1.0 : 1.0 / (1.0 + t * t));
+        const float *nn = b->N + 3 * (int64_t)i;
+        const float *T = b->T + 3 * (int64_t)i;
+        double off = 0.0;
+        for (int a = 0; a < 3; ++a) off += nn[a] * (b->scan_pts[3 * v + a] - T[a]);
+        b->pull_w[i] += w;
+        b->pull_off[i] += w * off;
+    }
+    for (int64_t i = 0; i < S; ++i) {
+        if (b->pull_w[i] <= 0.0) continue;
+        const double shift = b->pull_off[i] / ((double)b->wts[i] + b->pull_w[i]);
+        for (int a = 0; a < 3; ++a) b->T[3 * i + a] += (float)(shift * b->N[3 * i + a]);
+        b->wts[i] = (float)((double)b->wts[i] + b->pull_w[i]);
     }
     return SPIA_OK;
 }
@@ -1734,6 +1870,7 @@ static spia_result fit_surface(fit_run *u) {
     for (int round = 1; round <= u->fo.max_rounds; ++round) {
         const double t0 = spia__now();
         if ((r = round_weights(u, guard, &f)) != SPIA_OK) return r;
+        if ((u->fo.flags & SPIA_FIT_SCAN_PULL) && (r = scan_pull(u)) != SPIA_OK) return r;
         report->iterations +=
             least_squares_round(&f, b->T, b->V0, b->V, u->fo.solver_iterations, b->work, b->precond, &u->clock);
         if (u->clock.cancelled) return fit_cancelled(u);
@@ -1899,5 +2036,171 @@ done:
     buffers_free(&u.b);
     spia__adjacency_free(&u.adj);
     report->result = r;
+    return r;
+}
+
+/* ---- the limit surface as flat quads ------------------------------------- */
+
+/* spia_flat_positions: each quad's 3 x 3 grid of limit points (corners, edge
+ * midpoints, centre) against the bilinear quad through its corners' new
+ * positions, in least squares, the corner points weighted FLAT_CORNER_WEIGHT
+ * (measured on the bunny's level 3: 0, 1/16, 1/4 and 1 left the scan's
+ * vertices a median 2.5, 2.6, 2.9 and 3.5e-5 of the diagonal from the flat
+ * faces, against 4.4e-5 from those through the limit points; with none a
+ * checkerboard of the vertices would not be determined); conjugate
+ * gradients with a Jacobi preconditioner, from the limit points. */
+#define FLAT_CORNER_WEIGHT 0.0625
+#define FLAT_MAX_ITERATIONS 200
+#define FLAT_TOLERANCE 1e-8
+
+/* Bilinear weights of grid point (i, j), i along the first edge, at (i / 2, j / 2). */
+static void flat_weights(int i, int j, double w[4]) {
+    const double s = 0.5 * i, t = 0.5 * j;
+    w[0] = (1 - s) * (1 - t), w[1] = s * (1 - t), w[2] = s * t, w[3] = (1 - s) * t;
+}
+
+/* y = A x: the quads' 4 x 4 normal block M (the same for every quad), and
+ * an identity row for each vertex no quad uses (extra 1). */
+static void flat_apply(const spia_mesh *m, const double M[16], const double *extra, const double *x, double *y) {
+    memset(y, 0, sizeof(double) * 3 * (size_t)m->vertex_count);
+    for (int32_t f = 0; f < m->face_count; ++f) {
+        const int32_t *q = m->face_vertices + 4 * (int64_t)f;
+        for (int c = 0; c < 4; ++c)
+            for (int a = 0; a < 3; ++a) {
+                double sum = 0.0;
+                for (int d = 0; d < 4; ++d) sum += M[4 * c + d] * x[3 * (int64_t)q[d] + a];
+                y[3 * (int64_t)q[c] + a] += sum;
+            }
+    }
+    for (int64_t i = 0; i < 3 * (int64_t)m->vertex_count; ++i) y[i] += extra[i / 3] * x[i];
+}
+
+static spia_result flat_oom(spia_status *status) {
+    return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the flat positions");
+}
+
+static spia_result flat_solve(const spia_mesh *m, const float *X, float *out, fit_clock *clock, spia_status *status) {
+    const int32_t n = m->vertex_count;
+    const int64_t N3 = 3 * (int64_t)n;
+    double M[16] = {0}, w[4];
+    for (int j = 0; j < 3; ++j)
+        for (int i = 0; i < 3; ++i) {
+            const double k = ((i == 1) || (j == 1)) ? 1.0 : FLAT_CORNER_WEIGHT;
+            flat_weights(i, j, w);
+            for (int c = 0; c < 4; ++c)
+                for (int d = 0; d < 4; ++d) M[4 * c + d] += k * w[c] * w[d];
+        }
+    double *buf = malloc(sizeof(double) * (6 * (size_t)N3 + 2 * (size_t)n + 1));
+    unsigned char *seen = calloc((size_t)n + 1, 1);
+    if (!buf || !seen) {
+        free(buf), free(seen);
+        return flat_oom(status);
+    }
+    double *x = buf, *b = buf + N3, *r = buf + 2 * N3, *z = buf + 3 * N3, *p = buf + 4 * N3, *Ap = buf + 5 * N3;
+    double *extra = buf + 6 * N3, *pre = extra + n;
+    memset(b, 0, sizeof(double) * (size_t)N3);
+    memset(extra, 0, sizeof(double) * 2 * (size_t)n);
+    /* The right-hand side, the preconditioner, and the start: each vertex at
+     * its limit point (its corner point in its first quad's grid). */
+    static const int corner_point[4] = {0, 2, 8, 6};
+    for (int32_t f = 0; f < m->face_count; ++f) {
+        const int32_t *q = m->face_vertices + 4 * (int64_t)f;
+        const float *G = X + 27 * (int64_t)f;
+        for (int j = 0; j < 3; ++j)
+            for (int i = 0; i < 3; ++i) {
+                const double k = ((i == 1) || (j == 1)) ? 1.0 : FLAT_CORNER_WEIGHT;
+                flat_weights(i, j, w);
+                for (int c = 0; c < 4; ++c)
+                    for (int a = 0; a < 3; ++a) b[3 * (int64_t)q[c] + a] += k * w[c] * G[3 * (3 * j + i) + a];
+            }
+        for (int c = 0; c < 4; ++c) {
+            pre[q[c]] += M[5 * c];
+            if (!seen[q[c]]) {
+                seen[q[c]] = 1;
+                for (int a = 0; a < 3; ++a) x[3 * (int64_t)q[c] + a] = G[3 * corner_point[c] + a];
+            }
+        }
+    }
+    for (int32_t v = 0; v < n; ++v)
+        if (!seen[v]) {
+            extra[v] = 1.0, pre[v] = 1.0;
+            for (int a = 0; a < 3; ++a) b[3 * (int64_t)v + a] = x[3 * (int64_t)v + a] = m->positions[3 * (int64_t)v + a];
+        }
+    free(seen);
+    flat_apply(m, M, extra, x, Ap);
+    double rz = 0.0, bb = 0.0;
+    for (int64_t i = 0; i < N3; ++i) {
+        r[i] = b[i] - Ap[i];
+        z[i] = r[i] / pre[i / 3];
+        p[i] = z[i];
+        rz += r[i] * z[i];
+        bb += b[i] * b[i];
+    }
+    for (int it = 0; it < FLAT_MAX_ITERATIONS && rz > FLAT_TOLERANCE * FLAT_TOLERANCE * bb; ++it) {
+        if (clock_tick(clock)) {
+            free(buf);
+            return spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled computing the flat positions");
+        }
+        flat_apply(m, M, extra, p, Ap);
+        double pAp = 0.0;
+        for (int64_t i = 0; i < N3; ++i) pAp += p[i] * Ap[i];
+        if (!(pAp > 0.0)) break;
+        const double alpha = rz / pAp;
+        double rz_new = 0.0;
+        for (int64_t i = 0; i < N3; ++i) {
+            x[i] += alpha * p[i];
+            r[i] -= alpha * Ap[i];
+            z[i] = r[i] / pre[i / 3];
+            rz_new += r[i] * z[i];
+        }
+        const double beta = rz_new / rz;
+        rz = rz_new;
+        for (int64_t i = 0; i < N3; ++i) p[i] = z[i] + beta * p[i];
+    }
+    for (int64_t i = 0; i < N3; ++i)
+        if (!isfinite(x[i])) {
+            free(buf);
+            return spia__fail(status, SPIA_ERROR_DIVERGED, -1, "the flat positions are not finite");
+        }
+    for (int64_t i = 0; i < N3; ++i) out[i] = (float)x[i];
+    free(buf);
+    return SPIA_OK;
+}
+
+spia_result spia_flat_positions(const spia_mesh *mesh, const spia_options *options, float *out, spia_status *status) {
+    if (!out) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "out must not be NULL");
+    spia_options opt;
+    spia_result r = spia__resolve_options(options, &opt, status);
+    if (r != SPIA_OK) return r;
+    if (opt.scheme != SPIA_SCHEME_CATMULL_CLARK)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "flat positions are for Catmull-Clark cages");
+    if ((r = spia_mesh_validate(mesh, status)) != SPIA_OK) return r;
+    for (int32_t f = 0; f < mesh->face_count; ++f)
+        if (mesh->face_sizes[f] != 4)
+            return spia__fail(status, SPIA_ERROR_FACE_SIZE, f,
+                              "face %d has %d corners: flat positions are for quad meshes (a subdivided cage)",
+                              (int)f, (int)mesh->face_sizes[f]);
+    spia_adjacency adj;
+    if ((r = spia__adjacency_build(mesh, &adj, status)) != SPIA_OK) return r;
+    fit_clock clock = {opt.progress, opt.progress_user_data, spia__now(), 0.0, 0, 0};
+    sample_blocks B;
+    r = blocks_build(mesh, &adj, &opt, 3, 1, &B, &clock, status);
+    spia__adjacency_free(&adj);
+    if (r != SPIA_OK) return r;
+    const int64_t points = 9 * (int64_t)mesh->face_count, N3 = 3 * (int64_t)mesh->vertex_count;
+    float *X = malloc(sizeof(float) * 3 * (size_t)(points > 0 ? points : 1));
+    double *V = malloc(sizeof(double) * (size_t)(N3 > 0 ? N3 : 1));
+    if (!X || !V) {
+        free(X), free(V), blocks_free(&B);
+        return flat_oom(status);
+    }
+    for (int64_t i = 0; i < N3; ++i) V[i] = mesh->positions[i];
+    blocks_apply_float(&B, V, X);
+    free(V);
+    blocks_free(&B);
+    r = clock.cancelled ? spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled computing the flat positions")
+                        : flat_solve(mesh, X, out, &clock, status);
+    free(X);
+    if (r == SPIA_OK) spia__ok(status);
     return r;
 }
