@@ -43,7 +43,7 @@ import numpy as np
 __all__ = [
     "Mesh", "Report", "Stencils", "PiaError", "PiaCancelled",
     "available", "load_error", "library_path", "platform_tag", "version", "opensubdiv_version_number", "validate", "limit_stencils", "solve", "interpolate", "refine",
-    "subdivide", "fit", "fit_detail", "detail_samples", "DetailResult", "Scan",
+    "subdivide", "flat_positions", "fit", "fit_detail", "detail_samples", "DetailResult", "Scan",
     "usd_text", "write_usd",
     "SCHEMES", "BOUNDARY_SMOOTH", "BOUNDARY_RULES", "METHODS", "SOLVE_FLAGS",
 ]
@@ -160,7 +160,7 @@ class _FitReport(ctypes.Structure):
 
 
 # spia_fit_flags
-FIT_ALLOW_FOLDS, FIT_HARD_CUTOFF, FIT_NO_SCAN_DISTANCES = 1, 2, 4
+FIT_ALLOW_FOLDS, FIT_HARD_CUTOFF, FIT_NO_SCAN_DISTANCES, FIT_SCAN_PULL = 1, 2, 4, 8
 
 
 _lib = None
@@ -328,6 +328,8 @@ def _declare(lib):
        _i32p, _i32p, _i32p, ctypes.POINTER(_Status))
     fn("spia_subdivide", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(_Options), ctypes.c_int32,
        _f32p, _i32p, _i32p, _f32p, _f32p, ctypes.POINTER(_Status))
+    fn("spia_flat_positions", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(_Options), _f32p,
+       ctypes.POINTER(_Status))
     fn("spia_interpolate", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(_Options), _f32p,
        ctypes.POINTER(_Report), ctypes.POINTER(_Status))
     fn("spia_surface_stencils_create", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(_Options),
@@ -1256,7 +1258,7 @@ class FitReport:
 
 def fit(cage, scan, mode="SURFACE", samples_per_edge=4, cutoff=0.02, smoothing=1e-5, point_weight=1e-3,
         max_rounds=16, round_tolerance=0.01, solver_iterations=20, robust_scale=6.0, slide_weight=0.0, allow_folds=False,
-        hard_cutoff=False, measure_scan=True, **options):
+        hard_cutoff=False, measure_scan=True, scan_pull=False, **options):
     """Moves the vertices of ``cage`` (a :class:`Mesh`) so that its limit
     surface lies on ``scan`` (a :class:`Scan`).  mode 'SURFACE' fits the
     whole surface (Catmull-Clark); 'VERTICES' interpolates the closest scan
@@ -1266,7 +1268,8 @@ def fit(cage, scan, mode="SURFACE", samples_per_edge=4, cutoff=0.02, smoothing=1
     distance; ``slide_weight``: how much samples are held back from sliding
     along the scan within a round; ``allow_folds``: no fold guard; ``hard_cutoff``: the cut-off's
     0/1 weights without the kernel; ``measure_scan``: also measure the
-    scan's vertices against the surface (``report.scan_before/after``).
+    scan's vertices against the surface (``report.scan_before/after``);
+    ``scan_pull``: the scan's vertices pull the surface too (SPIA_FIT_SCAN_PULL).
     Returns ``(cage positions (N, 3) float32, FitReport)``."""
     lib = _library()
     opts, _keep = _options(**options)
@@ -1293,7 +1296,7 @@ def fit(cage, scan, mode="SURFACE", samples_per_edge=4, cutoff=0.02, smoothing=1
         raise PiaError("INVALID_ARGUMENT", f"slide_weight must be at least 0 and below 1, not {slide_weight!r}")
     fo.slide_weight = float(slide_weight)
     fo.flags = ((FIT_ALLOW_FOLDS if allow_folds else 0) | (FIT_HARD_CUTOFF if hard_cutoff else 0)
-                | (0 if measure_scan else FIT_NO_SCAN_DISTANCES))
+                | (0 if measure_scan else FIT_NO_SCAN_DISTANCES) | (FIT_SCAN_PULL if scan_pull else 0))
     if fo.max_rounds < 1 or fo.solver_iterations < 1:
         raise PiaError("INVALID_ARGUMENT", "max_rounds and solver_iterations must be at least 1")
     out = np.empty_like(cage.positions)
@@ -1324,14 +1327,32 @@ def fit(cage, scan, mode="SURFACE", samples_per_edge=4, cutoff=0.02, smoothing=1
         scan_distances=per_scan[: scan.vertex_count] if rep.scan_point_count else None)
 
 
+
+def flat_positions(mesh, boundary_smooth="ALL", use_creases=True, quality=3, opensubdiv_version=None, threads=0,
+                   progress=None):
+    """Positions (N, 3) float32 for the vertices of a quad mesh whose faces,
+    drawn flat (a Multires modifier's finest level), lie closest to its
+    Catmull-Clark limit surface (spia_flat_positions)."""
+    lib = _library()
+    opts, _keep = _options(boundary_smooth=boundary_smooth, use_creases=use_creases, quality=quality,
+                           opensubdiv_version=opensubdiv_version, threads=threads, progress=progress)
+    cm = mesh._c()
+    out = np.empty_like(mesh.positions)
+    status = _Status()
+    code = lib.spia_flat_positions(ctypes.byref(cm), ctypes.byref(opts), _ptr(out, ctypes.c_float),
+                                   ctypes.byref(status))
+    if code != 0:
+        _raise(code, status)
+    return out
+
 @dataclass
 class DetailResult:
-    """What :func:`fit_detail` made: the finest level's control mesh and
-    the points of its limit surface at its vertices (what a Multires
-    modifier's finest level shows), and each level's fit."""
+    """What :func:`fit_detail` made: the finest level's control mesh, the
+    positions of its vertices as a Multires modifier's finest level shows
+    them (flat faces straddling its limit surface), and each level's fit."""
     levels: int
     mesh: Mesh                  # the finest level's control mesh, fitted (mesh.positions)
-    points: np.ndarray = field(repr=False)   # (N, 3) float32: its limit points, the finest level's vertices
+    points: np.ndarray = field(repr=False)   # (N, 3) float32: the finest level's vertices, drawn flat
     reports: list = field(default_factory=list)  # a FitReport per level, coarse to fine
 
     @property
@@ -1357,14 +1378,18 @@ DETAIL_SLIDE_WEIGHT = 0.1
 
 def fit_detail(cage, scan, levels, samples_per_edge=4, progress=None, boundary_smooth="ALL", use_creases=True,
                quality=3, opensubdiv_version=None, threads=0, measure_scan=True, smoothing=DETAIL_SMOOTHING,
-               slide_weight=DETAIL_SLIDE_WEIGHT, **fit_options):
+               slide_weight=DETAIL_SLIDE_WEIGHT, scan_pull=True, **fit_options):
     """Detail levels on a cage whose limit surface lies on ``scan`` (usually
     the result of :func:`fit`): the cage subdivided one level at a time
     (:func:`subdivide`), and each level fitted to the scan as a cage of its
     own (:func:`fit`, with its guards: the fairness term holds each level to
     the level above where the scan says nothing, so holes are spanned
-    smoothly; folds and outliers do not pull).  Coarse levels take the broad
-    shape, fine levels the detail.  ``levels``: 1 to 6.  Each level's samples
+    smoothly; folds and outliers do not pull; with ``scan_pull`` the scan's
+    vertices pull each level too, so that it meets the scan from both
+    sides).  Coarse levels take the broad shape, fine levels the detail.
+    The finest level's vertices are then placed so that its faces, drawn
+    flat as Multires draws them, straddle the fitted limit surface
+    (:func:`flat_positions`).  ``levels``: 1 to 6.  Each level's samples
     per edge: :func:`detail_samples`.  ``progress(level, round, mean) ->
     bool`` follows each level's fit; True cancels (:class:`PiaCancelled`).
     ``fit_options``: those of :func:`fit` (cutoff, ...); ``smoothing`` and
@@ -1384,10 +1409,10 @@ def fit_detail(cage, scan, levels, samples_per_edge=4, progress=None, boundary_s
         follow = None if progress is None else (lambda it, value, level=level: progress(level, it, value))
         positions, report = fit(refined, scan, samples_per_edge=detail_samples(samples_per_edge, level),
                                 measure_scan=measure_scan and level == levels, progress=follow, threads=threads,
-                                smoothing=smoothing, slide_weight=slide_weight, **surface, **fit_options)
+                                smoothing=smoothing, slide_weight=slide_weight, scan_pull=scan_pull, **surface,
+                                **fit_options)
         reports.append(report)
         current = Mesh(positions, refined.face_sizes, refined.face_vertices, edges=refined.edges,
                        edge_creases=refined.edge_creases, vertex_creases=refined.vertex_creases)
-    stencils = limit_stencils(current, threads=threads, **surface)
-    points = stencils.limit_points(current.positions).astype(np.float32)
+    points = flat_positions(current, threads=threads, **surface)
     return DetailResult(levels=levels, mesh=current, points=points, reports=reports)

@@ -1,0 +1,88 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Folds a Surface fit makes, measured against the cage it started from.
+
+    SUBDIV_PIA_LIBRARY=build/cmake/libsubdiv_pia.so python3 bench/bench_fit_folds.py [--cases ...]
+
+For each of bench_fit.py's cases (a scan in tests/data and its QuadriFlow
+cage) the cage is fitted (spia.fit, the add-on's settings) and both cages'
+limit surfaces are sampled at the same points: 8 x 8 per ptex face, the
+points of Blender's level 3 (spia.surface_stencils).  A point's normal is
+the cross product of its neighbours' differences along the sample grid (in
+numpy); the share of points whose normal the fit turned by more than 90
+degrees against the starting cage's is printed beside the fit's own count
+(samples facing away from the scan's normal, which counts the scan's own
+folds too) and the mean distance, as a Markdown table.
+"""
+import argparse
+import os
+import sys
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+sys.path.insert(0, os.path.join(ROOT, "python"))
+sys.path.insert(0, os.path.join(ROOT, "tests", "python"))
+import spia  # noqa: E402
+from meshio import read_obj  # noqa: E402
+
+# As bench_fit.py's CASES (which needs Blender to import).
+CASES = {
+    "bunny": ("bun_zipper.obj", "bun_zipper_quadriflow_cage.obj"),
+    "dragon": ("dragon_res2.obj", "dragon_res2_quadriflow_cage.obj"),
+    "armadillo": ("armadillo.obj", "armadillo_quadriflow_cage.obj"),
+    "chinese_dragon": ("ChineseDragon-10kv.obj", "ChineseDragon-10kv_quadriflow_cage.obj"),
+}
+PER_EDGE = 8
+
+
+def load(name):
+    positions, faces, _creases = read_obj(os.path.join(ROOT, "tests", "data", name))
+    return spia.Mesh.from_faces(positions, faces)
+
+
+def grid_normals(points, k):
+    """Per sample of k x k grids (rows along u), the cross product of its
+    neighbours' differences along u and v (one-sided at the grid's edges)."""
+    g = points.reshape(-1, k, k, 3)  # [ptex, j (v), i (u)]
+    du = np.empty_like(g)
+    dv = np.empty_like(g)
+    du[:, :, 1:-1] = g[:, :, 2:] - g[:, :, :-2]
+    du[:, :, 0] = g[:, :, 1] - g[:, :, 0]
+    du[:, :, -1] = g[:, :, -1] - g[:, :, -2]
+    dv[:, 1:-1] = g[:, 2:] - g[:, :-2]
+    dv[:, 0] = g[:, 1] - g[:, 0]
+    dv[:, -1] = g[:, -1] - g[:, -2]
+    return np.cross(du, dv).reshape(-1, 3)
+
+
+def turned_share(cage, start, fitted):
+    """Share of the level-3 points whose normal turned by more than 90 degrees from start to fitted."""
+    stencils = spia.surface_stencils(cage, samples_per_edge=PER_EDGE)
+    n0 = grid_normals(stencils.limit_points(start), PER_EDGE)
+    n1 = grid_normals(stencils.limit_points(fitted), PER_EDGE)
+    return float(np.mean(np.einsum("ij,ij->i", n0, n1) < 0.0))
+
+
+def main():
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
+    args = parser.parse_args()
+    print("| case | mean distance | facing away from the scan | turned against the start | s |")
+    print("|---|---:|---:|---:|---:|")
+    for name in args.cases:
+        scan_file, cage_file = CASES[name]
+        scan = spia.Scan(load(scan_file))
+        cage = load(cage_file)
+        t = time.perf_counter()
+        fitted, report = spia.fit(cage, scan)
+        seconds = time.perf_counter() - t
+        turned = turned_share(cage, cage.positions, fitted)
+        print("| %s | %.3e | %.3f%% | %.3f%% | %.1f |"
+              % (name, report.after.mean, 100.0 * report.folded_after / report.sample_count, 100.0 * turned,
+                 seconds), flush=True)
+
+
+if __name__ == "__main__":
+    main()
