@@ -11,7 +11,9 @@ the cross product of its neighbours' differences along the sample grid (in
 numpy); the share of points whose normal the fit turned by more than 90
 degrees against the starting cage's is printed beside the fit's own count
 (samples facing away from the scan's normal, which counts the scan's own
-folds too) and the mean distance, as a Markdown table.
+folds too) and the mean distance, as a Markdown table; and the share of
+those where the starting cage faced the scan (the rest are folds of the
+starting cage that the fit turned back).
 """
 import argparse
 import os
@@ -57,20 +59,31 @@ def grid_normals(points, k):
     return np.cross(du, dv).reshape(-1, 3)
 
 
-def turned_share(cage, start, fitted):
-    """Share of the level-3 points whose normal turned by more than 90 degrees from start to fitted."""
+def turned_share(cage, start, fitted, scan=None):
+    """Share of the level-3 points whose normal turned by more than 90
+    degrees from start to fitted; with scan, also the share of those where
+    the start faced the scan's normal at its closest point as most of the
+    start does (the others the fit turned back onto the scan)."""
     stencils = spia.surface_stencils(cage, samples_per_edge=PER_EDGE)
-    n0 = grid_normals(stencils.limit_points(start), PER_EDGE)
+    p0 = stencils.limit_points(start)
+    n0 = grid_normals(p0, PER_EDGE)
     n1 = grid_normals(stencils.limit_points(fitted), PER_EDGE)
-    return float(np.mean(np.einsum("ij,ij->i", n0, n1) < 0.0))
+    turned = np.einsum("ij,ij->i", n0, n1) < 0.0
+    if scan is None:
+        return float(np.mean(turned))
+    normals = scan.closest_points(p0)[1]
+    facing = np.einsum("ij,ij->i", n0, normals)
+    facing *= 1.0 if facing.sum() >= 0.0 else -1.0
+    return float(np.mean(turned)), float(np.mean(turned & (facing > 0.0)))
 
 
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
     args = parser.parse_args()
-    print("| case | mean distance | facing away from the scan | turned against the start | s |")
-    print("|---|---:|---:|---:|---:|")
+    print("| case | mean distance | facing away from the scan | turned against the start | of them where the start "
+          "faced the scan | s |")
+    print("|---|---:|---:|---:|---:|---:|")
     for name in args.cases:
         scan_file, cage_file = CASES[name]
         scan = spia.Scan(load(scan_file))
@@ -78,10 +91,10 @@ def main():
         t = time.perf_counter()
         fitted, report = spia.fit(cage, scan)
         seconds = time.perf_counter() - t
-        turned = turned_share(cage, cage.positions, fitted)
-        print("| %s | %.3e | %.3f%% | %.3f%% | %.1f |"
+        turned, made = turned_share(cage, cage.positions, fitted, scan)
+        print("| %s | %.3e | %.3f%% | %.3f%% | %.3f%% | %.1f |"
               % (name, report.after.mean, 100.0 * report.folded_after / report.sample_count, 100.0 * turned,
-                 seconds), flush=True)
+                 100.0 * made, seconds), flush=True)
 
 
 if __name__ == "__main__":

@@ -1,5 +1,6 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
-/* Subdivision of the cage (spia_subdivide): the counts against Catmull-Clark's
+/* Subdivision of the cage (spia_subdivide) and its flat positions
+ * (spia_flat_positions): the counts against Catmull-Clark's
  * closed forms, the same limit surface (the subdivided cage's limit points at
  * the cage's vertices are the cage's own, smooth and with creases), every
  * face a quad whose vertices are in range, and the bad inputs (codes,
@@ -125,6 +126,41 @@ int main(void) {
     CHECK(spia_subdivide(&m, &cancel, 1, pos, faces, NULL, NULL, NULL, &st) == SPIA_ERROR_CANCELLED, "cancel: %s",
           st.message);
     free(pos), free(faces);
+
+    /* spia_flat_positions: the subdivided cube's flat quads straddle its
+     * limit surface (each vertex moves off its limit point, outwards on a
+     * convex cube), quads only, nothing written when refused. */
+    CHECK(spia_subdivide_size(&m, NULL, 1, &v, &f, &e, &st) == SPIA_OK, "%s", st.message);
+    pos = (float *)malloc(sizeof(float) * 3 * (size_t)v);
+    faces = (int32_t *)malloc(sizeof(int32_t) * 4 * (size_t)f);
+    int32_t *quad_sizes = (int32_t *)malloc(sizeof(int32_t) * (size_t)f);
+    float *flat = (float *)malloc(sizeof(float) * 3 * (size_t)v);
+    CHECK(spia_subdivide(&m, NULL, 1, pos, faces, NULL, NULL, NULL, &st) == SPIA_OK, "%s", st.message);
+    for (int32_t i = 0; i < f; ++i) quad_sizes[i] = 4;
+    spia_mesh quads = {v, pos, f, quad_sizes, faces, 0, NULL, NULL, NULL};
+    CHECK(spia_flat_positions(&quads, NULL, flat, &st) == SPIA_OK, "flat: %s", st.message);
+    spia_stencils *L = NULL;
+    CHECK(spia_limit_stencils_create(&quads, NULL, &L, &st) == SPIA_OK, "%s", st.message);
+    double *cage = (double *)malloc(sizeof(double) * 3 * (size_t)v), *limit = (double *)malloc(sizeof(double) * 3 * (size_t)v);
+    for (int64_t i = 0; i < 3 * (int64_t)v; ++i) cage[i] = pos[i];
+    spia_stencils_apply(L, cage, limit);
+    int outward = 0;
+    for (int32_t i = 0; i < v; ++i) {
+        double rl = 0.0, rf = 0.0;
+        for (int a = 0; a < 3; ++a) rl += limit[3 * i + a] * limit[3 * i + a], rf += (double)flat[3 * i + a] * flat[3 * i + a];
+        outward += rf > rl;
+    }
+    CHECK(outward == v, "%d of %d vertices moved outwards", outward, (int)v);
+    float sentinel_flat[3] = {7.0f, 7.0f, 7.0f};
+    CHECK(spia_flat_positions(&m, NULL, flat, &st) == SPIA_OK, "the cut cube is all quads: %s", st.message);
+    int32_t tri_sizes[2] = {3, 3}, tri_fv[6] = {0, 1, 2, 0, 2, 3};
+    float tri_pos[12] = {0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0};
+    spia_mesh tris = {4, tri_pos, 2, tri_sizes, tri_fv, 0, NULL, NULL, NULL};
+    CHECK(spia_flat_positions(&tris, NULL, sentinel_flat, &st) == SPIA_ERROR_FACE_SIZE && sentinel_flat[0] == 7.0f,
+          "triangles: %s", st.message);
+    CHECK(spia_flat_positions(&m, &loop, flat, &st) == SPIA_ERROR_INVALID_ARGUMENT, "Loop: %s", st.message);
+    spia_stencils_free(L);
+    free(cage), free(limit), free(flat), free(quad_sizes), free(pos), free(faces);
     free(vertex_creases);
     tmesh_free(&cube);
     TEST_MAIN_END();
