@@ -1,0 +1,94 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Detail levels at production scale: a 50k-vertex cage of the dragon with
+3 detail levels (3.2M faces at the finest) on the dragon refined to 4.9M
+triangles.
+
+    build/bpy/5.3/bin/python bench/bench_detail_scale.py [--levels 3] [--cage 50000] [--scan dragon_s2]
+    blender -b --factory-startup --python-exit-code 1 --python bench/bench_detail_scale.py -- [...]
+
+The scan and the cage are bench_fit_scale.py's (made and cached by it
+under out/bench/fit_scale/).  subdiv_pia.api.interpolate(cage,
+target=scan, fit_detail_levels=levels) is timed from the call to the new
+object, split into: reading the scan and building its hierarchy, the fit
+of the cage, each detail level's subdivision and fit, the finest level's
+flat positions, the subdivision that tells Blender's order, and Blender's
+share (its Subdivision Surface for the order, the match, Multires
+subdivided and reshaped).  Also the process's peak resident size.  Prints
+a Markdown table.
+"""
+import argparse
+import os
+import sys
+import time
+
+import bpy
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+import bench_fit_scale as scale  # noqa: E402
+
+
+def main():
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--levels", type=int, default=3)
+    parser.add_argument("--cage", type=int, default=scale.TARGET_CAGE)
+    parser.add_argument("--scan", default="dragon_s2", choices=list(scale.SCANS))
+    args = parser.parse_args(scale.script_args())
+    scale.prepare([args.scan], [args.cage], False)
+    pia = scale.ensure_addon()
+    api = pia.api
+    from subdiv_pia import compute, detail, native, steps
+    bpy.ops.wm.read_homefile(use_empty=True)
+    scan = scale._load(scale.scan_path(args.scan), "scan")
+    cage = scale._load(scale.cage_path(args.cage), "cage")
+    seconds = {}
+
+    def timed(key, fn):
+        def wrapper(*a, **k):
+            t0 = time.perf_counter()
+            try:
+                return fn(*a, **k)
+            finally:
+                seconds[key] = seconds.get(key, 0.0) + time.perf_counter() - t0
+        return wrapper
+
+    native.Scan = timed("scan: hierarchy", native.Scan)
+    native.subdivide = timed("subdivide (levels and order)", native.subdivide)
+    native.flat_positions = timed("finest level's flat positions", native.flat_positions)
+    steps.apply_detail = timed("Blender: order, Multires, Reshape", steps.apply_detail)
+    levels_seen = []
+    fit = native.fit
+
+    def fit_timed(mesh, *a, **k):
+        t0 = time.perf_counter()
+        try:
+            return fit(mesh, *a, **k)
+        finally:
+            key = "fit, cage" if not levels_seen else "fit, level %d" % len(levels_seen)
+            seconds[key] = time.perf_counter() - t0
+            levels_seen.append(len(mesh.positions))
+    native.fit = fit_timed
+    rss0 = scale.proc_status("VmRSS")
+    scale.reset_peak()
+    t0 = time.perf_counter()
+    new_obj, report = api.interpolate(cage, target=scan.name, fit_detail_levels=args.levels)
+    total = time.perf_counter() - t0
+    peak = scale.proc_status("VmHWM")
+    faces = len(cage.data.polygons) * 4 ** args.levels
+    print("Blender %s, %d processors; cage %d vertices, scan %d triangles, %d levels (%d faces at the finest)\n"
+          % (bpy.app.version_string, os.cpu_count() or 1, len(cage.data.vertices),
+             sum(len(p.vertices) - 2 for p in scan.data.polygons), args.levels, faces))
+    print("| step | s |\n|---|---:|")
+    for key, value in seconds.items():
+        print("| %s | %.1f |" % (key, value))
+    print("| **total** (interpolate, call to object) | **%.1f** |" % total)
+    print("\npeak resident size %.1f GB (%.1f GB before the call)" % (peak / 2**30, rss0 / 2**30))
+    print("finest level: mean %.3g, p95 %.3g of the diagonal from the scan; scan to it: mean %.3g, p95 %.3g"
+          % (new_obj["pia_fit_detail_mean"], new_obj["pia_fit_detail_p95"],
+             new_obj.get("pia_fit_detail_scan_mean", float("nan")),
+             new_obj.get("pia_fit_detail_scan_p95", float("nan"))))
+    scale.finish()
+
+
+if __name__ == "__main__":
+    main()
