@@ -61,7 +61,7 @@ from .objects import (  # noqa: F401
     heat_colors, limit_cage_of, limit_mesh, loop_cage_of, paint_scan, set_limit_object, store_cleanup, store_fit,
     store_report, stored_settings, write_heat_map, write_unreachable_group)
 from .reports import (  # noqa: F401
-    FIT_NAMES, format_cleanup, format_fit_report, format_report, format_unreachable, report_converged)
+    FIT_NAMES, format_cleanup, format_detail, format_fit_report, format_report, format_unreachable, report_converged)
 from .live import is_live, set_live  # noqa: F401
 from .steps import (  # noqa: F401
     interpolate, interpolate_steps, refresh_limit, refresh_limit_steps, run_steps)

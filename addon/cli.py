@@ -314,6 +314,9 @@ def main(argv):
         sys.stdout.write("\n")
     if "target" in settings:
         print("subdiv_pia: %s: %s" % (new_obj.name, package.api.format_fit_report(report, settings["target"])))
+        detail = package.api.format_detail(new_obj)
+        if detail:
+            print("subdiv_pia: %s: %s" % (new_obj.name, detail))
         print("subdiv_pia: stencils %.3f s, closest points %.3f s, solve %.3f s"
               % (report.stencil_seconds, report.query_seconds, report.solve_seconds))
     else:

@@ -53,8 +53,9 @@ def result_line(new_obj, report, settings):
         line = api.format_report(report)
     cleaned = api.format_cleanup(new_obj)
     not_painted = new_obj.get("pia_fit_scan_not_painted")
-    return "%s: %s%s%s" % (new_obj.name, line, "; " + cleaned if cleaned else "",
-                           "; " + not_painted if not_painted else "")
+    detail = api.format_detail(new_obj)
+    return "%s: %s%s%s%s" % (new_obj.name, line, "; " + detail if detail else "", "; " + cleaned if cleaned else "",
+                             "; " + not_painted if not_painted else "")
 
 
 def draw_settings(layout, settings, from_modifier=False):

@@ -38,6 +38,21 @@ def format_fit_report(report, target_name):
     return line
 
 
+def format_detail(obj):
+    """What obj's detail levels came to ('' without them), from its custom
+    properties (detail.store_detail)."""
+    levels = int(obj.get("pia_fit_detail_levels", 0))
+    if not levels:
+        return ""
+    line = ("%d detail level%s in Multires: the finest %.2g from the scan (mean), 95th percentile %.2g"
+            % (levels, "" if levels == 1 else "s", float(obj["pia_fit_detail_mean"]),
+               float(obj["pia_fit_detail_p95"])))
+    if "pia_fit_detail_scan_mean" in obj:
+        line += "; scan to it: mean %.2g, 95th percentile %.2g" % (float(obj["pia_fit_detail_scan_mean"]),
+                                                                   float(obj["pia_fit_detail_scan_p95"]))
+    return line
+
+
 def report_converged(report):
     """True unless an interpolation or a fit stopped short of its tolerance."""
     return report.status == 'CONVERGED'

@@ -102,6 +102,13 @@ class DATA_PT_subdiv_pia(bpy.types.Panel):
                 col.label(text="Facing away from the scan: %.2g%% (was %.2g%%)"
                           % (100.0 * float(obj["pia_fit_folded_after"]),
                              100.0 * float(obj.get("pia_fit_folded_before", 0.0))))
+            if obj.get("pia_fit_detail_levels"):
+                col.label(text="Detail: %d levels, finest mean %.2g, 95th percentile %.2g"
+                          % (int(obj["pia_fit_detail_levels"]), float(obj["pia_fit_detail_mean"]),
+                             float(obj["pia_fit_detail_p95"])))
+                if "pia_fit_detail_scan_mean" in obj:
+                    col.label(text="Scan to the finest level: mean %.2g, 95th percentile %.2g"
+                              % (float(obj["pia_fit_detail_scan_mean"]), float(obj["pia_fit_detail_scan_p95"])))
             col.label(text="Of the scan's diagonal; heat map red at %.2g"
                       % float(obj.get("pia_distance_scale", api.HEAT_SCALE)))
             col.label(text="(Viewport Shading > Color > Attribute)")

@@ -13,7 +13,7 @@ object, split into: reading the scan and building its hierarchy, the fit
 of the cage, each detail level's subdivision and fit, the finest level's
 flat positions, the subdivision that tells Blender's order, and Blender's
 share (its Subdivision Surface for the order, the match, Multires
-subdivided and reshaped).  Also the process's peak resident size.  Prints
+subdivided, and the rest: Reshape).  Also the process's peak resident size.  Prints
 a Markdown table.
 """
 import argparse
@@ -55,7 +55,10 @@ def main():
     native.Scan = timed("scan: hierarchy", native.Scan)
     native.subdivide = timed("subdivide (levels and order)", native.subdivide)
     native.flat_positions = timed("finest level's flat positions", native.flat_positions)
-    steps.apply_detail = timed("Blender: order, Multires, Reshape", steps.apply_detail)
+    steps.apply_detail = timed("Blender's share, all", steps.apply_detail)
+    detail._subsurf_topology = timed("  Blender: Subdivision Surface for the order", detail._subsurf_topology)
+    detail.match_order = timed("  matching the order", detail.match_order)
+    detail._add_multires = timed("  Blender: Multires subdivided", detail._add_multires)
     levels_seen = []
     fit = native.fit
 

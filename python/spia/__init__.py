@@ -1374,11 +1374,18 @@ def detail_samples(samples_per_edge, level):
 # over against the starting cage instead of 1.1%, as close to the scan.
 DETAIL_SMOOTHING = 1e-3
 DETAIL_SLIDE_WEIGHT = 0.1
+# And they need fewer rounds and steps: 3 rounds of 5 conjugate-gradient
+# steps a level left the bunny's, armadillo's and Chinese dragon's finest
+# levels within 2% of 16 rounds of 20 steps (closer, for the bunny), in less
+# than half the time.
+DETAIL_ROUNDS = 3
+DETAIL_SOLVER_ITERATIONS = 5
 
 
 def fit_detail(cage, scan, levels, samples_per_edge=4, progress=None, boundary_smooth="ALL", use_creases=True,
                quality=3, opensubdiv_version=None, threads=0, measure_scan=True, smoothing=DETAIL_SMOOTHING,
-               slide_weight=DETAIL_SLIDE_WEIGHT, scan_pull=True, **fit_options):
+               slide_weight=DETAIL_SLIDE_WEIGHT, scan_pull=True, max_rounds=DETAIL_ROUNDS,
+               solver_iterations=DETAIL_SOLVER_ITERATIONS, **fit_options):
     """Detail levels on a cage whose limit surface lies on ``scan`` (usually
     the result of :func:`fit`): the cage subdivided one level at a time
     (:func:`subdivide`), and each level fitted to the scan as a cage of its
@@ -1392,8 +1399,10 @@ def fit_detail(cage, scan, levels, samples_per_edge=4, progress=None, boundary_s
     (:func:`flat_positions`).  ``levels``: 1 to 6.  Each level's samples
     per edge: :func:`detail_samples`.  ``progress(level, round, mean) ->
     bool`` follows each level's fit; True cancels (:class:`PiaCancelled`).
-    ``fit_options``: those of :func:`fit` (cutoff, ...); ``smoothing`` and
-    ``slide_weight`` default to DETAIL_SMOOTHING and DETAIL_SLIDE_WEIGHT.
+    ``fit_options``: those of :func:`fit` (cutoff, ...); ``smoothing``,
+    ``slide_weight``, ``max_rounds`` and ``solver_iterations`` default to
+    DETAIL_SMOOTHING, DETAIL_SLIDE_WEIGHT, DETAIL_ROUNDS and
+    DETAIL_SOLVER_ITERATIONS.
     The finest level's vertices are numbered as :func:`subdivide` applied
     one level at a time numbers them.  Returns a :class:`DetailResult`."""
     levels = int(levels)
@@ -1409,8 +1418,8 @@ def fit_detail(cage, scan, levels, samples_per_edge=4, progress=None, boundary_s
         follow = None if progress is None else (lambda it, value, level=level: progress(level, it, value))
         positions, report = fit(refined, scan, samples_per_edge=detail_samples(samples_per_edge, level),
                                 measure_scan=measure_scan and level == levels, progress=follow, threads=threads,
-                                smoothing=smoothing, slide_weight=slide_weight, scan_pull=scan_pull, **surface,
-                                **fit_options)
+                                smoothing=smoothing, slide_weight=slide_weight, scan_pull=scan_pull,
+                                max_rounds=max_rounds, solver_iterations=solver_iterations, **surface, **fit_options)
         reports.append(report)
         current = Mesh(positions, refined.face_sizes, refined.face_vertices, edges=refined.edges,
                        edge_creases=refined.edge_creases, vertex_creases=refined.vertex_creases)

@@ -14,7 +14,7 @@ from mathutils.kdtree import KDTree
 
 from subdiv_pia import api, native
 from subdiv_pia.settings import opensubdiv_version_of
-from conftest import DATA, assert_unchanged, import_obj, positions, snapshot
+from conftest import DATA, assert_unchanged, import_obj, positions, run_operator, snapshot
 from test_fit import bvh_distances, bvh_of, fine_sphere, quad_sphere, scan_in_cage_space, used_diagonal
 
 
@@ -146,16 +146,21 @@ def test_live_cage_has_no_detail():
 def test_detail_cancel_leaves_nothing():
     fine_sphere("Scan", segments=64, rings=32)
     cage = quad_sphere("Cage", cuts=2, radius=0.8)
+    # The fit alone's progress calls, then a cancel two calls into the levels.
+    base_calls = []
+    plain, _report = api.interpolate(cage, target="Scan", fit_cutoff=0.3,
+                                     progress=lambda it, value: base_calls.append(it) and False)
+    bpy.data.objects.remove(plain)
     count, meshes = len(bpy.data.objects), len(bpy.data.meshes)
     calls = []
 
     def progress(iteration, value):
         calls.append(iteration)
-        return len(calls) > 25  # past the base fit's rounds, inside the levels'
+        return len(calls) > len(base_calls) + 2
     with pytest.raises(native.PiaCancelled):
         api.interpolate(cage, target="Scan", fit_cutoff=0.3, fit_detail_levels=2, progress=progress)
     assert len(bpy.data.objects) == count and len(bpy.data.meshes) == meshes
-    assert len(calls) > 25
+    assert len(calls) == len(base_calls) + 3
 
 
 def test_cli_detail_levels(tmp_path):
@@ -173,3 +178,15 @@ def test_cli_detail_levels(tmp_path):
     new_obj = data_to.objects[0]
     assert [m.type for m in new_obj.modifiers] == ['MULTIRES'] and new_obj.modifiers[0].total_levels == 2
     assert new_obj["pia_fit_detail_levels"] == 2
+    assert "Cage_pia: 2 detail levels in Multires: the finest" in result.stdout, result.stdout
+
+
+def test_operator_reports_the_detail():
+    scan = fine_sphere("Scan", segments=64, rings=32)
+    cage = quad_sphere("Cage", cuts=2, radius=0.8)
+    assert run_operator(target=scan.name, fit_cutoff=0.3, fit_detail_levels=1) == {'FINISHED'}
+    new_obj = bpy.data.objects["Cage_pia"]
+    assert [m.type for m in new_obj.modifiers] == ['MULTIRES'] and new_obj.modifiers[0].total_levels == 1
+    line = api.format_detail(new_obj)
+    assert line.startswith("1 detail level in Multires: the finest") and "scan to it" in line
+    assert api.format_detail(cage) == ""
