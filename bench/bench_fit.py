@@ -293,6 +293,9 @@ def main(argv):
     parser.add_argument("--check", action="store_true", help="compare BVH and kd-tree closest points")
     parser.add_argument("--export-test-data", action="store_true",
                         help="copy the cages to tests/data")
+    parser.add_argument("--detail", type=int, default=LEVELS, metavar="LEVELS",
+                        help="also the detail levels beside Blender's Multires + Shrinkwrap workflow, same cage "
+                             "and levels (bench_detail.py's table; 0: not)")
     args = parser.parse_args(argv)
 
     header = ["| method | cage | mean | 95th percentile | max | facing away | scan to surface: mean | p95 | max "
@@ -354,6 +357,15 @@ def main(argv):
          (LEVELS, bpy.app.version_string, CUTOFF), ""] + header + rows + [""]
         + ["- " + n for n in notes]) + "\n"
     print("\n".join("- " + n for n in notes))
+    if args.detail:
+        import bench_detail
+        detail_rows = []
+        print("\n".join(bench_detail.HEADER), flush=True)
+        for case in args.cases:
+            detail_rows += bench_detail.run_case(case, args.detail)
+        text += "\n" + "\n".join(
+            ["Detail levels (%d) beside Blender's workflow, the same cages, their finest level measured with "
+             "mathutils (bench/bench_detail.py):" % args.detail, ""] + bench_detail.HEADER + detail_rows) + "\n"
     os.makedirs(OUT, exist_ok=True)
     with open(os.path.join(OUT, "fit.md"), "w") as f:
         f.write(text)

@@ -192,7 +192,7 @@ def _stats(d):
 
 
 def measure_detail(positions, face_sizes, face_vertices, scan_obj, start_positions=None,
-                   degenerate=1e-6):
+                   degenerate=1e-6, start_facing=None):
     """Distances between a mesh (world-space arrays as top_level_mesh gives)
     and scan_obj's evaluated mesh in world space, relative to the
     bounding-box diagonal of the scan's vertices used by faces.
@@ -273,6 +273,8 @@ def measure_detail(positions, face_sizes, face_vertices, scan_obj, start_positio
         dots = np.einsum("ij,ij->i", area[ok], start_area[ok])
         out["turned"] = float((dots < 0).mean()) if ok.any() else 0.0
         out["turned_faces"] = int((dots < 0).sum())
+        if start_facing is not None:  # of those, where the start faced the scan (a bool per face)
+            out["turned_facing"] = float(((dots < 0) & start_facing[ok]).mean()) if ok.any() else 0.0
         out["degenerate_faces"] = int((~ok).sum())
     out["total_s"] = time.perf_counter() - t_all
     return out

@@ -99,7 +99,7 @@ def main(argv):
     parser.add_argument("--levels", type=int, default=3)
     parser.add_argument("--scale", type=float, default=5e-4)
     parser.add_argument("--out", default=os.path.join(bench_fit.ROOT, "docs"))
-    parser.add_argument("--resolution", type=int, default=2000)
+    parser.add_argument("--resolution", type=int, default=1400)
     args = parser.parse_args(argv)
     scan_file, _faces, cage_file = bench_fit.CASES[args.case]
     bpy.ops.wm.read_homefile(use_empty=True)
@@ -144,7 +144,9 @@ def main(argv):
             label, distances.mean(), np.median(distances), np.quantile(distances, 0.95)))
     total, size = place(heat_panels, lo, hi)
     bar_z = lo[2] - 7.0 * size
-    render_fit.legend(lo[0] + 0.2 * total, lo[0] + 0.8 * total, bar_z, 1.2 * size, args.scale, size)
+    render_fit.legend(lo[0] + 0.2 * total, lo[0] + 0.8 * total, bar_z, 1.2 * size, args.scale, size,
+                      caption="scan vertex to the finest level / the scan's bounding-box diagonal (red: %g or more)"
+                      % args.scale)
     render(os.path.join(args.out, "detail_%s_heat.png" % args.case), lo, hi, total, bar_z - 4.5 * size,
            args.resolution, True)
 

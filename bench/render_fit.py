@@ -76,8 +76,8 @@ def text(body, location, size):
     return obj
 
 
-def legend(x0, x1, z, height, scale, size):
-    """A colour bar from x0 to x1 at height z, with its scale written under it."""
+def legend(x0, x1, z, height, scale, size, caption=None):
+    """A colour bar from x0 to x1 at height z, with its scale and caption written under it."""
     n = 64
     xs = np.linspace(x0, x1, n + 1)
     verts = [(x, 0.0, zz) for x in xs for zz in (z, z + height)]
@@ -88,8 +88,10 @@ def legend(x0, x1, z, height, scale, size):
     bpy.context.scene.collection.objects.link(bpy.data.objects.new("legend", mesh))
     for frac in (0.0, 0.5, 1.0):
         text("%.3g" % (frac * scale), (x0 + frac * (x1 - x0), 0.0, z - 1.6 * size), size)
-    text("distance to the scan / bounding-box diagonal (grey: beyond %g, not measured)"
-         % bench_fit.CUTOFF, ((x0 + x1) / 2, 0.0, z - 3.4 * size), size)
+    if caption is None:
+        caption = ("distance to the scan / bounding-box diagonal (grey: beyond %g, not measured)"
+                   % bench_fit.CUTOFF)
+    text(caption, ((x0 + x1) / 2, 0.0, z - 3.4 * size), size)
 
 
 def main(argv):
