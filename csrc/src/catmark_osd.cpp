@@ -2287,6 +2287,14 @@ spia_result subdivide(const spia_mesh *m, const spia_adjacency *adj, const spia_
     auto crease_of = [](float s) {
         return s >= kInfiniteSharpness ? 1.0f : (s > 0.0f ? (float)std::sqrt((double)s / 10.0) : 0.0f);
     };
+    // Boundary and non-manifold edges OpenSubdiv makes infinitely sharp by
+    // itself, as it will again when the refined mesh is read: they are not
+    // written as creases, which would bring Blender's two-edge rule down on
+    // every one-face corner of a boundary.
+    auto written = [&](Far::Index e) {
+        if (!creased || last.IsEdgeBoundary(e) || last.IsEdgeNonManifold(e)) return 0.0f;
+        return crease_of(last.GetEdgeSharpness(e));
+    };
     if (edges || edge_creases)
         for (int32_t e = 0; e < last.GetNumEdges(); ++e) {
             Far::ConstIndexArray ev = last.GetEdgeVertices(e);
@@ -2294,7 +2302,7 @@ spia_result subdivide(const spia_mesh *m, const spia_adjacency *adj, const spia_
                 edges[2 * (int64_t)e] = out_index(ev[0]);
                 edges[2 * (int64_t)e + 1] = out_index(ev[1]);
             }
-            if (edge_creases) edge_creases[e] = creased ? crease_of(last.GetEdgeSharpness(e)) : 0.0f;
+            if (edge_creases) edge_creases[e] = written(e);
         }
     if (vertex_creases) {
         // Loose vertices keep theirs (the refined mesh has no loose edges,
@@ -2310,8 +2318,7 @@ spia_result subdivide(const spia_mesh *m, const spia_adjacency *adj, const spia_
             Far::ConstIndexArray ve = last.GetVertexEdges(i);
             if (s < kInfiniteSharpness && p.blender && ve.size() == 2) {
                 // Blender adds the smaller sharpness of a vertex's two edges.
-                const float added = std::min(crease_to_sharpness(crease_of(last.GetEdgeSharpness(ve[0]))),
-                                             crease_to_sharpness(crease_of(last.GetEdgeSharpness(ve[1]))));
+                const float added = std::min(crease_to_sharpness(written(ve[0])), crease_to_sharpness(written(ve[1])));
                 s = std::max(0.0f, s - added);
             }
             vertex_creases[out_index(i)] = crease_of(s);

@@ -136,3 +136,23 @@ def test_scan_pull_brings_the_scan_closer(native):
     assert gaps[1] < 0.8 * gaps[0], gaps  # measured 0.70
     with pytest.raises(native.PiaError, match="samples_per_edge"):
         native.fit(cage, scan, samples_per_edge=1, scan_pull=True)
+
+
+def test_subdividing_twice_is_subdividing_two_levels(native):
+    """An open grid (one-face corners, boundary edges): its boundary edges,
+    which OpenSubdiv makes sharp by itself, are not written as creases, so
+    that reading the refined mesh again (Blender's two-edge rule included)
+    refines it as OpenSubdiv would have gone on: the same positions as two
+    levels at once, vertex by vertex where the numbering agrees."""
+    n = 4
+    positions = np.array([[i, j, 0.3 * np.sin(i + 2.0 * j)] for j in range(n + 1) for i in range(n + 1)], np.float32)
+    quads = [[j * (n + 1) + i, j * (n + 1) + i + 1, (j + 1) * (n + 1) + i + 1, (j + 1) * (n + 1) + i]
+             for j in range(n) for i in range(n)]
+    grid = _mesh(native, positions, quads)
+    once = native.subdivide(grid, 1)
+    assert not once.edge_creases.any() and not once.vertex_creases.any()
+    twice = native.subdivide(once, 1)
+    both = native.subdivide(grid, 2)
+    first = len(once.positions)  # the children of the level-1 vertices come first in both
+    assert np.abs(twice.positions[:first] - both.positions[:first]).max() < 1e-6
+    assert sorted(map(tuple, np.round(twice.positions, 5))) == sorted(map(tuple, np.round(both.positions, 5)))
