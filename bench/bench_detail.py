@@ -70,11 +70,13 @@ def row(name, method, seconds, m):
 def start_facing(start, scan):
     """Per face of the start's finest level: whether it faces the scan's
     normal at its centre's closest point as most faces do (mathutils)."""
+    from mathutils import Vector
     from mathutils.bvhtree import BVHTree
     normals, centres = detail_workflow.newell_normals(*start)
     verts, tris = fit_cases.scan_geometry(scan)
-    tree = BVHTree.FromPolygons([tuple(v) for v in verts], [tuple(t) for t in tris], epsilon=0.0)
-    scan_normals = np.array([tuple(tree.find_nearest(tuple(c))[1]) for c in centres.tolist()])
+    # Plain Python numbers and Vectors: Blender 3.4's BVHTree crashes on numpy's.
+    tree = BVHTree.FromPolygons([Vector(v) for v in verts.tolist()], tris.tolist(), all_triangles=True)
+    scan_normals = np.array([tuple(tree.find_nearest(Vector(c))[1]) for c in centres.tolist()])
     dots = np.einsum("ij,ij->i", normals, scan_normals)
     return dots * (1.0 if dots.sum() >= 0.0 else -1.0) > 0.0
 

@@ -43,6 +43,7 @@ CASES = {
     "dragon": ("dragon_res2.obj", 10000, "dragon_res2_quadriflow_cage.obj"),
     "armadillo": ("armadillo.obj", 3000, "armadillo_quadriflow_cage.obj"),
     "chinese_dragon": ("ChineseDragon-10kv.obj", 3000, "ChineseDragon-10kv_quadriflow_cage.obj"),
+    "elephant": ("elephant-with-holes.obj", 3000, "elephant-with-holes_quadriflow_cage.obj"),
 }
 
 

@@ -35,6 +35,7 @@ CASES = {
     "dragon": ("dragon_res2.obj", "dragon_res2_quadriflow_cage.obj"),
     "armadillo": ("armadillo.obj", "armadillo_quadriflow_cage.obj"),
     "chinese_dragon": ("ChineseDragon-10kv.obj", "ChineseDragon-10kv_quadriflow_cage.obj"),
+    "elephant": ("elephant-with-holes.obj", "elephant-with-holes_quadriflow_cage.obj"),
 }
 PER_EDGE = 8
 

@@ -10,6 +10,8 @@ as the panel's Target with a Surface fit, runs the add-on's operator on the
 cage, hides the scan and the cage, and shows the new `<cage>_pia` object
 coloured by its `pia_distance_color` heat map (Solid shading, colour
 Attribute) beside the Modifiers tab with the panel and its "Last fit" box.
+With --detail N the fit makes N detail levels (the panel's Detail, the
+result's Multires shown at its finest level; docs/panel_detail.png).
 With --paint-scan (after the output path) the fit runs with Paint Scan on
 and the scan is shown instead, coloured by its pia_scan_distance_color:
 where the surface does not reach the scan.
@@ -59,10 +61,12 @@ panel.OUTLINER_HEIGHT = 26
 
 ARGV = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
 PAINT_SCAN = "--paint-scan" in ARGV
+# --detail N: the fit with N detail levels (the panel's Detail), the result's Multires shown.
+DETAIL = int(ARGV[ARGV.index("--detail") + 1]) if "--detail" in ARGV else 0
 
 
 def output_path():
-    paths = [a for a in ARGV if not a.startswith("--")]
+    paths = [a for i, a in enumerate(ARGV) if not a.startswith("--") and (i == 0 or ARGV[i - 1] != "--detail")]
     return os.path.abspath(paths[0] if paths else os.path.join(ROOT, "docs", "panel_fit.png"))
 
 
@@ -77,7 +81,9 @@ def setup_scene():
     settings.target_object = scan
     settings.fit = 'SURFACE'
     settings.fit_paint_scan = PAINT_SCAN
-    result = bpy.ops.object.subdiv_pia_interpolate(target=scan.name, fit='SURFACE', fit_paint_scan=PAINT_SCAN)
+    settings.fit_detail_levels = DETAIL
+    result = bpy.ops.object.subdiv_pia_interpolate(target=scan.name, fit='SURFACE', fit_paint_scan=PAINT_SCAN,
+                                                   fit_detail_levels=DETAIL)
     if result != {'FINISHED'}:
         raise RuntimeError("operator returned %s" % result)
     new_obj = bpy.context.view_layer.objects.active
