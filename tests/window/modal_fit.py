@@ -277,6 +277,27 @@ def script():
     say("let run: the cage made is interpolate()'s (%d rounds, mean %.3g), reported" % (
         report.rounds, report.after.mean))
 
+    # 4b. With detail levels: the Multires is made and reshaped when the run
+    # ends, in the window's own context, as interpolate() makes it.
+    for obj in bpy.context.scene.objects:
+        obj.select_set(obj is cage)
+    bpy.context.view_layer.objects.active = cage
+    job = yield from run_to_end(target=scan.name, fit='SURFACE', fit_cutoff=0.02, fit_detail_levels=1)
+    assert not job.cancelled
+    detailed = bpy.data.objects.get("Cage_pia.001")
+    assert detailed is not None, [o.name for o in bpy.data.objects]
+    assert [m.type for m in detailed.modifiers] == ['MULTIRES'] and detailed.modifiers[0].total_levels == 1
+    scripted, _report = api.interpolate(cage, name="Cage_detail", **last_settings())
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    shown = [api.read_positions(o.evaluated_get(depsgraph).to_mesh()).astype(np.float64)
+             for o in (detailed, scripted)]
+    assert np.abs(shown[0] - shown[1]).max() < 1e-6, "the window's detail levels differ from interpolate()'s"
+    text = reports()
+    assert "1 detail level in Multires" in text, text
+    say("with a detail level: the Multires made in the window is interpolate()'s, reported")
+    for obj in (detailed, scripted):
+        bpy.data.objects.remove(obj)
+
     # 5. Without a target (interpolating the cage's own vertices), from Edit
     # Mode: the same, the source left in Object Mode as the menu leaves it.
     for obj in bpy.context.scene.objects:
