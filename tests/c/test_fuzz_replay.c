@@ -109,8 +109,9 @@ typedef int (*seed_fn)(const char *name, const uint8_t *data, size_t size, void 
 static int for_each_seed(seed_fn fn, void *user) {
     /* ops, scheme, flags, method, quality, iterations, tolerance|weight,
      * shape|threads|osd, levels, samples, cancel, fit mode|samples|rounds,
-     * cutoff|smoothing, point weight|round tolerance|solver, spare x2 */
-    static const uint8_t catmark[FUZZ_SETTINGS] = {0x7F, 0, 0, 0, 1, 20, 1, 1 << 3, 1, 3, 0, (2 << 2) | (1 << 5), 1 | (1 << 3), 7 | (1 << 3) | (1 << 6), 0, 0};
+     * cutoff|smoothing, point weight|round tolerance|solver, fit flags,
+     * subdivision (the Catmull-Clark seed: the scan's pull, subdivide) */
+    static const uint8_t catmark[FUZZ_SETTINGS] = {0x7F, 0, 0, 0, 1, 20, 1, 1 << 3, 1, 3, 0, (2 << 2) | (1 << 5), 1 | (1 << 3), 7 | (1 << 3) | (1 << 6), 8, 1};
     static const uint8_t catmark_vertices[FUZZ_SETTINGS] = {0x67, 0, 0x43, 3, 2, 10, 1, 2 << 5, 0, 2, 0, 1 | (1 << 5), 1, 0, 0, 0};
     static const uint8_t loop[FUZZ_SETTINGS] = {0xEF, 1, 0x08, 2, 0, 20, 1, 1 << 3, 3, 0, 0, 1 | (1 << 5), 1, 0, 0, 0};
     static const uint8_t loop_hoppe[FUZZ_SETTINGS] = {0x0F, 1, 0x04, 5, 0, 20, 1, 0, 2, 0, 0, 0, 0, 0, 0, 0};

@@ -14,7 +14,7 @@
  *   16 bytes of settings (see decode_settings): operations, scheme, flags,
  *   method, quality, iterations, tolerance and weight, shape parameter and
  *   threads and OpenSubdiv version, levels, samples, cancel, fit settings
- *   (3 bytes), 2 spare
+ *   (3 bytes), fit flags, subdivision
  *   u16 vertex count, u16 face count, u8 edge count
  *   face sizes (u8 each, taken mod 9: 0 to 8)
  *   corners (u16 each; see index_of)
@@ -79,6 +79,7 @@ typedef struct settings {
     spia_fit_options fit;
     uint8_t has_edges, has_edge_creases, has_vertex_creases, has_face_shapes;
     int16_t raw_vertex_count, raw_face_count;
+    int subdivide;
 } settings;
 
 enum {
@@ -143,8 +144,10 @@ static void decode_settings(reader *r, settings *s) {
     s->fit.point_weight = terms[b % 8];
     s->fit.round_tolerance = terms[(b >> 3) % 8];
     s->fit.solver_iterations = (int32_t)(b >> 6) * 4;
-    (void)u8(r); /* spare */
-    (void)u8(r);
+    b = u8(r);
+    s->fit.flags = b & 15; /* the four spia_fit_flags */
+    b = u8(r);
+    s->subdivide = b & 1;  /* spia_subdivide and spia_flat_positions */
 }
 
 static int known_code(spia_result r) { return r >= SPIA_ERROR_INTERNAL && r <= SPIA_STAGNATED; }
@@ -326,6 +329,57 @@ static void run_refine(const spia_mesh *m, const spia_options *o, int32_t levels
     free(pos);
     free(sizes);
     free(fv);
+}
+
+/* spia_subdivide (counts first, then exactly those), and spia_flat_positions
+ * on the mesh and on what spia_subdivide made. */
+static void run_subdivide(const spia_mesh *m, const spia_options *o, int32_t levels) {
+    spia_status st;
+    const size_t flat_size = sizeof(float) * 3 * ((size_t)m->vertex_count + 1);
+    float *flat = (float *)malloc(flat_size);
+    if (!flat) abort();
+    fill(flat, flat_size);
+    spia_result r = spia_flat_positions(m, o, flat, &st);
+    check_status("spia_flat_positions", r, &st);
+    if (r < 0) check_untouched("spia_flat_positions", flat, flat_size);
+    else check_finite("spia_flat_positions", flat, 3 * (size_t)m->vertex_count);
+    free(flat);
+    if (levels > 0 && m->face_count > 0)
+        while (levels > 1 && (double)m->face_count * pow(4.0, levels) > 6e4) --levels;
+    int32_t nv = -7, nf = -7, ne = -7;
+    r = spia_subdivide_size(m, o, levels, &nv, &nf, &ne, &st);
+    check_status("spia_subdivide_size", r, &st);
+    if (r != SPIA_OK) return;
+    if (nv < 0 || nf < 0 || ne < 0) fuzz_fail("negative counts", "spia_subdivide_size");
+    float *pos = (float *)malloc(sizeof(float) * 3 * (size_t)(nv > 0 ? nv : 1));
+    int32_t *fv = (int32_t *)malloc(sizeof(int32_t) * 4 * (size_t)(nf > 0 ? nf : 1));
+    int32_t *sizes = (int32_t *)malloc(sizeof(int32_t) * (size_t)(nf > 0 ? nf : 1));
+    int32_t *edges = (int32_t *)malloc(sizeof(int32_t) * 2 * (size_t)(ne > 0 ? ne : 1));
+    float *ec = (float *)malloc(sizeof(float) * (size_t)(ne > 0 ? ne : 1));
+    float *vc = (float *)malloc(sizeof(float) * (size_t)(nv > 0 ? nv : 1));
+    float *out = (float *)malloc(sizeof(float) * 3 * (size_t)(nv > 0 ? nv : 1));
+    if (!pos || !fv || !sizes || !edges || !ec || !vc || !out) abort();
+    r = spia_subdivide(m, o, levels, pos, fv, edges, ec, vc, &st);
+    check_status("spia_subdivide", r, &st);
+    if (r != SPIA_OK && r != SPIA_ERROR_OUT_OF_MEMORY && r != SPIA_ERROR_CANCELLED)
+        fuzz_fail("refused after its counts were given", "spia_subdivide");
+    if (r == SPIA_OK) {
+        for (int64_t k = 0; k < 4 * (int64_t)nf; ++k)
+            if (fv[k] < 0 || fv[k] >= nv) fuzz_fail("subdivided index out of range", "spia_subdivide");
+        for (int64_t k = 0; k < 2 * (int64_t)ne; ++k)
+            if (edges[k] < 0 || edges[k] >= nv) fuzz_fail("subdivided edge out of range", "spia_subdivide");
+        for (int32_t e = 0; e < ne; ++e)
+            if (!(ec[e] >= 0.0f && ec[e] <= 1.0f)) fuzz_fail("subdivided crease out of [0, 1]", "spia_subdivide");
+        for (int32_t v = 0; v < nv; ++v)
+            if (!(vc[v] >= 0.0f && vc[v] <= 1.0f)) fuzz_fail("subdivided crease out of [0, 1]", "spia_subdivide");
+        check_finite("spia_subdivide", pos, 3 * (size_t)nv);
+        for (int32_t f = 0; f < nf; ++f) sizes[f] = 4;
+        spia_mesh fine = {nv, pos, nf, sizes, fv, ne, edges, ec, vc};
+        r = spia_flat_positions(&fine, o, out, &st);
+        check_status("spia_flat_positions", r, &st);
+        if (r == SPIA_OK) check_finite("spia_flat_positions", out, 3 * (size_t)nv);
+    }
+    free(pos), free(fv), free(sizes), free(edges), free(ec), free(vc), free(out);
 }
 
 static void run_surface(const spia_mesh *m, const spia_options *o, int32_t k) {
@@ -517,6 +571,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     if (set.ops & OP_INTERPOLATE) run_interpolate(&m, &o, validated);
     cancel.calls = 0;
     if (set.ops & OP_REFINE) run_refine(&m, &o, set.levels);
+    if (set.subdivide) run_subdivide(&m, &o, set.levels);
     if (set.ops & OP_SURFACE) run_surface(&m, &o, set.samples);
     cancel.calls = 0;
     if (set.ops & (OP_SCAN | OP_FIT)) run_scan(&m, &o, &set, &rd);
