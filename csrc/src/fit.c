@@ -1079,6 +1079,17 @@ static void grid_differences(const double *X, int64_t base, int32_t l, int32_t k
         for (int c = 0; c < 3; ++c) D[m][c] = X[3 * (base + a[m]) + c] - X[3 * (base + b[m]) + c];
 }
 
+/* Sample s's grid normal: the cross product of its neighbours' differences
+ * along u and v (grid_differences), not normalised. */
+static void grid_normal(const double *X, int64_t s, int32_t k, double n[3]) {
+    const int64_t per_face = (int64_t)k * k;
+    int32_t a[2], b[2];
+    double D[2][3];
+    grid_differences(X, s - s % per_face, (int32_t)(s % per_face), k, a, b, D);
+    const double *du = D[0], *dv = D[1];
+    n[0] = du[1] * dv[2] - du[2] * dv[1], n[1] = du[2] * dv[0] - du[0] * dv[2], n[2] = du[0] * dv[1] - du[1] * dv[0];
+}
+
 /* Per sample, the cosine between its limit normal and the scan's normal at
  * its closest point.  The normal is the cross product of the differences
  * to the neighbours along the ptex face's sample grid (grid_differences);
@@ -1089,13 +1100,9 @@ static void normal_agreement(const double *X, const float *N, int64_t S, int32_t
         memset(dots, 0, sizeof(float) * (size_t)S);
         return;
     }
-    const int64_t per_face = (int64_t)k * k;
     for (int64_t s = 0; s < S; ++s) {
-        int32_t a[2], b[2];
-        double D[2][3];
-        grid_differences(X, s - s % per_face, (int32_t)(s % per_face), k, a, b, D);
-        const double *du = D[0], *dv = D[1];
-        const double n[3] = {du[1] * dv[2] - du[2] * dv[1], du[2] * dv[0] - du[0] * dv[2], du[0] * dv[1] - du[1] * dv[0]};
+        double n[3];
+        grid_normal(X, s, k, n);
         const float *m = N + 3 * s;
         const double len = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
         const double mlen = sqrt((double)m[0] * m[0] + (double)m[1] * m[1] + (double)m[2] * m[2]);
@@ -1106,13 +1113,9 @@ static void normal_agreement(const double *X, const float *N, int64_t S, int32_t
 /* Per sample, the unit normal of the starting cage's surface where it
  * faced the scan as the cage does (sign), else zero (see facing_start). */
 static void start_normals(const double *X, const float *dots, int64_t S, int32_t k, int sign, float *out) {
-    const int64_t per_face = (int64_t)k * k;
     for (int64_t s = 0; s < S; ++s) {
-        int32_t a[2], b[2];
-        double D[2][3];
-        grid_differences(X, s - s % per_face, (int32_t)(s % per_face), k, a, b, D);
-        const double *du = D[0], *dv = D[1];
-        const double n[3] = {du[1] * dv[2] - du[2] * dv[1], du[2] * dv[0] - du[0] * dv[2], du[0] * dv[1] - du[1] * dv[0]};
+        double n[3];
+        grid_normal(X, s, k, n);
         const double len = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
         const int keep = len > 0.0 && (double)sign * dots[s] > 0.0;
         for (int c = 0; c < 3; ++c) out[3 * s + c] = keep ? (float)(n[c] / len) : 0.0f;
