@@ -2021,7 +2021,10 @@ static spia_result measure_samples_written(fit_run *u, spia_result r) {
     report->folded_after = u->fo.samples_per_edge < 2
                                ? -1
                                : find_folds(b->dots, b->d, b->on_boundary, S, u->cutoff_abs, u->sign, b->folded);
-    if (b->grid.groups && (r = measure_scan_written(u)) != SPIA_OK) return r;
+    if (b->grid.groups) {
+        const spia_result m = measure_scan_written(u);
+        if (m != SPIA_OK) return m;
+    }
     if (report->vertex_distances) sample_vertex_distances(u);
     return r;
 }

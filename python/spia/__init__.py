@@ -1404,7 +1404,10 @@ def fit_detail(cage, scan, levels, samples_per_edge=4, progress=None, boundary_s
     DETAIL_SMOOTHING, DETAIL_SLIDE_WEIGHT, DETAIL_ROUNDS and
     DETAIL_SOLVER_ITERATIONS.
     The finest level's vertices are numbered as :func:`subdivide` applied
-    one level at a time numbers them.  Returns a :class:`DetailResult`."""
+    one level at a time numbers them.  A level's report has status
+    'MAX_ITERATIONS' when its rounds were all used (the defaults' few rounds
+    usually are): the level is written all the same.  Returns a
+    :class:`DetailResult`."""
     levels = int(levels)
     if not 1 <= levels <= 6:
         raise PiaError("INVALID_ARGUMENT", f"levels must be 1 to 6, not {levels!r}")

@@ -124,6 +124,20 @@ def test_surface_fit_puts_every_sample_on_the_sphere(native, sphere_scan):
     assert rep.history[0] == pytest.approx(rep.before.mean) and len(rep.history) == rep.rounds + 1
 
 
+@pytest.mark.parametrize("measure_scan", [True, False])
+def test_a_fit_stopped_by_max_rounds_says_so(native, sphere_scan, measure_scan):
+    # One round cannot settle (settling takes two rounds that gain less
+    # than round_tolerance): the result says so whether or not the scan's
+    # side is measured after the fit, and the cage is still written.
+    cage, out, rep = _fit_sphere(native, sphere_scan, "SURFACE", max_rounds=1, measure_scan=measure_scan)
+    assert rep.status == "MAX_ITERATIONS" and "max_rounds" in rep.message
+    assert rep.rounds == 1 and rep.after.mean < rep.before.mean
+    assert not np.array_equal(out, cage.positions)
+    assert (rep.scan_point_count > 0) == measure_scan
+    settled_cage, settled_out, settled = _fit_sphere(native, sphere_scan, "SURFACE", measure_scan=measure_scan)
+    assert settled.status == "CONVERGED" and settled.message == ""
+
+
 @pytest.mark.parametrize("per_edge", [1, 2, 3, 5, 6])
 def test_sample_products_for_every_grid_size(native, sphere_scan, per_edge):
     """The sample products take eight, four and single samples at a time:
