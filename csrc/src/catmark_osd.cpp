@@ -2143,19 +2143,85 @@ struct Point {
     }
 };
 
+// Refines prepare()'s refiner uniformly to `levels` and carries the
+// control points down with Far::PrimvarRefiner (to the last level's limit
+// positions with `limit`).  The counts, counted in closed form, are checked
+// against the refinement (ne < 0: not checked).  *last_points: the last
+// level's points, in OpenSubdiv's order, inside `src` or `limit_points`.
+spia_result refine_points(const spia_mesh *m, Prepared &p, int32_t levels, bool limit, int64_t nv, int64_t ne,
+                          int64_t nf, std::vector<Point> &src, std::vector<Point> &limit_points,
+                          const Point **last_points, spia__refine_clock *clock, spia_status *status) {
+    Far::TopologyRefiner &refiner = *p.refiner;
+    Far::TopologyRefiner::UniformOptions uniform(levels);
+    uniform.fullTopologyInLastLevel = true;
+    refiner.RefineUniform(uniform);
+    const Far::TopologyLevel &last = refiner.GetLevel(levels);
+    if (last.GetNumVertices() != nv || last.GetNumFaces() != nf || (ne >= 0 && last.GetNumEdges() != ne))
+        return spia__fail(status, SPIA_ERROR_INTERNAL, -1,
+                          "refined to %d vertices and %d faces, not the %lld and %lld counted", last.GetNumVertices(),
+                          last.GetNumFaces(), (long long)nv, (long long)nf);
+    if (spia__refine_tick(clock, 0)) return spia__refine_cancelled(status, clock);
+    src.resize((size_t)refiner.GetNumVerticesTotal());
+    for (int32_t o = 0; o < p.osd_n; ++o)
+        for (int a = 0; a < 3; ++a) src[o].p[a] = m->positions[3 * (int64_t)p.vertex_of[o] + a];
+    Far::PrimvarRefinerReal<float> primvar(refiner);
+    Point *level_src = src.data();
+    for (int level = 1; level <= levels; ++level) {
+        Point *level_dst = level_src + refiner.GetLevel(level - 1).GetNumVertices();
+        primvar.Interpolate(level, level_src, level_dst);
+        level_src = level_dst;
+        // With `limit`, the last level is done when its limit is.
+        if ((!limit || level < levels) && spia__refine_level_done(clock, level))
+            return spia__refine_cancelled(status, clock);
+    }
+    *last_points = level_src;
+    if (limit) {
+        limit_points.resize((size_t)last.GetNumVertices());
+        Point *limit_dst = limit_points.data();
+        primvar.Limit(level_src, limit_dst);
+        *last_points = limit_points.data();
+        if (spia__refine_level_done(clock, levels)) return spia__refine_cancelled(status, clock);
+    }
+    return SPIA_OK;
+}
+
+// The output's index of the last level's vertex i: the control vertices'
+// children at the caller's indices, then the others in OpenSubdiv's order.
+int32_t refined_index(const Prepared &p, int32_t n, int32_t i) { return i < p.osd_n ? p.vertex_of[i] : n + (i - p.osd_n); }
+
+// Writes the last level's points (the caller's vertices that OpenSubdiv
+// did not take, loose ones, where they are) and its faces, each of
+// face_size corners.
+spia_result write_refined(const spia_mesh *m, const Prepared &p, const Far::TopologyLevel &last, const Point *points,
+                          int face_size, float *positions, int32_t *faces, spia_status *status) {
+    const int32_t n = m->vertex_count;
+    for (int32_t v = 0; v < n; ++v)
+        if (p.osd_of[v] < 0)
+            for (int a = 0; a < 3; ++a) positions[3 * (int64_t)v + a] = m->positions[3 * (int64_t)v + a];
+    for (int32_t i = 0; i < last.GetNumVertices(); ++i)
+        for (int a = 0; a < 3; ++a) positions[3 * (int64_t)refined_index(p, n, i) + a] = (float)points[i].p[a];
+    int64_t k = 0;
+    for (int32_t f = 0; f < last.GetNumFaces(); ++f) {
+        Far::ConstIndexArray fv = last.GetFaceVertices(f);
+        if (fv.size() != face_size)
+            return spia__fail(status, SPIA_ERROR_INTERNAL, f, "refined face %d has %d vertices", (int)f, fv.size());
+        for (int c = 0; c < face_size; ++c) faces[k++] = refined_index(p, n, fv[c]);
+    }
+    return SPIA_OK;
+}
+
 spia_result refine(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, int32_t levels,
                    int32_t *vertex_count, int32_t *face_count, float *positions, int32_t *faces,
                    spia__refine_clock *clock, spia_status *status) {
     Prepared p;
     spia_result r = prepare(m, adj, opt, p, status);
     if (r != SPIA_OK) return r;
-    Far::TopologyRefiner &refiner = *p.refiner;
     // The counts in closed form from the control mesh, so that asking for
     // them costs no refinement: a uniform Loop step puts a vertex on every
     // edge and splits every triangle in four (V' = V + E, E' = 2 E + 3 F,
     // F' = 4 F).
-    int64_t nv = refiner.GetLevel(0).GetNumVertices(), ne = refiner.GetLevel(0).GetNumEdges(),
-            nf = refiner.GetLevel(0).GetNumFaces();
+    const Far::TopologyLevel &base = p.refiner->GetLevel(0);
+    int64_t nv = base.GetNumVertices(), ne = base.GetNumEdges(), nf = base.GetNumFaces();
     for (int32_t l = 0; l < levels; ++l) {
         nv += ne;
         ne = 2 * ne + 3 * nf;
@@ -2165,50 +2231,18 @@ spia_result refine(const spia_mesh *m, const spia_adjacency *adj, const spia_opt
     // order, so the first osd_n vertices of the last level are the control
     // vertices; the output puts them at the caller's indices and appends the
     // others.
-    const int32_t n = m->vertex_count;
-    const int64_t total = n + (nv - p.osd_n);
+    const int64_t total = m->vertex_count + (nv - p.osd_n);
     if (total > INT32_MAX || 3 * nf > INT32_MAX)
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "%d levels make %lld faces, too many", (int)levels,
                           (long long)nf);
     *vertex_count = (int32_t)total;
     *face_count = (int32_t)nf;
     if (!positions) return SPIA_OK;
-    Far::TopologyRefiner::UniformOptions uniform(levels);
-    uniform.fullTopologyInLastLevel = true;
-    refiner.RefineUniform(uniform);
-    const Far::TopologyLevel &last = refiner.GetLevel(levels);
-    if (last.GetNumVertices() != nv || last.GetNumFaces() != nf)
-        return spia__fail(status, SPIA_ERROR_INTERNAL, -1,
-                          "refined to %d vertices and %d faces, not the %lld and %lld counted", last.GetNumVertices(),
-                          last.GetNumFaces(), (long long)nv, (long long)nf);
-    if (spia__refine_tick(clock, 0)) return spia__refine_cancelled(status, clock);
-    std::vector<Point> src((size_t)refiner.GetNumVerticesTotal()), limit((size_t)last.GetNumVertices());
-    for (int32_t o = 0; o < p.osd_n; ++o)
-        for (int a = 0; a < 3; ++a) src[o].p[a] = m->positions[3 * (int64_t)p.vertex_of[o] + a];
-    Far::PrimvarRefinerReal<float> primvar(refiner);
-    Point *level_src = src.data();
-    for (int level = 1; level <= levels; ++level) {
-        Point *level_dst = level_src + refiner.GetLevel(level - 1).GetNumVertices();
-        primvar.Interpolate(level, level_src, level_dst);
-        level_src = level_dst;
-        if (level < levels && spia__refine_level_done(clock, level)) return spia__refine_cancelled(status, clock);
-    }
-    Point *limit_dst = limit.data();
-    primvar.Limit(level_src, limit_dst);
-    if (spia__refine_level_done(clock, levels)) return spia__refine_cancelled(status, clock);
-    auto out_index = [&](int32_t i) { return i < p.osd_n ? p.vertex_of[i] : n + (i - p.osd_n); };
-    for (int32_t v = 0; v < n; ++v)
-        if (p.osd_of[v] < 0)
-            for (int a = 0; a < 3; ++a) positions[3 * (int64_t)v + a] = m->positions[3 * (int64_t)v + a];
-    for (int32_t i = 0; i < last.GetNumVertices(); ++i)
-        for (int a = 0; a < 3; ++a) positions[3 * (int64_t)out_index(i) + a] = (float)limit[i].p[a];
-    int64_t k = 0;
-    for (int32_t f = 0; f < last.GetNumFaces(); ++f) {
-        Far::ConstIndexArray fv = last.GetFaceVertices(f);
-        if (fv.size() != 3)
-            return spia__fail(status, SPIA_ERROR_INTERNAL, f, "refined face %d has %d vertices", (int)f, fv.size());
-        for (int c = 0; c < 3; ++c) faces[k++] = out_index(fv[c]);
-    }
+    std::vector<Point> src, limit;
+    const Point *points = nullptr;
+    if ((r = refine_points(m, p, levels, true, nv, -1, nf, src, limit, &points, clock, status)) != SPIA_OK) return r;
+    if ((r = write_refined(m, p, p.refiner->GetLevel(levels), points, 3, positions, faces, status)) != SPIA_OK)
+        return r;
     spia__ok(status);
     return SPIA_OK;
 }
@@ -2229,11 +2263,10 @@ spia_result subdivide(const spia_mesh *m, const spia_adjacency *adj, const spia_
     Prepared p;
     spia_result r = prepare(m, adj, opt, p, status);
     if (r != SPIA_OK) return r;
-    Far::TopologyRefiner &refiner = *p.refiner;
     // Counts in closed form: a Catmull-Clark step puts a vertex on every edge
     // and face, splits an n-gon into n quads and makes 2 edges of each edge
     // and one of each face corner.
-    const Far::TopologyLevel &base = refiner.GetLevel(0);
+    const Far::TopologyLevel &base = p.refiner->GetLevel(0);
     int64_t nv = base.GetNumVertices(), ne = base.GetNumEdges(), nf = base.GetNumFaces(), corners = 0;
     for (int f = 0; f < base.GetNumFaces(); ++f) corners += base.GetFaceVertices(f).size();
     for (int32_t l = 0; l < levels; ++l) {
@@ -2251,38 +2284,13 @@ spia_result subdivide(const spia_mesh *m, const spia_adjacency *adj, const spia_
     *face_count = (int32_t)nf;
     *edge_count = (int32_t)ne;
     if (!positions) return SPIA_OK;
-    Far::TopologyRefiner::UniformOptions uniform(levels);
-    uniform.fullTopologyInLastLevel = true;
-    refiner.RefineUniform(uniform);
-    const Far::TopologyLevel &last = refiner.GetLevel(levels);
-    if (last.GetNumVertices() != nv || last.GetNumFaces() != nf || last.GetNumEdges() != ne)
-        return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "refined to %d vertices and %d faces, not the %lld and %lld counted",
-                          last.GetNumVertices(), last.GetNumFaces(), (long long)nv, (long long)nf);
-    if (spia__refine_tick(clock, 0)) return spia__refine_cancelled(status, clock);
-    std::vector<Point> src((size_t)refiner.GetNumVerticesTotal());
-    for (int32_t o = 0; o < p.osd_n; ++o)
-        for (int a = 0; a < 3; ++a) src[o].p[a] = m->positions[3 * (int64_t)p.vertex_of[o] + a];
-    Far::PrimvarRefinerReal<float> primvar(refiner);
-    Point *level_src = src.data();
-    for (int level = 1; level <= levels; ++level) {
-        Point *level_dst = level_src + refiner.GetLevel(level - 1).GetNumVertices();
-        primvar.Interpolate(level, level_src, level_dst);
-        level_src = level_dst;
-        if (spia__refine_level_done(clock, level)) return spia__refine_cancelled(status, clock);
-    }
-    auto out_index = [&](int32_t i) { return i < p.osd_n ? p.vertex_of[i] : n + (i - p.osd_n); };
-    for (int32_t v = 0; v < n; ++v)
-        if (p.osd_of[v] < 0)
-            for (int a = 0; a < 3; ++a) positions[3 * (int64_t)v + a] = m->positions[3 * (int64_t)v + a];
-    for (int32_t i = 0; i < last.GetNumVertices(); ++i)
-        for (int a = 0; a < 3; ++a) positions[3 * (int64_t)out_index(i) + a] = (float)level_src[i].p[a];
-    int64_t k = 0;
-    for (int32_t f = 0; f < last.GetNumFaces(); ++f) {
-        Far::ConstIndexArray fv = last.GetFaceVertices(f);
-        if (fv.size() != 4)
-            return spia__fail(status, SPIA_ERROR_INTERNAL, f, "refined face %d has %d vertices", (int)f, fv.size());
-        for (int c = 0; c < 4; ++c) face_vertices[k++] = out_index(fv[c]);
-    }
+    std::vector<Point> src, unused;
+    const Point *points = nullptr;
+    if ((r = refine_points(m, p, levels, false, nv, ne, nf, src, unused, &points, clock, status)) != SPIA_OK)
+        return r;
+    const Far::TopologyLevel &last = p.refiner->GetLevel(levels);
+    if ((r = write_refined(m, p, last, points, 4, positions, face_vertices, status)) != SPIA_OK) return r;
+    auto out_index = [&](int32_t i) { return refined_index(p, n, i); };
     const bool creased = !opt->ignore_creases;
     auto crease_of = [](float s) {
         return s >= kInfiniteSharpness ? 1.0f : (s > 0.0f ? (float)std::sqrt((double)s / 10.0) : 0.0f);
