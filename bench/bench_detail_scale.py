@@ -62,12 +62,16 @@ def main():
     levels_seen = []
     fit = native.fit
 
+    fit_reports = {}
+
     def fit_timed(mesh, *a, **k):
         t0 = time.perf_counter()
+        key = "fit, cage" if not levels_seen else "fit, level %d" % len(levels_seen)
         try:
-            return fit(mesh, *a, **k)
+            result = fit(mesh, *a, **k)
+            fit_reports[key] = result[1]
+            return result
         finally:
-            key = "fit, cage" if not levels_seen else "fit, level %d" % len(levels_seen)
             seconds[key] = time.perf_counter() - t0
             levels_seen.append(len(mesh.positions))
     native.fit = fit_timed
@@ -85,6 +89,11 @@ def main():
     for key, value in seconds.items():
         print("| %s | %.1f |" % (key, value))
     print("| **total** (interpolate, call to object) | **%.1f** |" % total)
+    print("\nThe fits' own split (their reports):\n\n| fit | samples | rounds | stencils s | queries s | solve s |"
+          "\n|---|---:|---:|---:|---:|---:|")
+    for key, rep in fit_reports.items():
+        print("| %s | %d | %d | %.1f | %.1f | %.1f |" % (key, rep.sample_count, rep.rounds, rep.stencil_seconds,
+                                                       rep.query_seconds, rep.solve_seconds))
     print("\npeak resident size %.1f GB (%.1f GB before the call)" % (peak / 2**30, rss0 / 2**30))
     print("finest level: mean %.3g, p95 %.3g of the diagonal from the scan; scan to it: mean %.3g, p95 %.3g"
           % (new_obj["pia_fit_detail_mean"], new_obj["pia_fit_detail_p95"],
