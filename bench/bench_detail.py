@@ -23,7 +23,9 @@ vertices (mean, 95th percentile, max; and the median from the scan,
 relative to the scan's diagonal), the share of faces turned over against
 the start's same face and, in brackets, of those where the start's face
 faced the scan (the rest are the start's own folds turned back onto the
-scan), and the seconds each took.  Prints a Markdown table and writes out/bench/detail.md.
+scan) and of those the folds: faces now facing away from the scan or
+beyond detail_workflow.FOLD_FAR of it (the rest turned with the scan, in a
+groove or an overhang), and the seconds each took.  Prints a Markdown table and writes out/bench/detail.md.
 """
 import argparse
 import os
@@ -42,7 +44,7 @@ from bench_fit import CASES, ensure_addon, finish, script_args  # noqa: E402
 
 OUT = os.path.join(ROOT, "out", "bench")
 HEADER = ["| case | method | surface to scan mean / p95 / max | scan to surface mean / median / p95 / max "
-          "| faces turned (where the start faced the scan) | s |", "|---|---|---|---|---:|---:|"]
+          "| faces turned (where the start faced the scan / folds) | s |", "|---|---|---|---|---:|---:|"]
 
 
 def plain_levels(obj, levels):
@@ -63,7 +65,8 @@ def row(name, method, seconds, m):
     return ("| %s | %s | %.2e / %.2e / %.2e | %.2e / %.2e / %.2e / %.2e | %s | %.1f |"
             % (name, method, s["mean"], s["p95"], s["max"], t["mean"], float(np.median(m["scan_distances"])),
                t["p95"], t["max"],
-               "-" if turned is None else "%.3f%% (%.3f%%)" % (100.0 * turned, 100.0 * m["turned_facing"]),
+               "-" if turned is None else "%.3f%% (%.3f%% / %.3f%%)" % (100.0 * turned, 100.0 * m["turned_facing"],
+                                                                   100.0 * m["turned_folded"]),
                seconds))
 
 

@@ -176,15 +176,23 @@ def newell_normals(positions, face_sizes, face_vertices):
 # --------------------------------------------------------------------------
 # The measurement
 
-def _nearest(tree, points):
+def _nearest(tree, points, normals=None):
     """Distance from each point to the tree's surface (one find_nearest per
-    point; inf where the tree finds nothing)."""
+    point; inf where the tree finds nothing); with `normals` (an (N, 3)
+    array), also the surface's normal there (zero where nothing is found)."""
     out = np.empty(len(points))
     find = tree.find_nearest
     for i, p in enumerate(points.tolist()):
-        d = find(p)[3]
+        _location, normal, _index, d = find(p)
         out[i] = np.inf if d is None else d
+        if normals is not None:
+            normals[i] = (0.0, 0.0, 0.0) if normal is None else tuple(normal)
     return out
+
+
+# A turned face farther than this share of the diagonal from the scan
+# follows nothing of it: it counts as a fold whichever way it faces.
+FOLD_FAR = 1e-3
 
 
 def _stats(d):
@@ -237,7 +245,8 @@ def measure_detail(positions, face_sizes, face_vertices, scan_obj, start_positio
     build_s = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    to_scan = _nearest(scan_tree, centres) / diag
+    scan_normals = np.zeros_like(centres)
+    to_scan = _nearest(scan_tree, centres, scan_normals) / diag
     to_scan_s = time.perf_counter() - t0
     t0 = time.perf_counter()
     to_surface = _nearest(surface_tree, verts[used]) / diag
@@ -274,7 +283,18 @@ def measure_detail(positions, face_sizes, face_vertices, scan_obj, start_positio
         out["turned"] = float((dots < 0).mean()) if ok.any() else 0.0
         out["turned_faces"] = int((dots < 0).sum())
         if start_facing is not None:  # of those, where the start faced the scan (a bool per face)
-            out["turned_facing"] = float(((dots < 0) & start_facing[ok]).mean()) if ok.any() else 0.0
+            turned = np.zeros(len(ok), bool)
+            turned[np.flatnonzero(ok)[dots < 0]] = True
+            out["turned_facing"] = float((turned & start_facing)[ok].mean()) if ok.any() else 0.0
+            # And of those, the folds: faces that now face away from the
+            # scan's normal at their centre's nearest point, or lie beyond
+            # FOLD_FAR of the diagonal from it.  The others turned with the
+            # scan (a groove or an overhang the start's coarser surface
+            # spans: the scan's normal there is turned from the start's).
+            facing = np.einsum("ij,ij->i", area, scan_normals)
+            facing *= 1.0 if facing.sum() >= 0.0 else -1.0
+            folded = turned & start_facing & ((facing <= 0.0) | (to_scan > FOLD_FAR))
+            out["turned_folded"] = float(folded[ok].mean()) if ok.any() else 0.0
         out["degenerate_faces"] = int((~ok).sum())
     out["total_s"] = time.perf_counter() - t_all
     return out
