@@ -13,7 +13,8 @@ degrees against the starting cage's is printed beside the fit's own count
 (samples facing away from the scan's normal, which counts the scan's own
 folds too) and the mean distance, as a Markdown table; and the share of
 those where the starting cage faced the scan (the rest are folds of the
-starting cage that the fit turned back).
+starting cage that the fit turned back), and of those the folds (facing
+away from the scan, or beyond FOLD_FAR of it).
 """
 import argparse
 import os
@@ -60,22 +61,35 @@ def grid_normals(points, k):
     return np.cross(du, dv).reshape(-1, 3)
 
 
+# A turned point farther than this share of the scan's diagonal from the
+# scan follows nothing of it: a fold whichever way it faces (as
+# detail_workflow.FOLD_FAR).
+FOLD_FAR = 1e-3
+
+
 def turned_share(cage, start, fitted, scan=None):
     """Share of the level-3 points whose normal turned by more than 90
     degrees from start to fitted; with scan, also the share of those where
     the start faced the scan's normal at its closest point as most of the
-    start does (the others the fit turned back onto the scan)."""
+    start does (the others the fit turned back onto the scan), and of
+    those the folds: points facing away from the scan's normal at their own
+    closest point, or beyond FOLD_FAR of it (the others turned with the
+    scan, into a groove or under an overhang)."""
     stencils = spia.surface_stencils(cage, samples_per_edge=PER_EDGE)
     p0 = stencils.limit_points(start)
+    p1 = stencils.limit_points(fitted)
     n0 = grid_normals(p0, PER_EDGE)
-    n1 = grid_normals(stencils.limit_points(fitted), PER_EDGE)
+    n1 = grid_normals(p1, PER_EDGE)
     turned = np.einsum("ij,ij->i", n0, n1) < 0.0
     if scan is None:
         return float(np.mean(turned))
     normals = scan.closest_points(p0)[1]
     facing = np.einsum("ij,ij->i", n0, normals)
-    facing *= 1.0 if facing.sum() >= 0.0 else -1.0
-    return float(np.mean(turned)), float(np.mean(turned & (facing > 0.0)))
+    sign = 1.0 if facing.sum() >= 0.0 else -1.0
+    made = turned & (sign * facing > 0.0)
+    _closest, normals1, distances, _faces = scan.closest_points(p1)
+    away = (sign * np.einsum("ij,ij->i", n1, normals1) <= 0.0) | (distances > FOLD_FAR * scan.diagonal)
+    return float(np.mean(turned)), float(np.mean(made)), float(np.mean(made & away))
 
 
 def main():
@@ -83,8 +97,8 @@ def main():
     parser.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
     args = parser.parse_args()
     print("| case | mean distance | facing away from the scan | turned against the start | of them where the start "
-          "faced the scan | s |")
-    print("|---|---:|---:|---:|---:|---:|")
+          "faced the scan | of those, folds | s |")
+    print("|---|---:|---:|---:|---:|---:|---:|")
     for name in args.cases:
         scan_file, cage_file = CASES[name]
         scan = spia.Scan(load(scan_file))
@@ -92,10 +106,10 @@ def main():
         t = time.perf_counter()
         fitted, report = spia.fit(cage, scan)
         seconds = time.perf_counter() - t
-        turned, made = turned_share(cage, cage.positions, fitted, scan)
-        print("| %s | %.3e | %.3f%% | %.3f%% | %.3f%% | %.1f |"
+        turned, made, folds = turned_share(cage, cage.positions, fitted, scan)
+        print("| %s | %.3e | %.3f%% | %.3f%% | %.3f%% | %.3f%% | %.1f |"
               % (name, report.after.mean, 100.0 * report.folded_after / report.sample_count, 100.0 * turned,
-                 100.0 * made, seconds), flush=True)
+                 100.0 * made, 100.0 * folds, seconds), flush=True)
 
 
 if __name__ == "__main__":
