@@ -160,7 +160,7 @@ class _FitReport(ctypes.Structure):
 
 
 # spia_fit_flags
-FIT_ALLOW_FOLDS, FIT_HARD_CUTOFF, FIT_NO_SCAN_DISTANCES, FIT_SCAN_PULL = 1, 2, 4, 8
+FIT_ALLOW_FOLDS, FIT_HARD_CUTOFF, FIT_NO_SCAN_DISTANCES, FIT_SCAN_PULL, FIT_FREE_RIMS = 1, 2, 4, 8, 16
 
 
 _lib = None
@@ -1258,7 +1258,7 @@ class FitReport:
 
 def fit(cage, scan, mode="SURFACE", samples_per_edge=4, cutoff=0.02, smoothing=1e-5, point_weight=1e-3,
         max_rounds=16, round_tolerance=0.01, solver_iterations=20, robust_scale=6.0, slide_weight=0.0, allow_folds=False,
-        hard_cutoff=False, measure_scan=True, scan_pull=False, **options):
+        hard_cutoff=False, measure_scan=True, scan_pull=False, free_rims=False, **options):
     """Moves the vertices of ``cage`` (a :class:`Mesh`) so that its limit
     surface lies on ``scan`` (a :class:`Scan`).  mode 'SURFACE' fits the
     whole surface (Catmull-Clark); 'VERTICES' interpolates the closest scan
@@ -1269,7 +1269,9 @@ def fit(cage, scan, mode="SURFACE", samples_per_edge=4, cutoff=0.02, smoothing=1
     along the scan within a round; ``allow_folds``: no fold guard; ``hard_cutoff``: the cut-off's
     0/1 weights without the kernel; ``measure_scan``: also measure the
     scan's vertices against the surface (``report.scan_before/after``);
-    ``scan_pull``: the scan's vertices pull the surface too (SPIA_FIT_SCAN_PULL).
+    ``scan_pull``: the scan's vertices pull the surface too (SPIA_FIT_SCAN_PULL);
+    ``free_rims``: the cage's rims (faces with a boundary vertex) are not
+    held smoother than the rest (SPIA_FIT_FREE_RIMS).
     Returns ``(cage positions (N, 3) float32, FitReport)``."""
     lib = _library()
     opts, _keep = _options(**options)
@@ -1296,7 +1298,8 @@ def fit(cage, scan, mode="SURFACE", samples_per_edge=4, cutoff=0.02, smoothing=1
         raise PiaError("INVALID_ARGUMENT", f"slide_weight must be at least 0 and below 1, not {slide_weight!r}")
     fo.slide_weight = float(slide_weight)
     fo.flags = ((FIT_ALLOW_FOLDS if allow_folds else 0) | (FIT_HARD_CUTOFF if hard_cutoff else 0)
-                | (0 if measure_scan else FIT_NO_SCAN_DISTANCES) | (FIT_SCAN_PULL if scan_pull else 0))
+                | (0 if measure_scan else FIT_NO_SCAN_DISTANCES) | (FIT_SCAN_PULL if scan_pull else 0)
+                | (FIT_FREE_RIMS if free_rims else 0))
     if fo.max_rounds < 1 or fo.solver_iterations < 1:
         raise PiaError("INVALID_ARGUMENT", "max_rounds and solver_iterations must be at least 1")
     out = np.empty_like(cage.positions)
@@ -1384,7 +1387,7 @@ DETAIL_SOLVER_ITERATIONS = 5
 
 def fit_detail(cage, scan, levels, samples_per_edge=4, progress=None, boundary_smooth="ALL", use_creases=True,
                quality=3, opensubdiv_version=None, threads=0, measure_scan=True, smoothing=DETAIL_SMOOTHING,
-               slide_weight=DETAIL_SLIDE_WEIGHT, scan_pull=True, max_rounds=DETAIL_ROUNDS,
+               slide_weight=DETAIL_SLIDE_WEIGHT, scan_pull=True, free_rims=True, max_rounds=DETAIL_ROUNDS,
                solver_iterations=DETAIL_SOLVER_ITERATIONS, **fit_options):
     """Detail levels on a cage whose limit surface lies on ``scan`` (usually
     the result of :func:`fit`): the cage subdivided one level at a time
@@ -1393,7 +1396,8 @@ def fit_detail(cage, scan, levels, samples_per_edge=4, progress=None, boundary_s
     the level above where the scan says nothing, so holes are spanned
     smoothly; folds and outliers do not pull; with ``scan_pull`` the scan's
     vertices pull each level too, so that it meets the scan from both
-    sides).  Coarse levels take the broad shape, fine levels the detail.
+    sides; with ``free_rims`` the cage's rims are not held smoother, as the
+    fit of a cage not yet on the scan holds them).  Coarse levels take the broad shape, fine levels the detail.
     The finest level's vertices are then placed so that its faces, drawn
     flat as Multires draws them, straddle the fitted limit surface
     (:func:`flat_positions`).  ``levels``: 1 to 6.  Each level's samples
@@ -1422,7 +1426,8 @@ def fit_detail(cage, scan, levels, samples_per_edge=4, progress=None, boundary_s
         positions, report = fit(refined, scan, samples_per_edge=detail_samples(samples_per_edge, level),
                                 measure_scan=measure_scan and level == levels, progress=follow, threads=threads,
                                 smoothing=smoothing, slide_weight=slide_weight, scan_pull=scan_pull,
-                                max_rounds=max_rounds, solver_iterations=solver_iterations, **surface, **fit_options)
+                                free_rims=free_rims, max_rounds=max_rounds, solver_iterations=solver_iterations,
+                                **surface, **fit_options)
         reports.append(report)
         current = Mesh(positions, refined.face_sizes, refined.face_vertices, edges=refined.edges,
                        edge_creases=refined.edge_creases, vertex_creases=refined.vertex_creases)

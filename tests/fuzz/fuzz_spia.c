@@ -145,7 +145,7 @@ static void decode_settings(reader *r, settings *s) {
     s->fit.round_tolerance = terms[(b >> 3) % 8];
     s->fit.solver_iterations = (int32_t)(b >> 6) * 4;
     b = u8(r);
-    s->fit.flags = b & 15; /* the four spia_fit_flags */
+    s->fit.flags = b & 31; /* the five spia_fit_flags */
     b = u8(r);
     s->subdivide = b & 1;  /* spia_subdivide and spia_flat_positions */
 }

@@ -188,6 +188,48 @@ def test_fold_guard_on_other_scans(native, scan_file, cage_file):
     assert rep.after.mean < rep.before.mean / 5
 
 
+def test_an_open_cages_rims_do_not_curl(native):
+    """The elephant's QuadriFlow cage has 1,218 boundary edges around the
+    scan's holes.  Left free (SPIA_FIT_FREE_RIMS), its rims curl over onto
+    the scan beyond them; held smoother, the surface faces away from the
+    scan's triangles (numpy normals, as above) on a fraction of the points
+    and turns over against the cage given (normals from differences on the
+    level-3 grid) on fewer of the points where that cage faced the scan,
+    for no more distance.  A closed cage has no rims: there the flag
+    changes nothing."""
+    scan_mesh = _obj_mesh(native, "elephant-with-holes.obj")
+    cage = _obj_mesh(native, "elephant-with-holes_quadriflow_cage.obj")
+    scan = native.Scan(scan_mesh)
+    held, rep = native.fit(cage, scan)
+    free, rep_free = native.fit(cage, scan, free_rims=True)
+    share, share_free = (_folded_share(native, cage, V, scan_mesh, scan) for V in (held, free))
+    k = 8
+    stencils = native.surface_stencils(cage, k)
+
+    def normals(V):
+        G = stencils.apply(V).reshape(-1, k, k, 3).astype(np.float64)
+        return np.cross(np.gradient(G, axis=2), np.gradient(G, axis=1)).reshape(-1, 3)
+    X0 = stencils.apply(cage.positions)
+    n0 = normals(cage.positions)
+    fv = scan_mesh.face_vertices.reshape(-1, 3)
+    P = scan_mesh.positions.astype(np.float64)
+    tri_normals = np.cross(P[fv[:, 1]] - P[fv[:, 0]], P[fv[:, 2]] - P[fv[:, 0]])
+    facing = np.einsum("ij,ij->i", n0, tri_normals[scan.closest_points(X0)[3]])
+    facing *= np.sign(facing.sum())
+    turned, turned_free = (float(((np.einsum("ij,ij->i", n0, normals(V)) < 0) & (facing > 0)).mean())
+                           for V in (held, free))
+    print("facing away %.3f%% (free %.3f%%), turned where the cage faced the scan %.3f%% (free %.3f%%), "
+          "mean %.4g (free %.4g)" % (100 * share, 100 * share_free, 100 * turned, 100 * turned_free,
+                                     rep.after.mean, rep_free.after.mean))
+    assert share < share_free / 2
+    assert turned < turned_free / 2
+    assert rep.after.mean < 1.02 * rep_free.after.mean
+
+    closed = _obj_mesh(native, "ChineseDragon-10kv_quadriflow_cage.obj")
+    closed_scan = native.Scan(_obj_mesh(native, "ChineseDragon-10kv.obj"))
+    assert np.array_equal(native.fit(closed, closed_scan)[0], native.fit(closed, closed_scan, free_rims=True)[0])
+
+
 def test_stray_triangles_do_not_pull(native, bunny):
     """1% of the scan's triangles copied 0.1% to 0.4% of the diagonal off
     the scan along their normals (noise blobs, stray points): within the
