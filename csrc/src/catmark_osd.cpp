@@ -2210,6 +2210,19 @@ spia_result write_refined(const spia_mesh *m, const Prepared &p, const Far::Topo
     return SPIA_OK;
 }
 
+// The output's vertex count from the last level's nv (the caller's
+// vertices, then the refined ones that are not control vertices), refused
+// when it or the longest output array (`longest` entries) passes int32.
+spia_result refined_total(const spia_mesh *m, const Prepared &p, int32_t levels, int64_t nv, int64_t nf,
+                          int64_t longest, int32_t *vertex_count, spia_status *status) {
+    const int64_t total = m->vertex_count + (nv - p.osd_n);
+    if (total > INT32_MAX || longest > INT32_MAX)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "%d levels make %lld faces, too many", (int)levels,
+                          (long long)nf);
+    *vertex_count = (int32_t)total;
+    return SPIA_OK;
+}
+
 spia_result refine(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, int32_t levels,
                    int32_t *vertex_count, int32_t *face_count, float *positions, int32_t *faces,
                    spia__refine_clock *clock, spia_status *status) {
@@ -2231,11 +2244,7 @@ spia_result refine(const spia_mesh *m, const spia_adjacency *adj, const spia_opt
     // order, so the first osd_n vertices of the last level are the control
     // vertices; the output puts them at the caller's indices and appends the
     // others.
-    const int64_t total = m->vertex_count + (nv - p.osd_n);
-    if (total > INT32_MAX || 3 * nf > INT32_MAX)
-        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "%d levels make %lld faces, too many", (int)levels,
-                          (long long)nf);
-    *vertex_count = (int32_t)total;
+    if ((r = refined_total(m, p, levels, nv, nf, 3 * nf, vertex_count, status)) != SPIA_OK) return r;
     *face_count = (int32_t)nf;
     if (!positions) return SPIA_OK;
     std::vector<Point> src, limit;
@@ -2276,11 +2285,7 @@ spia_result subdivide(const spia_mesh *m, const spia_adjacency *adj, const spia_
         corners = 4 * nf;
     }
     const int32_t n = m->vertex_count;
-    const int64_t total = n + (nv - p.osd_n);
-    if (total > INT32_MAX || 4 * nf > INT32_MAX || 2 * ne > INT32_MAX)
-        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "%d levels make %lld faces, too many", (int)levels,
-                          (long long)nf);
-    *vertex_count = (int32_t)total;
+    if ((r = refined_total(m, p, levels, nv, nf, std::max(4 * nf, 2 * ne), vertex_count, status)) != SPIA_OK) return r;
     *face_count = (int32_t)nf;
     *edge_count = (int32_t)ne;
     if (!positions) return SPIA_OK;

@@ -1397,12 +1397,13 @@ def fit_detail(cage, scan, levels, samples_per_edge=4, progress=None, boundary_s
     smoothly; folds and outliers do not pull; with ``scan_pull`` the scan's
     vertices pull each level too, so that it meets the scan from both
     sides; with ``free_rims`` the cage's rims are not held smoother, as the
-    fit of a cage not yet on the scan holds them).  Coarse levels take the broad shape, fine levels the detail.
-    The finest level's vertices are then placed so that its faces, drawn
-    flat as Multires draws them, straddle the fitted limit surface
-    (:func:`flat_positions`).  ``levels``: 1 to 6.  Each level's samples
-    per edge: :func:`detail_samples`.  ``progress(level, round, mean) ->
-    bool`` follows each level's fit; True cancels (:class:`PiaCancelled`).
+    fit of a cage not yet on the scan holds them).  Coarse levels take the
+    broad shape, fine levels the detail.  The finest level's vertices are
+    then placed so that its faces, drawn flat as Multires draws them,
+    straddle the fitted limit surface (:func:`flat_positions`).
+    ``levels``: 1 to 6.  Each level's samples per edge:
+    :func:`detail_samples`.  ``progress(level, round, mean) -> bool``
+    follows each level's fit; True cancels (:class:`PiaCancelled`).
     ``fit_options``: those of :func:`fit` (cutoff, ...); ``smoothing``,
     ``slide_weight``, ``max_rounds`` and ``solver_iterations`` default to
     DETAIL_SMOOTHING, DETAIL_SLIDE_WEIGHT, DETAIL_ROUNDS and
