@@ -261,11 +261,20 @@ def stencil_memory_estimate(face_sizes, vertex_count, settings, scan=None):
 
 
 def check_memory(mesh, settings, scan=None):
-    """Refuses up front a mesh (a native.Mesh) whose stencils would not fit in
-    the machine's memory."""
+    """Refuses up front a mesh (a native.Mesh) whose stencils, or whose
+    detail levels' finest fit, would not fit in the machine's memory."""
     total = machine_memory()
     if not total:
         return
+    levels = int(settings.get("fit_detail_levels", 0) or 0)
+    if scan is not None and levels:
+        need, faces = native.detail_memory_estimate(mesh, levels, int(settings.get("fit_samples", 4)))
+        if need > total:
+            raise native.PiaError(
+                'OUT_OF_MEMORY',
+                "%d detail levels would need about %.1f GB (%.1fM faces at the finest level), more than "
+                "this machine's %.1f GB of memory; try fewer detail levels"
+                % (levels, need / 2.0 ** 30, faces / 1e6, total / 2.0 ** 30))
     need = stencil_memory_estimate(mesh.face_sizes, mesh.vertex_count, settings, scan)
     if need > total:
         raise native.PiaError(
