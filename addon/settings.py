@@ -260,21 +260,31 @@ def stencil_memory_estimate(face_sizes, vertex_count, settings, scan=None):
     return _BUILD_FACTOR * (_BYTES_PER_WEIGHT * weights + 8 * rows)
 
 
+def check_detail_memory(corners, settings):
+    """Refuses up front detail levels (settings' fit_detail_levels) whose
+    fit would need more than the machine's memory, for a cage with this
+    many face corners (its loops): before the scan is read or anything is
+    fitted.  The scan's and Blender's own memory come on top of the
+    estimate."""
+    levels = int(settings.get("fit_detail_levels", 0) or 0)
+    total = machine_memory() if levels else None
+    if not total:
+        return
+    need, faces = native.detail_memory_estimate(int(corners), levels, int(settings.get("fit_samples", 4)))
+    if need > total:
+        raise native.PiaError(
+            'OUT_OF_MEMORY',
+            "%d detail levels would need about %.1f GB (%.1fM faces at the finest level), more than this "
+            "machine's %.1f GB of memory; try fewer detail levels" % (levels, need / 2.0 ** 30, faces / 1e6,
+                                                                   total / 2.0 ** 30))
+
+
 def check_memory(mesh, settings, scan=None):
-    """Refuses up front a mesh (a native.Mesh) whose stencils, or whose
-    detail levels' finest fit, would not fit in the machine's memory."""
+    """Refuses up front a mesh (a native.Mesh) whose stencils would not fit in
+    the machine's memory."""
     total = machine_memory()
     if not total:
         return
-    levels = int(settings.get("fit_detail_levels", 0) or 0)
-    if scan is not None and levels:
-        need, faces = native.detail_memory_estimate(mesh, levels, int(settings.get("fit_samples", 4)))
-        if need > total:
-            raise native.PiaError(
-                'OUT_OF_MEMORY',
-                "%d detail levels would need about %.1f GB (%.1fM faces at the finest level), more than "
-                "this machine's %.1f GB of memory; try fewer detail levels"
-                % (levels, need / 2.0 ** 30, faces / 1e6, total / 2.0 ** 30))
     need = stencil_memory_estimate(mesh.face_sizes, mesh.vertex_count, settings, scan)
     if need > total:
         raise native.PiaError(

@@ -16,7 +16,7 @@ from .mesh_io import cleaned_copy, native_mesh, non_triangle_count, triangulated
 from .objects import (DISTANCE_ATTRIBUTE, COLOR_ATTRIBUTE, build_object, discard_object, heat_colors,
                       limit_cage_of, paint_scan, set_limit_object, store_cleanup, stored_settings,
                       write_heat_map)
-from .settings import LIMIT_SCHEMES, LIVE_CLEANUP_MESSAGE, check_settings, settings_from_modifier
+from .settings import LIMIT_SCHEMES, LIVE_CLEANUP_MESSAGE, check_detail_memory, check_settings, settings_from_modifier
 
 
 def interpolate(obj, *, context=None, name=None, progress=None, live=False, **settings):
@@ -130,6 +130,8 @@ def interpolate_steps(obj, *, context=None, name=None, progress=None, live=False
     loop = s["scheme"] == 'LOOP'
     separate_limit = s["scheme"] in LIMIT_SCHEMES
     target = find_target(obj, s)
+    if target is not None:
+        check_detail_memory(len(obj.data.loops), s)
     refining = None
     if progress is not None and separate_limit:
         user, last = progress, [0, 0.0]

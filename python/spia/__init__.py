@@ -1371,26 +1371,35 @@ def detail_samples(samples_per_edge, level):
     return max(2, int(samples_per_edge) >> int(level))
 
 
-# The peak of fit_detail is its finest level's fit: the samples' stencils,
-# closest points and normals, the fold guard's and the scan's pull's
-# buffers, and the finest level itself.  Measured on the bunny's cage:
-# 494, 542 and 546 bytes per finest sample at 3, 4 and 5 levels (0.33, 1.45
-# and 5.84 GB of peak resident size over the call).
-DETAIL_BYTES_PER_SAMPLE = 560
+# The peak of fit_detail is the fit of its level with the most samples
+# (the finest, unless halving samples_per_edge drops a remainder): the
+# samples' stencils, closest points and normals, the fold guard's and the
+# scan's pull's buffers, the level itself, and the scan side's hierarchy.
+# Measured on the bunny's cage on two threads, the peak resident size over
+# the call: 0.25e9, 0.41e9, 1.61e9 and 6.32e9 bytes at 2 to 5 levels
+# (0.18M to 11.5M samples): 547 bytes a sample from 4 to 5 levels, and up
+# to 0.15e9 bytes besides.  The estimate keeps a tenth or more over both.
+DETAIL_BYTES_PER_SAMPLE = 600
+DETAIL_BYTES_FIXED = 256 << 20
 
 
 def detail_memory_estimate(cage, levels, samples_per_edge=4):
-    """Bytes :func:`fit_detail` needs at its peak for ``cage`` (a
-    :class:`Mesh`) at ``levels``, and the finest level's face count, as
-    (bytes, faces): each level turns an n-sided face into n quads (a quad
-    into 4), and the finest level's fit takes DETAIL_BYTES_PER_SAMPLE per
-    sample.  About 2.2 KB per finest face at the default samples."""
+    """Bytes :func:`fit_detail` needs at its peak for ``cage`` at
+    ``levels``, and the finest level's face count, as (bytes, faces).
+    ``cage``: a :class:`Mesh`, or its number of face corners (the sum of
+    its face sizes).  Each level turns an n-sided face into n quads (a quad
+    into 4), each level's fit takes DETAIL_BYTES_PER_SAMPLE per sample
+    (:func:`detail_samples` squared per face), and the level with the most
+    samples sets the peak, with DETAIL_BYTES_FIXED besides: about 2.4 KB
+    per finest face at the default samples.  fit_detail itself does not
+    refuse: a script checks this against the memory it has."""
     levels = int(levels)
     if levels <= 0:
         return 0, 0
-    faces = int(np.sum(np.asarray(cage.face_sizes, np.int64))) * 4 ** (levels - 1)
-    k = detail_samples(samples_per_edge, levels)
-    return DETAIL_BYTES_PER_SAMPLE * faces * k * k, faces
+    corners = int(np.sum(np.asarray(cage.face_sizes, np.int64))) if hasattr(cage, "face_sizes") else int(cage)
+    samples = max(corners * 4 ** (level - 1) * detail_samples(samples_per_edge, level) ** 2
+                  for level in range(1, levels + 1))
+    return DETAIL_BYTES_FIXED + DETAIL_BYTES_PER_SAMPLE * samples, corners * 4 ** (levels - 1)
 
 
 # Detail levels start on the scan already: they are held firmer than a
@@ -1410,7 +1419,7 @@ DETAIL_SOLVER_ITERATIONS = 5
 # base's multiple (6) the kernel took the armadillo's claws and a dragon's
 # scales just beyond the base surface for outliers.  At 15 the scan's mean
 # distance from the finest level falls 3% (elephant) to 26% (armadillo) on
-# bench_fit.py's cases, and the folds stay at most 0.04% on the covered
+# bench_detail.py's five cases, and the folds stay at most 0.04% on the covered
 # scans; at 30 the armadillo's folds tripled to 0.08%.
 DETAIL_ROBUST_SCALE = 15.0
 

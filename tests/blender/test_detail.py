@@ -195,8 +195,8 @@ def test_operator_reports_the_detail():
 def test_detail_beyond_memory_is_refused_up_front(monkeypatch):
     # A machine with 1 byte less than 6 detail levels of this cage need (the
     # finest fit's estimate; the cage's own stencils need far less): refused
-    # before the fit starts, with the estimate in the message, nothing made,
-    # the cage untouched.  One level fits on the same machine.
+    # before the scan is read, with the estimate in the message, nothing
+    # made, the cage untouched.  One level fits on the same machine.
     from subdiv_pia import settings
     scan = fine_sphere("Scan", segments=64, rings=32)
     cage = quad_sphere("Cage", cuts=2, radius=0.8)
@@ -212,8 +212,8 @@ def test_detail_beyond_memory_is_refused_up_front(monkeypatch):
     words = r"6 detail levels would need about %.1f GB \(%.1fM faces" % (need / 2.0 ** 30, faces / 1e6)
     with pytest.raises(native.PiaError, match=words):
         api.interpolate(cage, target=scan.name, fit_cutoff=0.3, fit_detail_levels=6,
-                        progress=lambda it, value: rounds.append(it) and False)
-    assert max(rounds, default=0) == 0  # no fitting round ran
+                        progress=lambda it, value: rounds.append(it) or False)
+    assert rounds == []  # neither the scan's build nor the fit called back
     assert len(bpy.data.objects) == count and len(bpy.data.meshes) == meshes
     assert_unchanged(cage, before)
     new_obj, _report = api.interpolate(cage, target=scan.name, fit_cutoff=0.3, fit_detail_levels=1)
