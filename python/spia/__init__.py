@@ -1416,8 +1416,8 @@ DETAIL_ROUNDS = 3
 DETAIL_SOLVER_ITERATIONS = 5
 # The robust kernel's scale is a multiple of the median distance, and a
 # detail level starts with a median a fraction of the base fit's: at the
-# base's multiple (6) the kernel took the armadillo's claws and a dragon's
-# scales just beyond the base surface for outliers.  At 15 the scan's mean
+# base's multiple (6) the kernel took the armadillo's claws, scan just
+# beyond the base surface, for outliers.  At 15 the scan's mean
 # distance from the finest level falls 3% (elephant) to 26% (armadillo) on
 # bench_detail.py's five cases, and the folds stay at most 0.04% on the covered
 # scans; at 30 the armadillo's folds tripled to 0.08%.
