@@ -522,43 +522,133 @@ void run_batches(int threads, int32_t count, Run &&run, Failed &&failed) {
     if (out_of_memory) throw std::bad_alloc();
 }
 
-// Rows of the exact limit (uniform refinement `levels` deep, then limit
-// masks) for the flagged vertices of a sub-mesh refiner.
-template <class Begin, class Add, class End>
-bool exact_limit_rows(Far::TopologyRefiner &sub, int levels, int32_t sub_n, const std::vector<char> &feature,
-                      const std::vector<int32_t> &sub_of, const std::vector<int32_t> &osd_of_sub, int32_t osd_n,
-                      Begin begin_row, Add add_weight, End end_row) {
-    Far::TopologyRefiner::UniformOptions uniform(levels);
-    uniform.fullTopologyInLastLevel = true;
-    sub.RefineUniform(uniform);
-    std::vector<SparseStencil> all((size_t)sub.GetNumVerticesTotal());
-    for (int32_t i = 0; i < sub_n; ++i) all[i].w.emplace_back(i, 1.0);
-    Far::PrimvarRefinerReal<float> primvar(sub);
-    SparseStencil *src = all.data();
-    for (int level = 1; level <= levels; ++level) {
-        SparseStencil *dst = src + sub.GetLevel(level - 1).GetNumVertices();
-        primvar.Interpolate(level, src, dst);
-        for (int32_t i = 0; i < sub.GetLevel(level).GetNumVertices(); ++i) dst[i].Compact();
-        src = dst;
-    }
-    std::vector<SparseStencil> limit((size_t)sub.GetLevel(levels).GetNumVertices());
-    SparseStencil *limit_dst = limit.data();
-    primvar.Limit(src, limit_dst);
-    for (int32_t o = 0; o < osd_n; ++o) {
-        if (!feature[o]) continue;
-        // Child vertices of vertices come first at every level, in order.
-        SparseStencil &st = limit[(size_t)sub_of[o]];
-        st.Compact();
-        begin_row(o);
-        for (const auto &e : st.w) {
-            if (e.first < 0 || e.first >= sub_n) return false;
-            add_weight(osd_of_sub[e.first], e.second);
+// Loop's exact limit at a vertex depends on its faces alone: the points of
+// its one ring one level down (its child and the children of its edges)
+// are combinations of the points of its one ring, under rules that read
+// only the sharpness of its edges and of itself.  So each vertex is refined
+// on a copy of its own fan, one level at a time, each level's fan taken
+// from the refinement of the last, until its semi-sharp features have
+// decayed, and OpenSubdiv's limit mask is applied there: a few dozen points
+// a level whatever the sharpness, where refining the whole mesh that deep
+// makes four times its faces a level.  The fans of a batch's vertices are
+// refined together, as one mesh of disjoint fans.
+struct Fans {
+    std::vector<int32_t> sizes, fv;
+    std::vector<int32_t> crease_pairs, corner_indices;
+    std::vector<float> crease_weights, corner_weights;
+    std::vector<SparseStencil> points;  // per fan vertex, over the sub-mesh's control vertices
+    std::vector<int32_t> centre, owner;  // per fan: its centre (a fan vertex) and whose fan it is
+
+    // Appends the fan of vertex c of `level`, whose points are `pts`.
+    void add(const Far::TopologyLevel &level, Far::Index c, const SparseStencil *pts, int32_t whose,
+             std::vector<std::pair<Far::Index, int32_t>> &local) {
+        local.clear();
+        auto vertex = [&](Far::Index v) {
+            for (const auto &e : local)
+                if (e.first == v) return e.second;
+            const int32_t i = (int32_t)points.size();
+            local.emplace_back(v, i);
+            points.push_back(pts[v]);
+            return i;
+        };
+        const int32_t mid = vertex(c);
+        centre.push_back(mid);
+        owner.push_back(whose);
+        Far::ConstIndexArray faces = level.GetVertexFaces(c);
+        for (int k = 0; k < faces.size(); ++k) {
+            Far::ConstIndexArray corners = level.GetFaceVertices(faces[k]);
+            sizes.push_back(corners.size());
+            for (int j = 0; j < corners.size(); ++j) fv.push_back(vertex(corners[j]));
         }
-        end_row(o);
+        Far::ConstIndexArray edges = level.GetVertexEdges(c);
+        for (int k = 0; k < edges.size(); ++k) {
+            const float s = level.GetEdgeSharpness(edges[k]);
+            if (s <= 0.0f) continue;
+            Far::ConstIndexArray ends = level.GetEdgeVertices(edges[k]);
+            crease_pairs.push_back(vertex(ends[0]));
+            crease_pairs.push_back(vertex(ends[1]));
+            crease_weights.push_back(s);
+        }
+        const float s = level.GetVertexSharpness(c);
+        if (s > 0.0f) {
+            corner_indices.push_back(mid);
+            corner_weights.push_back(s);
+        }
+    }
+};
+
+// Levels until the semi-sharp features at vertex v of `level` have
+// decayed (at least one, at most ten).
+int decay_levels(const Far::TopologyLevel &level, Far::Index v) {
+    float sharpest = level.GetVertexSharpness(v);
+    if (sharpest >= kInfiniteSharpness) sharpest = 0.0f;
+    Far::ConstIndexArray edges = level.GetVertexEdges(v);
+    for (int k = 0; k < edges.size(); ++k) {
+        const float s = level.GetEdgeSharpness(edges[k]);
+        if (s < kInfiniteSharpness) sharpest = std::max(sharpest, s);
+    }
+    return std::max(1, std::min(10, (int)std::ceil(sharpest)));
+}
+
+// Rows of the exact limit (refinement until the semi-sharp features have
+// decayed, then limit masks) for `marked` (osd numbering), vertices of the
+// sub-mesh refiner `sub` (local_of: osd -> sub vertex), over its control
+// vertices; add_row(o, stencil) receives each.  The memory grows with the
+// vertices' fans and the levels, not with four to the levels.
+template <class AddRow>
+bool fan_limit_rows(const Far::TopologyRefiner &sub, const std::vector<int32_t> &marked,
+                    const std::vector<int32_t> &local_of, Sdc::SchemeType scheme, const Sdc::Options &sdc,
+                    AddRow add_row) {
+    const Far::TopologyLevel &base = sub.GetLevel(0);
+    std::vector<SparseStencil> identity((size_t)base.GetNumVertices());
+    for (int32_t i = 0; i < base.GetNumVertices(); ++i) identity[(size_t)i].w.emplace_back(i, 1.0);
+    std::vector<int> levels(marked.size());
+    std::vector<std::pair<Far::Index, int32_t>> local;
+    Fans fans;
+    for (size_t i = 0; i < marked.size(); ++i) {
+        const Far::Index v = local_of[(size_t)marked[i]];
+        levels[i] = decay_levels(base, v);
+        fans.add(base, v, identity.data(), (int32_t)i, local);
+    }
+    std::vector<SparseStencil>().swap(identity);
+    for (int level = 1; !fans.owner.empty(); ++level) {
+        std::unique_ptr<Far::TopologyRefiner> refiner(create_refiner(
+            (int32_t)fans.points.size(), (int32_t)fans.sizes.size(), fans.sizes.data(), fans.fv.data(),
+            fans.crease_pairs, fans.crease_weights, fans.corner_indices, fans.corner_weights, scheme, sdc));
+        if (!refiner) return false;
+        Far::TopologyRefiner::UniformOptions uniform(1);
+        uniform.fullTopologyInLastLevel = true;
+        refiner->RefineUniform(uniform);
+        const Far::TopologyLevel &parent = refiner->GetLevel(0), &child = refiner->GetLevel(1);
+        std::vector<SparseStencil> refined((size_t)child.GetNumVertices());
+        Far::PrimvarRefinerReal<double> primvar(*refiner);
+        SparseStencil *src = fans.points.data(), *dst = refined.data();
+        primvar.Interpolate(1, src, dst);
+        for (SparseStencil &st : refined) st.Compact();
+        std::vector<SparseStencil> limit;
+        bool any_done = false;
+        for (int32_t owner : fans.owner) any_done = any_done || levels[(size_t)owner] == level;
+        if (any_done) {
+            limit.resize(refined.size());
+            SparseStencil *limit_dst = limit.data();
+            primvar.Limit(dst, limit_dst);
+        }
+        Fans next;
+        for (size_t k = 0; k < fans.owner.size(); ++k) {
+            const int32_t owner = fans.owner[k];
+            const Far::Index c = parent.GetVertexChildVertex(fans.centre[k]);
+            if (levels[(size_t)owner] == level) {
+                SparseStencil &st = limit[(size_t)c];
+                st.Compact();
+                add_row(marked[(size_t)owner], st);
+            } else {
+                next.add(child, c, refined.data(), owner, local);
+            }
+        }
+        std::swap(fans, next);
     }
     return true;
 }
-
 
 // The sharpness of a part of the mesh, in a numbering of its own (local_of:
 // osd vertex -> local vertex, -1 outside): the creased edges the part's
@@ -1428,22 +1518,23 @@ void feature_batches(const spia_mesh *m, const Prepared &p, const Evaluation &ev
     }
 }
 
-// Loop is taken at its exact limit, as refine() takes it: uniform
-// refinement until semi-sharp creases have decayed, then OpenSubdiv's limit
-// masks, on sparse stencils.
-void loop_batch_rows(const Part &sub, const std::vector<int32_t> &marked, int32_t osd_n, BatchRows &out) {
+// Loop is taken at its exact limit: each vertex refined on its own fan
+// until its semi-sharp features have decayed, then OpenSubdiv's limit
+// masks (fan_limit_rows), on sparse stencils.
+void loop_batch_rows(const Part &sub, const std::vector<int32_t> &marked, const Prepared &p, BatchRows &out) {
     const int32_t sub_n = (int32_t)sub.osd_of_local.size();
-    float sharpest = 0.0f;
-    for (float w : sub.crease_weights) sharpest = std::max(sharpest, w < kInfiniteSharpness ? w : 0.0f);
-    for (float w : sub.corner_weights) sharpest = std::max(sharpest, w < kInfiniteSharpness ? w : 0.0f);
-    const int levels = std::max(1, std::min(10, (int)std::ceil(sharpest)));
-    std::vector<char> batch_feature((size_t)osd_n, 0);
-    for (int32_t o : marked) batch_feature[(size_t)o] = 1;
-    auto begin_batch_row = [&](int32_t o) { out.begin_row(o); };
-    auto add_batch_weight = [&](int32_t j, double w) { out.add(j, w); };
-    auto end_batch_row = [&](int32_t) {};
-    if (!exact_limit_rows(*sub.refiner, levels, sub_n, batch_feature, sub.local_of, sub.osd_of_local, osd_n,
-                          begin_batch_row, add_batch_weight, end_batch_row))
+    bool bad_column = false;
+    auto add_row = [&](int32_t o, const SparseStencil &st) {
+        out.begin_row(o);
+        for (const auto &e : st.w) {
+            if (e.first < 0 || e.first >= sub_n) {
+                bad_column = true;
+                continue;
+            }
+            out.add(sub.osd_of_local[(size_t)e.first], e.second);
+        }
+    };
+    if (!fan_limit_rows(*sub.refiner, marked, sub.local_of, p.scheme, p.sdc, add_row) || bad_column)
         out.failed(SPIA_ERROR_INTERNAL, -1, "OpenSubdiv's limit masks failed", 0, 0);
     out.end();
 }
@@ -1575,7 +1666,7 @@ void adaptive_batch(const spia_mesh *m, const spia_adjacency *adj, const spia_op
     std::vector<int32_t> sub_face_of((size_t)m->face_count, -1);
     for (size_t i = 0; i < sub.mesh_face_of.size(); ++i) sub_face_of[(size_t)sub.mesh_face_of[i]] = (int32_t)i;
     if (!p.blender) {
-        loop_batch_rows(sub, marked, p.osd_n, out);
+        loop_batch_rows(sub, marked, p, out);
         return;
     }
     // Refined around the faces the vertices are evaluated on.

@@ -9,6 +9,7 @@
 
 #include "support.h"
 
+#include <opensubdiv/far/primvarRefiner.h>
 #include <opensubdiv/far/ptexIndices.h>
 #include <opensubdiv/far/stencilTable.h>
 #include <opensubdiv/far/stencilTableFactory.h>
@@ -16,6 +17,7 @@
 #include <opensubdiv/far/topologyRefinerFactory.h>
 
 #include <algorithm>
+#include <cmath>
 #include <functional>
 #include <map>
 #include <memory>
@@ -266,6 +268,123 @@ static Rows reference_rows(const tmesh &m, int quality, bool preserve_corners, b
         for (int k = 0; k < st.GetSize(); ++k) rows[back[o]][back[st.GetVertexIndices()[k]]] += st.GetWeights()[k];
     }
     return rows;
+}
+
+// Loop's exact limit stencils the plain way: the whole mesh refined
+// uniformly until every semi-sharp feature has decayed (ceil of the largest
+// finite sharpness levels, at least one, at most ten), then OpenSubdiv's
+// limit masks, carried as sparse stencils over the control vertices in
+// double.  Sharpness as OpenSubdiv takes Blender's
+// creases, without Blender's own rules: 10 c^2 on face edges (an edge
+// listed twice takes its larger), vertex creases alone; vertices no face
+// uses keep their position.  Returns false, leaving rows empty, when the
+// last level would have more than max_faces faces (four times the faces a
+// level).
+struct LoopStencil {
+    std::vector<std::pair<int, double>> w;
+    void Clear(void * = nullptr) { w.clear(); }
+    void AddWithWeight(const LoopStencil &src, double weight) {
+        for (const auto &e : src.w) w.emplace_back(e.first, weight * e.second);
+    }
+    void Merge() {
+        std::sort(w.begin(), w.end());
+        size_t out = 0;
+        for (size_t i = 0; i < w.size();) {
+            const int j = w[i].first;
+            double sum = 0.0;
+            while (i < w.size() && w[i].first == j) sum += w[i++].second;
+            w[out++] = std::make_pair(j, sum);
+        }
+        w.resize(out);
+    }
+};
+
+static bool loop_uniform_rows(const tmesh &m, bool preserve_corners, bool use_creases, int64_t max_faces, Rows &rows) {
+    rows.clear();
+    std::vector<int> used(m.nv, -1), back;
+    for (int64_t c = 0; c < m.nfv; ++c) used[m.fv[c]] = 1;
+    for (int v = 0; v < m.nv; ++v)
+        if (used[v] > 0) {
+            used[v] = (int)back.size();
+            back.push_back(v);
+        }
+    std::vector<int> fv(m.fv, m.fv + m.nfv);
+    for (int &v : fv) v = used[v];
+    std::set<std::pair<int, int>> face_edges;
+    for (int f = 0, c = 0; f < m.nf; c += m.sizes[f++])
+        for (int k = 0; k < m.sizes[f]; ++k) {
+            const int a = fv[c + k], b = fv[c + (k + 1) % m.sizes[f]];
+            face_edges.insert(std::make_pair(std::min(a, b), std::max(a, b)));
+        }
+    std::map<std::pair<int, int>, float> esharp;
+    float sharpest = 0.0f;
+    for (int e = 0; e < m.ne && use_creases && m.edge_creases; ++e) {
+        const int a = used[m.edges[2 * e]], b = used[m.edges[2 * e + 1]];
+        const std::pair<int, int> key(std::min(a, b), std::max(a, b));
+        if (a < 0 || b < 0 || !face_edges.count(key)) continue;
+        const float s = m.edge_creases[e] * m.edge_creases[e] * 10.0f;
+        if (s < 1e-6f) continue;
+        esharp[key] = std::max(esharp[key], s);
+    }
+    std::vector<int> pairs, corners;
+    std::vector<float> pair_w, corner_w;
+    for (const auto &kv : esharp) {
+        pairs.push_back(kv.first.first);
+        pairs.push_back(kv.first.second);
+        pair_w.push_back(kv.second);
+        if (kv.second < 10.0f) sharpest = std::max(sharpest, kv.second);
+    }
+    for (size_t o = 0; o < back.size() && use_creases && m.vertex_creases; ++o) {
+        const float c = m.vertex_creases[back[o]], s = c * c * 10.0f;
+        if (s <= 0.0f) continue;
+        corners.push_back((int)o);
+        corner_w.push_back(s);
+        if (s < 10.0f) sharpest = std::max(sharpest, s);
+    }
+    const int levels = std::max(1, std::min(10, (int)std::ceil(sharpest)));
+    int64_t faces = m.nf;
+    for (int l = 0; l < levels; ++l) faces *= 4;
+    if (faces > max_faces) return false;
+    Far::TopologyDescriptor d;
+    d.numVertices = (int)back.size();
+    d.numFaces = m.nf;
+    d.numVertsPerFace = m.sizes;
+    d.vertIndicesPerFace = fv.data();
+    d.numCreases = (int)pair_w.size();
+    d.creaseVertexIndexPairs = pairs.data();
+    d.creaseWeights = pair_w.data();
+    d.numCorners = (int)corner_w.size();
+    d.cornerVertexIndices = corners.data();
+    d.cornerWeights = corner_w.data();
+    Sdc::Options sdc;
+    sdc.SetVtxBoundaryInterpolation(preserve_corners ? Sdc::Options::VTX_BOUNDARY_EDGE_AND_CORNER
+                                                     : Sdc::Options::VTX_BOUNDARY_EDGE_ONLY);
+    sdc.SetCreasingMethod(Sdc::Options::CREASE_UNIFORM);
+    typedef Far::TopologyRefinerFactory<Far::TopologyDescriptor> F;
+    std::unique_ptr<Far::TopologyRefiner> r(F::Create(d, F::Options(Sdc::SCHEME_LOOP, sdc)));
+    if (!r) return false;
+    Far::TopologyRefiner::UniformOptions uniform(levels);
+    uniform.fullTopologyInLastLevel = true;
+    r->RefineUniform(uniform);
+    std::vector<LoopStencil> all((size_t)r->GetNumVerticesTotal());
+    for (size_t i = 0; i < back.size(); ++i) all[i].w.emplace_back((int)i, 1.0);
+    Far::PrimvarRefinerReal<double> primvar(*r);
+    LoopStencil *src = all.data();
+    for (int l = 1; l <= levels; ++l) {
+        LoopStencil *dst = src + r->GetLevel(l - 1).GetNumVertices();
+        primvar.Interpolate(l, src, dst);
+        for (int i = 0; i < r->GetLevel(l).GetNumVertices(); ++i) dst[i].Merge();
+        src = dst;
+    }
+    std::vector<LoopStencil> limit((size_t)r->GetLevel(levels).GetNumVertices());
+    LoopStencil *limit_dst = limit.data();
+    primvar.Limit(src, limit_dst);
+    rows.assign((size_t)m.nv, std::map<int, double>());
+    for (int v = 0; v < m.nv; ++v)
+        if (used[v] < 0) rows[(size_t)v][v] = 1.0;
+    for (size_t o = 0; o < back.size(); ++o)  // (children of vertices come first, in order)
+        for (const auto &e : limit[o].w) rows[(size_t)back[o]][back[(size_t)e.first]] += e.second;
+    return true;
 }
 
 #endif

@@ -229,6 +229,12 @@ std::map<std::tuple<int, bool, bool>, Rows> reference_cache;
 // quality 3 or more (the library a few milliseconds): such shapes are
 // compared at quality 1 only, unless --full.
 int max_reference_quality = 10, max_valence = 0;
+// The most faces the uniform Loop reference refines to (fewer under the
+// sanitizers).
+int64_t loop_reference_faces = 1 << 21;
+// Its rows by (preserve corners, creases), for the shape at hand (Loop's
+// limit does not depend on the quality).
+std::map<std::pair<bool, bool>, Rows> loop_reference_cache;
 
 struct Stats {
     int configs = 0, ok = 0, refused = 0, stagnated = 0, max_iterations = 0;
@@ -339,6 +345,35 @@ void run(const std::string &shape, const tmesh &m, spia_scheme scheme, spia_boun
                              "diagonal at vertex %d (weights by up to %g)", where, worst, at, weight);
         stats.worst_reference = std::max(stats.worst_reference, worst);
         snprintf(reference, sizeof reference, "  osd %.1e (w %.1e)", worst, weight);
+    } else if (scheme == SPIA_SCHEME_LOOP && rule == SPIA_BOUNDARY_RULE_SMOOTH) {
+        // Loop: every weight against the whole mesh refined uniformly until
+        // its semi-sharp creases have decayed (reference.h), where that fits.
+        t0 = Clock::now();
+        const std::pair<bool, bool> key(preserve, creases);
+        auto cached = loop_reference_cache.find(key);
+        if (cached == loop_reference_cache.end()) {
+            Rows rows;
+            if (!loop_uniform_rows(m, preserve, creases, loop_reference_faces, rows)) rows.clear();
+            cached = loop_reference_cache.emplace(key, rows).first;
+        }
+        const Rows &ref = cached->second;
+        if (!ref.empty()) {
+            double weight = 0.0;
+            int at = -1;
+            for (int32_t i = 0; i < n; ++i) {
+                std::map<int, double> row;
+                for (int64_t k = off[(size_t)i]; k < off[(size_t)i + 1]; ++k) row[idx[(size_t)k]] += w[(size_t)k];
+                for (const auto &kv : ref[(size_t)i]) row[kv.first] -= kv.second;
+                for (const auto &kv : row)
+                    if (std::fabs(kv.second) > weight) weight = std::fabs(kv.second), at = i;
+            }
+            CHECK(weight <= 1e-12, "%s: a Loop weight differs from the uniform refinement's by %g at vertex %d",
+                  where, weight, at);
+            snprintf(reference, sizeof reference, "  uniform w %.1e", weight);
+        } else {
+            snprintf(reference, sizeof reference, "  uniform too large");
+        }
+        t_reference = since(t0);
     }
 
     std::vector<float> cage((size_t)n * 3, 12345.0f);
@@ -480,6 +515,7 @@ void run_shape(const std::string &path, bool full, bool sanitized) {
         max_valence = *std::max_element(valence.begin(), valence.end());
         max_reference_quality = !full && max_valence > 100 ? 1 : 10;
         reference_cache.clear();
+        loop_reference_cache.clear();
         Stats stats;
         for (const Scheme &sc : schemes)
             for (int preserve = 0; preserve < 2; ++preserve)
@@ -537,7 +573,7 @@ int main(int argc, char **argv) {
         if (arg == "--full")
             full = true;
         else if (arg == "--sanitized")
-            sanitized = true;
+            sanitized = true, loop_reference_faces = 1 << 17;
         else
             paths.push_back(arg);
     }
