@@ -104,7 +104,7 @@ fuzz: build
 	mkdir -p build/fuzz/seeds build/fuzz/corpus build/fuzz/crashes
 	build/cmake/tests/c/test_fuzz_replay --seeds build/fuzz/seeds
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
-	  $(FUZZ_TARGET) -max_total_time=$(FUZZ_SECONDS) -timeout=60 -rss_limit_mb=2048 -max_len=20000 \
+	  $(FUZZ_TARGET) -max_total_time=$(FUZZ_SECONDS) -timeout=60 -rss_limit_mb=2048 -malloc_limit_mb=2048 -max_len=20000 \
 	  -print_final_stats=1 -artifact_prefix=build/fuzz/crashes/ build/fuzz/corpus build/fuzz/seeds tests/fuzz/regressions
 
 test-fuzz:

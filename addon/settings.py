@@ -217,7 +217,16 @@ def check_settings(settings):
 
 
 def machine_memory():
-    """The machine's physical memory in bytes, or None where it cannot be told."""
+    """The memory in bytes the machine can give a computation now, as the
+    library tells it (spia_available_memory: what is available, within a
+    container's limit and the process's address-space limit), else the
+    machine's physical memory, or None where neither can be told."""
+    try:
+        available = native.available_memory()
+    except (AttributeError, OSError, native.PiaError):
+        available = None
+    if available:
+        return available
     try:
         if sys.platform == "win32":
             import ctypes

@@ -325,10 +325,28 @@ typedef struct spia_options {
     const float *initial_cage;
     /* SPIA_SOLVE_* flags. [0] */
     int32_t solve_flags;
+    /* The memory, in bytes, a call may use.  Every call first estimates
+     * what the settings in force make it need (the stencil table of the
+     * mesh, the faces refine and subdivide make at their levels, a fit's
+     * samples at its samples_per_edge) and, where that is more, returns
+     * SPIA_ERROR_OUT_OF_MEMORY at once with a message that names the
+     * setting, the estimate and what would fit, having allocated nothing.
+     * 0: what spia_available_memory() reports when the call starts; a
+     * negative value: no check (allocations that fail are still reported
+     * as SPIA_ERROR_OUT_OF_MEMORY). [0] */
+    int64_t memory_budget;
 } spia_options;
 
 /* The defaults, as a value (the same as an all-zero struct). */
 SPIA_API spia_options spia_options_default(void);
+
+/* The memory, in bytes, the machine can give a call now (the default
+ * memory_budget): on Linux the kernel's MemAvailable, within a cgroup's
+ * memory limit and the address space left under RLIMIT_AS (ulimit -v);
+ * on Windows the available physical memory, within the process's virtual
+ * address space; on macOS the machine's physical memory, within RLIMIT_AS.
+ * -1 where it cannot be told (no check is made then). */
+SPIA_API int64_t spia_available_memory(void);
 
 /* ------------------------------------------------------------------------ */
 /* Validation                                                                */

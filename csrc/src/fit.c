@@ -41,6 +41,7 @@
 #include "threads.h"
 
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -88,6 +89,32 @@ static spia_result resolve_fit(const spia_fit_options *in, spia_fit_options *out
     return SPIA_OK;
 }
 
+/* Bytes a fit needs a sample at its peak: the sample's stencil, closest
+ * point and normal, the fold guard's and the scan pull's buffers (547 measured
+ * on the bunny's cage at 4 and 5 detail levels, python/spia's estimate). */
+#define FIT_BYTES_PER_SAMPLE 600.0
+
+/* The check before a fit or a table of surface samples: samples_per_edge
+ * (k) and the most that fits.  Without surface samples (Loop, Doo-Sabin)
+ * a fit takes the limit points alone. */
+static spia_result samples_memory(const spia_mesh *m, const spia_options *o, int32_t k, int surface,
+                                  const char *work, spia_status *status) {
+    const int64_t budget = spia__memory_budget(o);
+    if (budget < 0) return SPIA_OK;
+    const double table = spia__table_bytes(m);
+    const double samples = surface ? (double)spia_surface_sample_count(m, k) : (double)m->vertex_count;
+    if (table + FIT_BYTES_PER_SAMPLE * samples <= (double)budget) return SPIA_OK;
+    int32_t fit = surface ? k : 0;
+    while (fit > 0 && table + FIT_BYTES_PER_SAMPLE * (double)spia_surface_sample_count(m, fit) > (double)budget) --fit;
+    char what[128], fits[64];
+    snprintf(what, sizeof what, "%s with %d samples per edge (%.0f samples)", work, (int)k, samples);
+    if (fit > 0)
+        snprintf(fits, sizeof fits, "at most %d samples per edge fit", (int)fit);
+    else
+        snprintf(fits, sizeof fits, "try a smaller cage");
+    return spia__memory_check(o, table + FIT_BYTES_PER_SAMPLE * samples, what, fits, status);
+}
+
 spia_result spia_surface_stencils_create(const spia_mesh *mesh, const spia_options *options,
                                          int32_t samples_per_edge, spia_stencils **out, spia_status *status) {
     if (!out) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "out must not be NULL");
@@ -102,6 +129,8 @@ spia_result spia_surface_stencils_create(const spia_mesh *mesh, const spia_optio
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "samples_per_edge must be 1 to 64, got %d",
                           samples_per_edge);
     if ((r = spia_mesh_validate(mesh, status)) != SPIA_OK) return r;
+    if ((r = samples_memory(mesh, &opt, samples_per_edge, 1, "a table of surface samples", status)) != SPIA_OK)
+        return r;
     spia_adjacency adj;
     if ((r = spia__adjacency_build(mesh, &adj, status)) != SPIA_OK) return r;
     r = spia__osd_surface_stencils(mesh, &adj, &opt, samples_per_edge, out, status);
@@ -2106,6 +2135,9 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
     u.status = status;
     spia_result r = fit_arguments(cage, scan, options, fit_options, cage_out, &u);
     if (r != SPIA_OK) return r;
+    r = samples_memory(cage, &u.opt, u.fo.samples_per_edge, u.opt.scheme == SPIA_SCHEME_CATMULL_CLARK, "the fit",
+                       status);
+    if (r != SPIA_OK) return report->result = r;
     u.cage = cage;
     u.scan = scan;
     u.n = cage->vertex_count;

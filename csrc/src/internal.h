@@ -118,6 +118,15 @@ void spia__ok(spia_status *status);
 /* Options with every zero field replaced by its default, or an error for
  * out-of-range values. */
 spia_result spia__resolve_options(const spia_options *in, spia_options *out, spia_status *status);
+/* memory.c: the budget in force (spia_options.memory_budget resolved; -1
+ * for none), the check before a call allocates what its settings make
+ * grow (need in bytes; what: the work and its setting, fits: what would
+ * fit, or NULL), and the bytes of a mesh's limit stencil table with the
+ * solvers' working arrays. */
+int64_t spia__memory_budget(const spia_options *o);
+spia_result spia__memory_check(const spia_options *o, double need, const char *what, const char *fits,
+                               spia_status *status);
+double spia__table_bytes(const spia_mesh *m);
 
 /* Monotonic wall clock in seconds. */
 double spia__now(void);

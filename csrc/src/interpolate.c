@@ -2,6 +2,7 @@
 /* Entry points that tie validation, stencils and solvers together. */
 #include "internal.h"
 
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -48,6 +49,11 @@ spia_result spia_limit_stencils_create(const spia_mesh *mesh, const spia_options
     r = spia_mesh_validate(mesh, status);
     if (r != SPIA_OK) return r;
     if (opt.scheme == SPIA_SCHEME_LOOP && (r = spia__require_triangles(mesh, status)) != SPIA_OK) return r;
+    char what[96];
+    snprintf(what, sizeof what, "the limit stencils of %d vertices and %d faces", (int)mesh->vertex_count,
+             (int)mesh->face_count);
+    if ((r = spia__memory_check(&opt, spia__table_bytes(mesh), what, "try a smaller mesh", status)) != SPIA_OK)
+        return r;
     if (cancelled(&opt)) return spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled before computing stencils");
     spia_adjacency adj;
     r = spia__adjacency_build_threads(mesh, &adj, opt.threads, status);
@@ -97,6 +103,50 @@ spia_result spia_interpolate(const spia_mesh *mesh, const spia_options *options,
 
 /* ---- refinement ------------------------------------------------------------ */
 
+/* Faces of the last level of `levels` refinement steps: Loop splits each
+ * triangle in four; a Doo-Sabin step makes a face of every face, edge and
+ * vertex (about as many as the corners), four times as many each step after;
+ * Catmull-Clark makes a quad of every corner, then four of each quad. */
+static double refined_faces(const spia_mesh *m, spia_scheme scheme, int32_t levels) {
+    double corners = 0.0;
+    for (int32_t f = 0; f < m->face_count; ++f) corners += (double)m->face_sizes[f];
+    double faces = scheme == SPIA_SCHEME_LOOP ? (double)m->face_count : corners;
+    for (int32_t l = scheme == SPIA_SCHEME_LOOP ? 0 : 1; l < levels; ++l) faces *= 4.0;
+    return levels > 0 ? faces : (double)m->face_count;
+}
+
+/* Bytes a refinement needs at its peak per face of its last level
+ * (OpenSubdiv's topology of every level, the points of every level in
+ * double, the caller's output), measured from the peak resident size at
+ * two levels (bench/bench_creases.py): Loop 257, Catmull-Clark's
+ * subdivision with its edges and creases 356, Doo-Sabin 70; a tenth more. */
+static double refine_bytes_per_face(spia_scheme scheme) {
+    switch (scheme) {
+    case SPIA_SCHEME_LOOP: return 290.0;
+    case SPIA_SCHEME_DOO_SABIN: return 80.0;
+    default: return 400.0;
+    }
+}
+
+/* The check before a refinement: the levels asked for, and the most that fit. */
+static spia_result refine_memory(const spia_mesh *m, const spia_options *o, int32_t levels, const char *work,
+                                 spia_status *status) {
+    const int64_t budget = spia__memory_budget(o);
+    if (budget < 0) return SPIA_OK;
+    const double per_face = refine_bytes_per_face(o->scheme);
+    const double need = per_face * refined_faces(m, o->scheme, levels);
+    if (need <= (double)budget) return SPIA_OK;
+    int32_t fit = levels;
+    while (fit > 0 && per_face * refined_faces(m, o->scheme, fit) > (double)budget) --fit;
+    char what[128], fits[64];
+    snprintf(what, sizeof what, "%s %d levels (%.0f faces)", work, (int)levels, refined_faces(m, o->scheme, levels));
+    if (fit > 0)
+        snprintf(fits, sizeof fits, "at most %d level%s fit", (int)fit, fit == 1 ? "" : "s");
+    else
+        snprintf(fits, sizeof fits, "not one level fits");
+    return spia__memory_check(o, need, what, fits, status);
+}
+
 static spia_result refine_dispatch(const spia_mesh *mesh, const spia_options *options, int32_t levels,
                                    int32_t *vertex_count, int32_t *face_count, int64_t *corner_count,
                                    float *positions, int32_t *face_sizes, int32_t *faces, spia_status *status) {
@@ -110,6 +160,7 @@ static spia_result refine_dispatch(const spia_mesh *mesh, const spia_options *op
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "levels must be 0 to 8, got %d", (int)levels);
     r = spia_mesh_validate(mesh, status);
     if (r != SPIA_OK) return r;
+    if ((r = refine_memory(mesh, &opt, levels, "refining", status)) != SPIA_OK) return r;
     spia__refine_clock clock;
     spia__refine_clock_start(&clock, &opt, levels);
     spia__refine_clock *tick = positions ? &clock : NULL;
@@ -168,6 +219,7 @@ static spia_result subdivide_dispatch(const spia_mesh *mesh, const spia_options 
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "levels must be 1 to 6, got %d", (int)levels);
     r = spia_mesh_validate(mesh, status);
     if (r != SPIA_OK) return r;
+    if ((r = refine_memory(mesh, &opt, levels, "subdividing", status)) != SPIA_OK) return r;
     spia__refine_clock clock;
     spia__refine_clock_start(&clock, &opt, levels);
     spia_adjacency adj;

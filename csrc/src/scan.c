@@ -9,6 +9,7 @@
 
 #include <float.h>
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -667,6 +668,8 @@ static spia_result scan_vertices(spia_scan *s, int bare, int threads, spia__buil
     return SPIA_OK;
 }
 
+#define SCAN_BYTES_PER_TRIANGLE 120.0
+
 static spia_result scan_create(const spia_mesh *mesh, spia_progress_fn progress, void *progress_user_data, int bare,
                                spia_scan **out, spia_status *status) {
     spia__build_progress pr;
@@ -678,6 +681,20 @@ static spia_result scan_create(const spia_mesh *mesh, spia_progress_fn progress,
     spia__build_progress *const p = progress ? &pr : NULL;
     spia_result r = check_scan_mesh(mesh, out, status);
     if (r != SPIA_OK) return r;
+    {
+        /* The hierarchy, about 40 bytes a triangle, its build's scratch and the
+         * copied positions and normals (SCAN_BYTES_PER_TRIANGLE in all), against
+         * what the machine has available. */
+        double triangles = 0.0;
+        for (int32_t f = 0; f < mesh->face_count; ++f)
+            triangles += mesh->face_sizes[f] > 2 ? (double)(mesh->face_sizes[f] - 2) : 0.0;
+        const spia_options defaults = spia_options_default();
+        char what[96];
+        snprintf(what, sizeof what, "a scan of %.0f triangles", triangles);
+        r = spia__memory_check(&defaults, SCAN_BYTES_PER_TRIANGLE * triangles + 48.0 * (double)mesh->vertex_count,
+                               what, "try a decimated scan", status);
+        if (r != SPIA_OK) return r;
+    }
     const int32_t n = mesh->vertex_count;
     double t0 = spia__now();
     const double start = t0;

@@ -42,7 +42,7 @@ import numpy as np
 
 __all__ = [
     "Mesh", "Report", "Stencils", "PiaError", "PiaCancelled",
-    "available", "load_error", "library_path", "platform_tag", "version", "opensubdiv_version_number", "validate", "limit_stencils", "solve", "interpolate", "refine",
+    "available", "load_error", "library_path", "platform_tag", "version", "available_memory", "opensubdiv_version_number", "validate", "limit_stencils", "solve", "interpolate", "refine",
     "subdivide", "flat_positions", "fit", "fit_detail", "detail_samples", "detail_memory_estimate", "DetailResult", "Scan",
     "usd_text", "write_usd",
     "SCHEMES", "BOUNDARY_SMOOTH", "BOUNDARY_RULES", "METHODS", "SOLVE_FLAGS",
@@ -112,6 +112,7 @@ class _Options(ctypes.Structure):
         ("boundary_rule", ctypes.c_int), ("weight", ctypes.c_double), ("staged", ctypes.c_int32),
         ("shape_parameter", ctypes.c_double), ("face_shape_parameters", _f32p), ("threads", ctypes.c_int32),
         ("opensubdiv_version", ctypes.c_int32), ("initial_cage", _f32p), ("solve_flags", ctypes.c_int32),
+        ("memory_budget", ctypes.c_int64),
     ]
 
 
@@ -309,6 +310,7 @@ def _declare(lib):
 
     P = ctypes.c_void_p
     fn("spia_version", ctypes.c_int)
+    fn("spia_available_memory", ctypes.c_int64)
     fn("spia_result_name", ctypes.c_char_p, ctypes.c_int)
     fn("spia_mesh_validate", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(_Status))
     fn("spia_limit_stencils_create", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(_Options),
@@ -389,6 +391,13 @@ def library_path():
     """The file the native library was loaded from, or None."""
     available()
     return _lib_path
+
+
+def available_memory():
+    """Bytes of memory the machine can give the library now (the default
+    ``memory_budget`` of every call), or None where it cannot be told."""
+    value = int(_library().spia_available_memory())
+    return value if value >= 0 else None
 
 
 def version():
@@ -497,7 +506,11 @@ def opensubdiv_version_number(version):
 
 def _options(scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases=True, quality=3, method="AUTO",
              tolerance=1e-6, max_iterations=1000, progress=None, boundary_rule="SMOOTH", weight=0.0, staged=False,
-             shape_parameter=0.5, face_shape_parameters=None, threads=0, opensubdiv_version=None, solve_flags=()):
+             shape_parameter=0.5, face_shape_parameters=None, threads=0, opensubdiv_version=None, solve_flags=(),
+             memory_budget=0):
+    if not isinstance(memory_budget, (int, np.integer)):
+        raise PiaError("INVALID_ARGUMENT", f"memory_budget must be a whole number of bytes (0: what the machine "
+                                           f"has available; negative: no check), not {memory_budget!r}")
     if not (isinstance(threads, (int, np.integer)) and threads >= 0):
         raise PiaError("INVALID_ARGUMENT", f"threads must be 0 (all processors) or a positive integer, not {threads!r}")
     if not (isinstance(quality, (int, np.integer)) and 1 <= quality <= 10):
@@ -523,6 +536,7 @@ def _options(scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases=True, qu
     opts.threads = int(threads)
     opts.opensubdiv_version = opensubdiv_version_number(opensubdiv_version)
     opts.solve_flags = _solve_flags(solve_flags)
+    opts.memory_budget = int(memory_budget)
     keep = None
     if face_shape_parameters is not None:
         keep = np.ascontiguousarray(face_shape_parameters, dtype=np.float32).ravel()
@@ -735,7 +749,7 @@ def validate(mesh):
 
 def limit_stencils(mesh, scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases=True, quality=3, progress=None,
                    boundary_rule="SMOOTH", shape_parameter=0.5, face_shape_parameters=None, threads=0,
-                   opensubdiv_version=None):
+                   opensubdiv_version=None, memory_budget=0):
     """The limit stencils of ``mesh`` (a :class:`Stencils`).  ``threads``: 0 for
     one per processor; the table does not depend on it.  ``opensubdiv_version``
     (Catmull-Clark): that of the Blender to match, e.g.
@@ -745,7 +759,7 @@ def limit_stencils(mesh, scheme="CATMULL_CLARK", boundary_smooth="ALL", use_crea
     opts, _keep = _options(scheme=scheme, boundary_smooth=boundary_smooth, use_creases=use_creases,
                            quality=quality, progress=progress, boundary_rule=boundary_rule,
                            shape_parameter=shape_parameter, face_shape_parameters=face_shape_parameters,
-                           threads=threads, opensubdiv_version=opensubdiv_version)
+                           threads=threads, opensubdiv_version=opensubdiv_version, memory_budget=memory_budget)
     handle = ctypes.c_void_p()
     status = _Status()
     cm = mesh._c()
@@ -764,7 +778,7 @@ def solve(stencils, targets, **options):
 def interpolate(mesh, scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases=True, quality=3, method="AUTO",
                 tolerance=1e-6, max_iterations=1000, progress=None, boundary_rule="SMOOTH", weight=0.0,
                 staged=False, shape_parameter=0.5, face_shape_parameters=None, threads=0, opensubdiv_version=None,
-                solve_flags=()):
+                solve_flags=(), memory_budget=0):
     """A cage whose limit surface passes through the mesh's vertices.
 
     scheme 'LOOP' (triangles only) takes boundary_rule 'SMOOTH' (OpenSubdiv's)
@@ -775,7 +789,10 @@ def interpolate(mesh, scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases
     processor, 1 for the calling thread only; results do not depend on it.
     ``opensubdiv_version``: see :func:`limit_stencils`.  ``solve_flags``:
     names from :data:`SOLVE_FLAGS` (the header's SPIA_SOLVE_*), for the
-    Gauss-Seidel solvers.
+    Gauss-Seidel solvers.  ``memory_budget``: bytes the call may use (0:
+    :func:`available_memory`; negative: no check); every function takes it,
+    and one whose settings would need more raises :class:`PiaError`
+    OUT_OF_MEMORY at once, naming the setting and what would fit.
 
     Returns ``(cage, report)``: cage is an (N, 3) float32 array of new
     control positions, report a :class:`Report`.  Stopping at
@@ -787,7 +804,7 @@ def interpolate(mesh, scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases
     lib = _library()
     opts, _keep = _options(scheme, boundary_smooth, use_creases, quality, method, tolerance, max_iterations, progress,
                            boundary_rule, weight, staged, shape_parameter, face_shape_parameters, threads,
-                           opensubdiv_version, solve_flags)
+                           opensubdiv_version, solve_flags, memory_budget)
     cage = np.empty_like(mesh.positions)
     rep, history, unreachable = _report_buffers(opts.max_iterations, mesh.vertex_count)
     status = _Status()
@@ -800,7 +817,7 @@ def interpolate(mesh, scheme="CATMULL_CLARK", boundary_smooth="ALL", use_creases
 
 
 def refine(mesh, levels, scheme="LOOP", boundary_rule="SMOOTH", boundary_smooth="ALL", use_creases=True,
-           shape_parameter=0.5, face_shape_parameters=None, progress=None):
+           shape_parameter=0.5, face_shape_parameters=None, progress=None, memory_budget=0):
     """The surface of ``mesh`` (a cage) refined ``levels`` times, for the
     schemes Blender cannot show: ``(positions (M, 3) float32, face_sizes
     (K,) int32, face_vertices int32)``.  LOOP: triangles, every vertex at its
@@ -813,7 +830,8 @@ def refine(mesh, levels, scheme="LOOP", boundary_rule="SMOOTH", boundary_smooth=
     lib = _library()
     opts, _keep = _options(scheme=scheme, boundary_smooth=boundary_smooth, use_creases=use_creases,
                            boundary_rule=boundary_rule, shape_parameter=shape_parameter,
-                           face_shape_parameters=face_shape_parameters, progress=progress)
+                           face_shape_parameters=face_shape_parameters, progress=progress,
+                           memory_budget=memory_budget)
     cm = mesh._c()
     status = _Status()
     nv, nf, nc = ctypes.c_int32(), ctypes.c_int32(), ctypes.c_int64()
@@ -833,7 +851,7 @@ def refine(mesh, levels, scheme="LOOP", boundary_rule="SMOOTH", boundary_smooth=
 
 
 def subdivide(mesh, levels=1, boundary_smooth="ALL", use_creases=True, quality=3, opensubdiv_version=None,
-              progress=None):
+              progress=None, memory_budget=0):
     """The cage ``mesh`` subdivided ``levels`` times (1 to 6) by Catmull-Clark,
     as a :class:`Mesh`: the control mesh of the same limit surface, all
     quads, with every edge and its crease and every vertex's crease (the
@@ -842,7 +860,7 @@ def subdivide(mesh, levels=1, boundary_smooth="ALL", use_creases=True, quality=3
     bool`` is called at the end of each level; True cancels."""
     lib = _library()
     opts, _keep = _options(boundary_smooth=boundary_smooth, use_creases=use_creases, quality=quality,
-                           opensubdiv_version=opensubdiv_version, progress=progress)
+                           opensubdiv_version=opensubdiv_version, progress=progress, memory_budget=memory_budget)
     cm = mesh._c()
     status = _Status()
     nv, nf, ne = ctypes.c_int32(), ctypes.c_int32(), ctypes.c_int32()
@@ -1121,7 +1139,7 @@ FIT_MODES = ["SURFACE", "VERTICES"]
 
 
 def surface_stencils(mesh, samples_per_edge=4, boundary_smooth="ALL", use_creases=True, quality=3,
-                     opensubdiv_version=None):
+                     opensubdiv_version=None, memory_budget=0):
     """Catmull-Clark limit stencils at samples_per_edge**2 points inside each
     ptex face (a quad, or each corner's sub-quad of another polygon), at the
     centres of a regular (s, t) grid: row ``(ptex * k + j) * k + i`` is at
@@ -1130,7 +1148,7 @@ def surface_stencils(mesh, samples_per_edge=4, boundary_smooth="ALL", use_crease
     :func:`limit_stencils`."""
     lib = _library()
     opts, _keep = _options(boundary_smooth=boundary_smooth, use_creases=use_creases, quality=quality,
-                           opensubdiv_version=opensubdiv_version)
+                           opensubdiv_version=opensubdiv_version, memory_budget=memory_budget)
     handle = ctypes.c_void_p()
     status = _Status()
     cm = mesh._c()

@@ -132,7 +132,14 @@ static void decode_settings(reader *r, settings *s) {
     s->levels = (int32_t)(b % 11) - 1; /* -1 to 9 */
     b = u8(r);
     s->samples = (int32_t)(b % 67) - 1; /* -1 to 65 */
-    s->cancel_at = u8(r) % 8;          /* 0: never */
+    b = u8(r);
+    s->cancel_at = b % 8; /* 0: never */
+    {
+        /* Every call under a memory budget the fuzzer's own limit (2 GB)
+         * holds: the library must refuse what would need more. */
+        static const int64_t budgets[4] = {(int64_t)1 << 30, (int64_t)256 << 20, 4096, (int64_t)64 << 20};
+        s->o.memory_budget = budgets[(b >> 3) % 4];
+    }
     b = u8(r);
     s->fit.mode = (spia_fit_mode)(b % 3); /* 2: unknown */
     s->fit.samples_per_edge = (int32_t)((b >> 2) % 6) - 1;
