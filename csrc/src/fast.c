@@ -1170,6 +1170,7 @@ spia_result spia__solve_fast(const spia_stencils *L, const float *targets, const
         }
     }
     if (report) report->iterations = it;
+    if (res == SPIA_STAGNATED || res == SPIA_ERROR_DIVERGED) *handover_iterations = it;
 done:
     free(f.P);
     if (f.S != f.P) free(f.S);

@@ -227,7 +227,9 @@ void spia__stencils_expanded_free(const spia_stencils *s, spia_stencils *full);
  * already within the tolerance is then reported as PIA's).  Returns
  * SPIA__HAND_OVER, with nothing written, when float32 sweeps cannot reach
  * the tolerance: GS_PIA is to go on from *handover (a cage the caller
- * frees; NULL: from the first iterate), after *handover_iterations. */
+ * frees; NULL: from the first iterate), after *handover_iterations.  On
+ * SPIA_STAGNATED and SPIA_ERROR_DIVERGED, where least squares goes on,
+ * *handover_iterations is the sweeps' count as well. */
 #define SPIA__HAND_OVER ((spia_result)100)
 spia_result spia__solve_fast(const spia_stencils *L, const float *targets, const spia_options *options,
                              double diagonal, int automatic, float *cage, float **handover,

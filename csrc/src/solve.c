@@ -957,7 +957,29 @@ typedef struct solve_call {
     int32_t it0;             /* iterations before the iterative method's */
     double initial_relative; /* the report's initial error, when GS_PIA_FAST measured it; else -1 */
     int least_squares;
+    /* Where an iterative method handed the solve to least squares: how it
+     * ended (SPIA_STAGNATED or SPIA_ERROR_DIVERGED; SPIA_OK: no hand-over),
+     * which method and after how many iterations, for the message. */
+    spia_result gave_up;
+    spia_method gave_up_method;
+    int32_t gave_up_after;
 } solve_call;
+
+/* The method's name as spia_method spells it, for messages. */
+static const char *method_name(spia_method m) {
+    static const char *const names[] = {"AUTO", "PIA",         "GS_PIA",     "CHEBYSHEV",
+                                        "WPIA", "CG",          "GS_PIA_FAST", "LEAST_SQUARES"};
+    return (int)m >= 0 && (int)m < (int)(sizeof names / sizeof names[0]) ? names[m] : "the iteration";
+}
+
+/* Least squares takes over from `method`, which ended with `how` after
+ * `iterations`. */
+static void hand_to_least_squares(solve_call *c, spia_result how, spia_method method, int32_t iterations) {
+    c->least_squares = 1;
+    c->gave_up = how;
+    c->gave_up_method = method;
+    c->gave_up_after = iterations;
+}
 
 static spia_result solver_oom(const solve_call *c) {
     return spia__fail(c->status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)",
@@ -1030,8 +1052,7 @@ static int solve_fast(solve_call *c, int automatic, spia_result *res) {
          * first iterate. */
         if (report) c->initial_relative = report->initial_max_error_relative;
         if (*res == SPIA_STAGNATED) c->opt.initial_cage = c->cage;
-        if (report) c->it0 = report->iterations;
-        c->least_squares = 1;
+        hand_to_least_squares(c, *res, SPIA_METHOD_GS_PIA_FAST, c->it0);
         return 0;
     }
     if (*res != SPIA__HAND_OVER) return 1;
@@ -1157,7 +1178,7 @@ static spia_result solve_iterative(solve_call *c, solver_state *s, double thresh
         /* Some vertices cannot be reached, or L has eigenvalues outside
          * (0, 1] that PIA-type iterations cannot take: least squares from
          * here, or after a blow-up from the first iterate. */
-        c->least_squares = 1;
+        hand_to_least_squares(c, res == SPIA_ERROR_DIVERGED ? res : SPIA_STAGNATED, s->method, *it);
         if (res == SPIA_ERROR_DIVERGED)
             for (int64_t k = 0; k < 3 * (int64_t)n; ++k) s->V[k] = (double)s->start[k];
     }
@@ -1204,7 +1225,15 @@ static spia_result write_cage(solve_call *c, solver_state *s, spia_result res, d
         spia__fail(c->status, res, -1,
                    "stopped at max_iterations (%d) with max error %.3g of the diagonal, above the tolerance %.3g",
                    (int)it, err_all / scale, c->opt.tolerance);
-    else /* SPIA_STAGNATED, from least squares */
+    else if (c->gave_up != SPIA_OK) /* SPIA_STAGNATED, from least squares after another method */
+        spia__fail(c->status, res, -1,
+                   "%s %s after %d iterations and least squares took over%s: %d vertices cannot be reached (the "
+                   "limit matrix is singular there); it puts them within %.3g of the diagonal, the others "
+                   "within %.3g",
+                   method_name(c->gave_up_method), c->gave_up == SPIA_ERROR_DIVERGED ? "diverged" : "stagnated",
+                   (int)c->gave_up_after, c->gave_up == SPIA_ERROR_DIVERGED ? " from the first iterate" : "",
+                   (int)stuck_count, err_all / scale, err / scale);
+    else /* SPIA_STAGNATED, from least squares asked for */
         spia__fail(c->status, res, -1,
                    "%d vertices cannot be reached: no cage's limit surface passes through all the points (the "
                    "limit matrix is singular there); the least-squares cage puts them as close as the surface "

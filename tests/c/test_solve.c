@@ -461,6 +461,30 @@ int main(void) {
         CHECK(err <= 1e-6 + 4e-7, "the rest: %g", err);
         CHECK(rep.reachable_max_error_relative <= 1e-6 + 4e-7, "reported rest %g", rep.reachable_max_error_relative);
         CHECK(strstr(st.message, "3 vertices cannot be reached") != NULL, "message: %s", st.message);
+        /* One message for the whole solve: the method that stagnated, that
+         * least squares took over, and the least-squares result as the
+         * report gives it (not the iteration's own stagnation message). */
+        CHECK(st.code == r, "method %d: status code %d, returned %d", method, (int)st.code, (int)r);
+        static const char *const names[] = {"AUTO", "PIA", "GS_PIA", "CHEBYSHEV", "WPIA", "CG", "GS_PIA_FAST"};
+        char gave_up[32] = "";
+        int after = -1;
+        CHECK(sscanf(st.message, "%31s stagnated after %d iterations and least squares took over:", gave_up,
+                     &after) == 2 &&
+                  after > 0 && after <= rep.iterations,
+              "method %d (%d iterations): message: %s", method, (int)rep.iterations, st.message);
+        if (method != SPIA_METHOD_AUTO)
+            CHECK(strcmp(gave_up, names[method]) == 0, "method %d: message names %s", method, gave_up);
+        char result[128];
+        snprintf(result, sizeof result, "it puts them within %.3g of the diagonal, the others within %.3g",
+                 rep.max_error_relative, rep.reachable_max_error_relative);
+        CHECK(strstr(st.message, result) != NULL, "method %d: message %s; report: %s", method, st.message, result);
+        CHECK(strstr(st.message, "cannot reach their targets") == NULL, "method %d: GS_PIA_FAST's own message: %s",
+              method, st.message);
+        /* Without a report the message counts the same iterations. */
+        char with_report[SPIA_MESSAGE_SIZE];
+        memcpy(with_report, st.message, sizeof with_report);
+        CHECK(spia_solve(s, m.pos, &o, cage, NULL, &st) == SPIA_STAGNATED && strcmp(st.message, with_report) == 0,
+              "method %d without a report: %s", method, st.message);
         free(cage);
         free(flags);
         spia_stencils_free(s);
