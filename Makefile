@@ -30,7 +30,7 @@ LEGACY = dist/subdiv_pia-$(VERSION)-legacy-linux_x64.zip
 WINDOWS_LEGACY = dist/subdiv_pia-$(VERSION)-legacy-windows_x64.zip
 
 .PHONY: all deps build package macos test test-c test-asan test-tsan test-fuzz fuzz test-python test-package test-blender test-window \
-        blenders demo bench bench-scale bench-solve bench-closest bench-live bench-hard bench-fit-scale bench-scan clean
+        blenders demo bench bench-creases bench-scale bench-solve bench-closest bench-live bench-hard bench-fit-scale bench-scan clean
 
 all: build
 
@@ -166,6 +166,13 @@ bench-scale: build
 # threads (bench/bench_solve.py; writes out/bench/solve.md).
 bench-solve: build
 	$(PYTHON) bench/bench_solve.py
+
+# Memory that settings make grow: creased meshes (every crease 0.7 to 0.99)
+# in child processes under a 2 GB address-space limit, time and peak per
+# cell, and the refinements' bytes per face behind the library's estimates
+# (bench/bench_creases.py).
+bench-creases: build
+	$(PYTHON) bench/bench_creases.py
 
 # Live cages: the update time per edit at 1k, 10k and 50k vertices.
 bench-live: build

@@ -2316,6 +2316,7 @@ spia_result spia_flat_positions(const spia_mesh *mesh, const spia_options *optio
             return spia__fail(status, SPIA_ERROR_FACE_SIZE, f,
                               "face %d has %d corners: flat positions are for quad meshes (a subdivided cage)",
                               (int)f, (int)mesh->face_sizes[f]);
+    if ((r = samples_memory(mesh, &opt, 3, 1, "the flat positions", status)) != SPIA_OK) return r;
     spia_adjacency adj;
     if ((r = spia__adjacency_build(mesh, &adj, status)) != SPIA_OK) return r;
     fit_clock clock = {opt.progress, opt.progress_user_data, spia__now(), 0.0, 0, 0};

@@ -139,7 +139,8 @@ static spia_result refine_memory(const spia_mesh *m, const spia_options *o, int3
     int32_t fit = levels;
     while (fit > 0 && per_face * refined_faces(m, o->scheme, fit) > (double)budget) --fit;
     char what[128], fits[64];
-    snprintf(what, sizeof what, "%s %d levels (%.0f faces)", work, (int)levels, refined_faces(m, o->scheme, levels));
+    snprintf(what, sizeof what, "%s %d level%s (%.0f faces)", work, (int)levels, levels == 1 ? "" : "s",
+             refined_faces(m, o->scheme, levels));
     if (fit > 0)
         snprintf(fits, sizeof fits, "at most %d level%s fit", (int)fit, fit == 1 ? "" : "s");
     else

@@ -116,7 +116,7 @@ spia_result spia__memory_check(const spia_options *o, double need, const char *w
         return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "%s needs about %.2f GB, more than the memory budget of "
                           "%.2f GB%s%s", what, gigabytes(need), gigabytes((double)budget), fits ? ": " : "",
                           fits ? fits : "");
-    return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "%s needs about %.2f GB, more than the %.2f GB available%s%s",
+    return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "%s needs about %.2f GB, more than the %.2f GB of memory available%s%s",
                       what, gigabytes(need), gigabytes((double)budget), fits ? ": " : "", fits ? fits : "");
 }
 

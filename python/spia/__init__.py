@@ -43,7 +43,7 @@ import numpy as np
 __all__ = [
     "Mesh", "Report", "Stencils", "PiaError", "PiaCancelled",
     "available", "load_error", "library_path", "platform_tag", "version", "available_memory", "opensubdiv_version_number", "validate", "limit_stencils", "solve", "interpolate", "refine",
-    "subdivide", "flat_positions", "fit", "fit_detail", "detail_samples", "detail_memory_estimate", "DetailResult", "Scan",
+    "subdivide", "flat_positions", "fit", "fit_detail", "detail_samples", "detail_memory_estimate", "check_detail_memory", "DetailResult", "Scan",
     "usd_text", "write_usd",
     "SCHEMES", "BOUNDARY_SMOOTH", "BOUNDARY_RULES", "METHODS", "SOLVE_FLAGS",
 ]
@@ -1350,13 +1350,14 @@ def fit(cage, scan, mode="SURFACE", samples_per_edge=4, cutoff=0.02, smoothing=1
 
 
 def flat_positions(mesh, boundary_smooth="ALL", use_creases=True, quality=3, opensubdiv_version=None, threads=0,
-                   progress=None):
+                   progress=None, memory_budget=0):
     """Positions (N, 3) float32 for the vertices of a quad mesh whose faces,
     drawn flat (a Multires modifier's finest level), lie closest to its
     Catmull-Clark limit surface (spia_flat_positions)."""
     lib = _library()
     opts, _keep = _options(boundary_smooth=boundary_smooth, use_creases=use_creases, quality=quality,
-                           opensubdiv_version=opensubdiv_version, threads=threads, progress=progress)
+                           opensubdiv_version=opensubdiv_version, threads=threads, progress=progress,
+                           memory_budget=memory_budget)
     cm = mesh._c()
     out = np.empty_like(mesh.positions)
     status = _Status()
@@ -1420,6 +1421,28 @@ def detail_memory_estimate(cage, levels, samples_per_edge=4):
     return DETAIL_BYTES_FIXED + DETAIL_BYTES_PER_SAMPLE * samples, corners * 4 ** (levels - 1)
 
 
+def check_detail_memory(cage, levels, samples_per_edge=4, memory_budget=0):
+    """Raises :class:`PiaError` OUT_OF_MEMORY, naming the levels that fit,
+    when ``levels`` detail levels on ``cage`` (a :class:`Mesh` or its corner
+    count) would need more than ``memory_budget`` bytes (0: what
+    :func:`available_memory` reports; negative: no check)."""
+    budget = int(memory_budget)
+    if budget == 0:
+        budget = available_memory() or -1
+    if budget < 0:
+        return
+    need, faces = detail_memory_estimate(cage, levels, samples_per_edge)
+    if need <= budget:
+        return
+    fit = max((k for k in range(levels) if detail_memory_estimate(cage, k, samples_per_edge)[0] <= budget), default=0)
+    where = "the memory budget of" if memory_budget else "the"
+    raise PiaError("OUT_OF_MEMORY", "%d detail levels (%.1fM faces at the finest) need about %.2f GB, more than "
+                   "%s %.2f GB of memory%s: %s" % (
+                       levels, faces / 1e6, need / 2.0 ** 30, where, budget / 2.0 ** 30,
+                       "" if memory_budget else " available",
+                       "at most %d level%s fit" % (fit, "" if fit == 1 else "s") if fit else "not one level fits"))
+
+
 # Detail levels start on the scan already: they are held firmer than a
 # first fit (fairness, and samples held back from sliding past one another),
 # which on the bunny's raw scan at 3 levels turns 0.09% of the finest faces
@@ -1445,7 +1468,8 @@ DETAIL_ROBUST_SCALE = 15.0
 def fit_detail(cage, scan, levels, samples_per_edge=4, progress=None, boundary_smooth="ALL", use_creases=True,
                quality=3, opensubdiv_version=None, threads=0, measure_scan=True, smoothing=DETAIL_SMOOTHING,
                slide_weight=DETAIL_SLIDE_WEIGHT, scan_pull=True, free_rims=True, max_rounds=DETAIL_ROUNDS,
-               solver_iterations=DETAIL_SOLVER_ITERATIONS, robust_scale=DETAIL_ROBUST_SCALE, **fit_options):
+               solver_iterations=DETAIL_SOLVER_ITERATIONS, robust_scale=DETAIL_ROBUST_SCALE, memory_budget=0,
+               **fit_options):
     """Detail levels on a cage whose limit surface lies on ``scan`` (usually
     the result of :func:`fit`): the cage subdivided one level at a time
     (:func:`subdivide`), and each level fitted to the scan as a cage of its
@@ -1466,15 +1490,19 @@ def fit_detail(cage, scan, levels, samples_per_edge=4, progress=None, boundary_s
     ``robust_scale`` default to DETAIL_SMOOTHING, DETAIL_SLIDE_WEIGHT,
     DETAIL_ROUNDS, DETAIL_SOLVER_ITERATIONS and DETAIL_ROBUST_SCALE.
     The finest level's vertices are numbered as :func:`subdivide` applied
-    one level at a time numbers them.  A level's report has status
+    one level at a time numbers them.  ``memory_budget`` (bytes; 0: what
+    the machine has available, negative: no check): the levels are refused
+    before the first is made when :func:`detail_memory_estimate` says they
+    would need more (:func:`check_detail_memory`).  A level's report has status
     'MAX_ITERATIONS' when its rounds were all used (the defaults' few rounds
     usually are): the level is written all the same.  Returns a
     :class:`DetailResult`."""
     levels = int(levels)
     if not 1 <= levels <= 6:
         raise PiaError("INVALID_ARGUMENT", f"levels must be 1 to 6, not {levels!r}")
+    check_detail_memory(cage, levels, samples_per_edge, memory_budget)
     surface = dict(boundary_smooth=boundary_smooth, use_creases=use_creases, quality=quality,
-                   opensubdiv_version=opensubdiv_version)
+                   opensubdiv_version=opensubdiv_version, memory_budget=memory_budget)
     current = cage
     reports = []
     for level in range(1, levels + 1):

@@ -172,6 +172,19 @@ def test_too_many_levels():
     expect_error(r"levels must be in 0\.\.8", scheme='LOOP', levels=9)
 
 
+def test_a_preview_beyond_memory_is_refused_before_it_is_made():
+    """8 levels of a 20,480-triangle sphere would make 1.3 billion triangles
+    (some 380 GB): the library refuses before it allocates, naming the
+    levels that fit, and the operator reports it and makes nothing."""
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=5)
+    source = bpy.context.active_object
+    before = snapshot(source)
+    message = expect_error(r"refining 8 levels \(1342177280 faces\) needs about [0-9.]+ GB, more than the [0-9.]+ "
+                           r"GB of memory available: at most [1-7] levels? fit", scheme='LOOP', levels=8)
+    assert "GB of memory available" in message
+    assert_unchanged(source, before)
+
+
 # --- refresh ----------------------------------------------------------------------
 
 def limit_positions(limit):

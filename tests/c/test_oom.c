@@ -112,6 +112,9 @@ static void unlimit(void) {
 
 
 static int run = 0;
+/* The memory_budget of every call: -1 (no estimate, so that the
+ * allocations themselves fail), or 0 (the estimates refuse up front). */
+static int64_t budget = -1;
 
 /* One call's outcome: out of memory, with a message, nothing leaked. */
 static void expect_oom(const char *what, spia_result r, const spia_status *st, long long before) {
@@ -151,6 +154,7 @@ static void all_calls(big *b, long long margin, int tight) {
     for (int k = 0; k < 3; ++k)
         for (int hoppe = 0; hoppe < (schemes[k] == SPIA_SCHEME_LOOP ? 2 : 1); ++hoppe) {
             spia_options o = spia_options_default();
+            o.memory_budget = budget;
             o.scheme = schemes[k];
             o.boundary_rule = hoppe ? SPIA_BOUNDARY_RULE_HOPPE : SPIA_BOUNDARY_RULE_SMOOTH;
             const spia_mesh *m = schemes[k] == SPIA_SCHEME_LOOP ? &b->tm : &b->qm;
@@ -194,10 +198,12 @@ static void all_calls(big *b, long long margin, int tight) {
             }
         }
 
+    spia_options with_budget = spia_options_default();
+    with_budget.memory_budget = budget;
     spia_stencils *s = (spia_stencils *)&st;
     before = atomic_load(&live_bytes);
     if (!limit_to(margin)) CHECK(0, "setrlimit failed");
-    r = spia_surface_stencils_create(&b->qm, NULL, 4, &s, &st);
+    r = spia_surface_stencils_create(&b->qm, &with_budget, 4, &s, &st);
     unlimit();
     expect_oom(tight ? "tight surface stencils" : "medium surface stencils", r, &st, before);
     CHECK(s == NULL, "surface stencils: a table came back");
@@ -217,7 +223,7 @@ static void all_calls(big *b, long long margin, int tight) {
         for (size_t i = 0; i < b->cage_floats; ++i) b->cage[i] = -7.0f;
         before = atomic_load(&live_bytes);
         if (!limit_to(margin)) CHECK(0, "setrlimit failed");
-        r = spia_fit(&b->qm, b->small_scan, NULL, &fo, b->cage, NULL, &st);
+        r = spia_fit(&b->qm, b->small_scan, &with_budget, &fo, b->cage, NULL, &st);
         unlimit();
         snprintf(what, sizeof what, "%s fit, mode %d", tight ? "tight" : "medium", mode);
         expect_oom(what, r, &st, before);
@@ -236,6 +242,7 @@ static void all_calls(big *b, long long margin, int tight) {
                                               SPIA_METHOD_GS_PIA_FAST};
         for (size_t k = 0; k < sizeof methods / sizeof methods[0]; ++k) {
             spia_options o = spia_options_default();
+            o.memory_budget = budget;
             o.method = methods[k];
             for (size_t i = 0; i < b->cage_floats; ++i) b->cage[i] = -7.0f;
             before = atomic_load(&live_bytes);
@@ -302,6 +309,16 @@ int main(void) {
      * do not fit; 1 MB: not even the checks' scratch arrays fit. */
     all_calls(&b, 48ll << 20, 0);
     all_calls(&b, 1ll << 20, 1);
+
+    /* With the default budget (what is available, within the limit) every
+     * call is refused by its estimate before it asks for what it cannot
+     * have: not one allocation fails. */
+    budget = 0;
+    const long long failed_before = atomic_load(&failed_allocations);
+    all_calls(&b, 48ll << 20, 0);
+    CHECK(atomic_load(&failed_allocations) == failed_before,
+          "%lld allocations failed under the estimates", atomic_load(&failed_allocations) - failed_before);
+    budget = -1;
 
     /* With the limit lifted the same library works again. */
     const long long before = atomic_load(&live_bytes);

@@ -117,26 +117,39 @@ int main(void) {
           st.message);
     CHECK(sentinel[0] == 7.0f && fv[0] == -5, "a refused call wrote its buffers");
 
-    /* Sizes past int32 are refused by the counts, before any refinement:
-     * a 363 x 363 grid (131,769 quads) to 6 levels makes 539.7M quads,
-     * whose 2,158.8M corners pass INT32_MAX, and to 5 levels a quarter of
-     * that; Loop's 11,250 triangles to 8 levels make 737.3M triangles,
-     * 2,211.8M corners, and to 7 levels a quarter. */
+    /* Sizes past int32 are refused by the counts, before any refinement
+     * (with no memory budget, which would refuse them first): a 363 x 363
+     * grid (131,769 quads) to 6 levels makes 539.7M quads, whose 2,158.8M
+     * corners pass INT32_MAX, and to 5 levels a quarter of that; Loop's
+     * 11,250 triangles to 8 levels make 737.3M triangles, 2,211.8M
+     * corners, and to 7 levels a quarter. */
+    spia_options unbudgeted = spia_options_default(), loop_unbudgeted = loop;
+    unbudgeted.memory_budget = loop_unbudgeted.memory_budget = -1;
     tmesh big_grid = make_grid(363, 363);
     spia_mesh grid_view = tmesh_view(&big_grid);
-    CHECK(spia_subdivide_size(&grid_view, NULL, 5, &v, &f, &e, &st) == SPIA_OK && f == 131769 * 1024,
+    CHECK(spia_subdivide_size(&grid_view, &unbudgeted, 5, &v, &f, &e, &st) == SPIA_OK && f == 131769 * 1024,
           "grid, 5 levels: %s", st.message);
-    CHECK(spia_subdivide_size(&grid_view, NULL, 6, &v, &f, &e, &st) == SPIA_ERROR_INVALID_ARGUMENT &&
+    CHECK(spia_subdivide_size(&grid_view, &unbudgeted, 6, &v, &f, &e, &st) == SPIA_ERROR_INVALID_ARGUMENT &&
               strstr(st.message, "too many"),
           "grid, 6 levels: %s", st.message);
     tmesh torus = make_torus(75, 75, 1);
     spia_mesh torus_view = tmesh_view(&torus);
     int64_t corners = 0;
-    CHECK(spia_refine_size(&torus_view, &loop, 7, &v, &f, &corners, &st) == SPIA_OK && f == 11250 * 16384,
+    CHECK(spia_refine_size(&torus_view, &loop_unbudgeted, 7, &v, &f, &corners, &st) == SPIA_OK && f == 11250 * 16384,
           "Loop, 7 levels: %s", st.message);
-    CHECK(spia_refine_size(&torus_view, &loop, 8, &v, &f, &corners, &st) == SPIA_ERROR_INVALID_ARGUMENT &&
+    CHECK(spia_refine_size(&torus_view, &loop_unbudgeted, 8, &v, &f, &corners, &st) == SPIA_ERROR_INVALID_ARGUMENT &&
               strstr(st.message, "too many"),
           "Loop, 8 levels: %s", st.message);
+    /* Under a budget the size query already refuses what would not fit,
+     * before the caller allocates the output, naming the levels that do. */
+    spia_options budgeted = spia_options_default();
+    budgeted.memory_budget = (int64_t)1 << 30;
+    CHECK(spia_subdivide_size(&grid_view, &budgeted, 5, &v, &f, &e, &st) == SPIA_ERROR_OUT_OF_MEMORY &&
+              strstr(st.message, "subdividing 5 levels (134931456 faces)") &&
+              strstr(st.message, "memory budget of 1.00 GB: at most 2 levels fit"),
+          "grid, 5 levels under 1 GB: %s", st.message);
+    CHECK(spia_subdivide_size(&grid_view, &budgeted, 2, &v, &f, &e, &st) == SPIA_OK, "grid, 2 levels under 1 GB: %s",
+          st.message);
     tmesh_free(&big_grid);
     tmesh_free(&torus);
 

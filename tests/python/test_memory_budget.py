@@ -47,7 +47,7 @@ def test_a_refinement_beyond_the_address_space_is_refused_before_it_allocates():
     refused, done = out["calls"]
     assert refused["outcome"] == "refused" and refused["code"] == "OUT_OF_MEMORY", refused
     assert "refining 8 levels" in refused["message"] and "at most 6 levels fit" in refused["message"], refused
-    assert "GB available" in refused["message"], refused
+    assert "GB of memory available" in refused["message"], refused
     assert refused["seconds"] < 0.5, refused
     assert done["outcome"] == "done" and done["result"]["faces"] == 1280 * 16, done
     # Nothing near the refused size was ever allocated.
@@ -122,3 +122,21 @@ def test_a_creased_loop_cage_puts_its_limit_points_on_the_targets(native):
     table = native.limit_stencils(m, scheme="LOOP")
     limit = table.apply(cage.astype(np.float64))
     assert np.abs(limit - p).max() < 1e-5
+
+
+def test_detail_levels_are_refused_before_the_first_is_made(native):
+    cage = _sphere(native, 4)
+    scan = native.Scan(_sphere(native, 16))
+    two, _ = native.detail_memory_estimate(cage, 2)
+    three, faces = native.detail_memory_estimate(cage, 3)
+    assert two < three
+    calls = []
+    with pytest.raises(native.PiaError) as caught:
+        native.fit_detail(cage, scan, 3, memory_budget=(two + three) // 2, progress=lambda *a: calls.append(a))
+    text = str(caught.value)
+    assert caught.value.code == "OUT_OF_MEMORY", text
+    assert "3 detail levels (%.1fM faces at the finest)" % (faces / 1e6) in text, text
+    assert "memory budget of" in text and "at most 2 levels fit" in text, text
+    assert calls == [], "a level was started before the refusal"
+    result = native.fit_detail(cage, scan, 1, memory_budget=(two + three) // 2)
+    assert len(result.mesh.face_sizes) == 4 * len(cage.face_sizes)
