@@ -15,6 +15,13 @@ flat positions, the subdivision that tells Blender's order, and Blender's
 share (its Subdivision Surface for the order, the match, Multires
 subdivided, and the rest: Reshape).  Also the process's peak resident size.  Prints
 a Markdown table.
+
+Then, in the same process on the same cage, Blender's hand workflow
+(detail_workflow.blender_workflow: Multires subdivided `levels` times,
+Shrinkwrap Project both ways, evaluated), timed by its two stages with its
+own peak, and the ratio of the two workflows' times (ours over Blender's).
+--order blender-first runs Blender's first (the second run finds the
+scan's data warm).
 """
 import argparse
 import os
@@ -26,6 +33,7 @@ import bpy
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 import bench_fit_scale as scale  # noqa: E402
+import detail_workflow  # noqa: E402
 
 
 def main():
@@ -33,6 +41,7 @@ def main():
     parser.add_argument("--levels", type=int, default=3)
     parser.add_argument("--cage", type=int, default=scale.TARGET_CAGE)
     parser.add_argument("--scan", default="dragon_s2", choices=list(scale.SCANS))
+    parser.add_argument("--order", default="ours-first", choices=("ours-first", "blender-first"))
     args = parser.parse_args(scale.script_args())
     scale.prepare([args.scan], [args.cage], False)
     pia = scale.ensure_addon()
@@ -75,12 +84,27 @@ def main():
             seconds[key] = time.perf_counter() - t0
             levels_seen.append(len(mesh.positions))
     native.fit = fit_timed
+    hand = {}
+
+    def blender_hand():
+        rss = scale.proc_status("VmRSS")
+        scale.reset_peak()
+        t0 = time.perf_counter()
+        obj = detail_workflow.blender_workflow(cage, scan, levels=args.levels, method='PROJECT', report=hand)
+        hand.update(total=time.perf_counter() - t0, peak=scale.proc_status("VmHWM"), rss0=rss)
+        mesh = obj.data
+        bpy.data.objects.remove(obj)
+        bpy.data.meshes.remove(mesh)
+    if args.order == "blender-first":
+        blender_hand()
     rss0 = scale.proc_status("VmRSS")
     scale.reset_peak()
     t0 = time.perf_counter()
     new_obj, report = api.interpolate(cage, target=scan.name, fit_detail_levels=args.levels)
     total = time.perf_counter() - t0
     peak = scale.proc_status("VmHWM")
+    if args.order == "ours-first":
+        blender_hand()
     faces = len(cage.data.polygons) * 4 ** args.levels
     print("Blender %s, %d processors; cage %d vertices, scan %d triangles, %d levels (%d faces at the finest)\n"
           % (bpy.app.version_string, os.cpu_count() or 1, len(cage.data.vertices),
@@ -95,6 +119,15 @@ def main():
         print("| %s | %d | %d | %.1f | %.1f | %.1f |" % (key, rep.sample_count, rep.rounds, rep.stencil_seconds,
                                                        rep.query_seconds, rep.solve_seconds))
     print("\npeak resident size %.1f GB (%.1f GB before the call)" % (peak / 2**30, rss0 / 2**30))
+    print("\nBlender's hand workflow on the same cage, the same process (%s):\n" % args.order)
+    print("| workflow | s | peak GB | above the start GB |\n|---|---:|---:|---:|")
+    print("| ours: interpolate with %d detail levels | %.1f | %.1f | %.1f |"
+          % (args.levels, total, peak / 2**30, (peak - rss0) / 2**30))
+    print("| Blender: Multires subdivided %d times | %.1f | | |" % (args.levels, hand["subdivide_s"]))
+    print("| Blender: Shrinkwrap (Project, both ways) evaluated | %.1f | | |" % hand["evaluate_s"])
+    print("| Blender: all | %.1f | %.1f | %.1f |" % (hand["total"], hand["peak"] / 2**30,
+                                                   (hand["peak"] - hand["rss0"]) / 2**30))
+    print("\nratio (ours / Blender's): **%.2f**" % (total / hand["total"]))
     print("finest level: mean %.3g, p95 %.3g of the diagonal from the scan; scan to it: mean %.3g, p95 %.3g"
           % (new_obj["pia_fit_detail_mean"], new_obj["pia_fit_detail_p95"],
              new_obj.get("pia_fit_detail_scan_mean", float("nan")),

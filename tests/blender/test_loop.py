@@ -176,7 +176,7 @@ def test_a_preview_beyond_memory_is_refused_before_it_is_made():
     """8 levels of a 20,480-triangle sphere would make 1.3 billion triangles
     (some 380 GB): the library refuses before it allocates, naming the
     levels that fit, and the operator reports it and makes nothing."""
-    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=5)
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=6)
     source = bpy.context.active_object
     before = snapshot(source)
     message = expect_error(r"refining 8 levels \(1342177280 faces\) needs about [0-9.]+ GB, more than the [0-9.]+ "
