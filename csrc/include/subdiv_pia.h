@@ -545,6 +545,39 @@ SPIA_API spia_result spia_subdivide(const spia_mesh *mesh, const spia_options *o
                                     float *vertex_creases, spia_status *status);
 
 /* ------------------------------------------------------------------------ */
+/* Sharpness                                                                 */
+/* ------------------------------------------------------------------------ */
+
+/* spia_sharpness flags. */
+enum {
+    /* Leave Blender's two-edge rule out (a file for Blender, whose importer
+     * applies it again when it reads the sharpness). */
+    SPIA_SHARPNESS_NO_TWO_EDGE_RULE = 1
+};
+
+/*
+ * The sharpness the library hands OpenSubdiv for `mesh` under `options`
+ * (scheme and ignore_creases are used), in the mesh's own numbering, for
+ * writing the mesh where the same surface is to be rebuilt (USD):
+ *   - creases c in [0, 1] become sharpness c * c * 10 (float); face edges
+ *     below 1e-6 are left out; an edge listed more than once takes its
+ *     largest; edges used by no face carry none;
+ *   - Catmull-Clark (Blender's rules): the ends of edges used by no face
+ *     are infinitely sharp (10), and a vertex with exactly two face edges
+ *     gets the smaller of their sharpnesses added to its own, capped at 10
+ *     (unless flags has SPIA_SHARPNESS_NO_TWO_EDGE_RULE).
+ * Writes *crease_count, the creased face edges; where not NULL,
+ * crease_pairs (2 * count ints: each edge's smaller vertex index, then its
+ * larger, edges sorted by them) and crease_sharpness (count floats) must
+ * have room for them (call once with both NULL for the count), and
+ * vertex_sharpness receives vertex_count floats (0 for vertices no face
+ * uses).
+ */
+SPIA_API spia_result spia_sharpness(const spia_mesh *mesh, const spia_options *options, int32_t flags,
+                                    int32_t *crease_count, int32_t *crease_pairs, float *crease_sharpness,
+                                    float *vertex_sharpness, spia_status *status);
+
+/* ------------------------------------------------------------------------ */
 /* Limit surface samples                                                     */
 /* ------------------------------------------------------------------------ */
 

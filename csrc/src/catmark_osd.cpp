@@ -264,7 +264,8 @@ struct Prepared {
     std::unique_ptr<Far::TopologyRefiner> refiner;  // the whole mesh (prepare())
 };
 
-spia_result prepare_sharpness(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, Prepared &p) {
+spia_result prepare_sharpness(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, Prepared &p,
+                              bool two_edge_rule = true) {
     const int32_t n = m->vertex_count;
     const bool use_creases = !opt->ignore_creases;
     // Blender's own rules (loose-edge ends, the two-edge rule, smooth corners
@@ -361,7 +362,7 @@ spia_result prepare_sharpness(const spia_mesh *m, const spia_adjacency *adj, con
             s = kInfiniteSharpness;
         } else {
             s = (use_creases && m->vertex_creases) ? crease_to_sharpness(m->vertex_creases[v]) : 0.0f;
-            if (blender && any_edge_crease && crease_first[v + 1] > crease_first[v]) {
+            if (blender && two_edge_rule && any_edge_crease && crease_first[v + 1] > crease_first[v]) {
                 // Distinct neighbours along face edges.
                 int32_t nb[3];
                 int count = 0;
@@ -2744,6 +2745,35 @@ spia_result surface(const spia_mesh *m, const spia_adjacency *adj, const spia_op
     return SPIA_OK;
 }
 
+// spia_sharpness: prepare_sharpness's values in the mesh's own numbering,
+// the creased face edges sorted by their (smaller, larger) end.
+spia_result sharpness(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, bool two_edge_rule,
+                      int32_t *count, int32_t *pairs, float *edge_sharpness, float *vertex_sharpness,
+                      spia_status *status) {
+    Prepared p;
+    spia_result r = prepare_sharpness(m, adj, opt, p, two_edge_rule);
+    if (r != SPIA_OK) return r;
+    std::vector<std::pair<std::pair<int32_t, int32_t>, float>> creases;
+    creases.reserve(p.crease_weights.size());
+    for (size_t k = 0; k < p.crease_weights.size(); ++k) {
+        const int32_t a = p.vertex_of[(size_t)p.crease_pairs[2 * k]], b = p.vertex_of[(size_t)p.crease_pairs[2 * k + 1]];
+        creases.push_back(std::make_pair(std::make_pair(std::min(a, b), std::max(a, b)), p.crease_weights[k]));
+    }
+    std::sort(creases.begin(), creases.end());
+    *count = (int32_t)creases.size();
+    for (size_t k = 0; k < creases.size(); ++k) {
+        if (pairs) {
+            pairs[2 * k] = creases[k].first.first;
+            pairs[2 * k + 1] = creases[k].first.second;
+        }
+        if (edge_sharpness) edge_sharpness[k] = creases[k].second;
+    }
+    if (vertex_sharpness)
+        for (int32_t v = 0; v < m->vertex_count; ++v) vertex_sharpness[v] = p.vertex_sharpness[(size_t)v];
+    spia__ok(status);
+    return SPIA_OK;
+}
+
 }  // namespace
 
 extern "C" spia_result spia__osd_limit_stencils(const spia_mesh *mesh, spia_adjacency *adj,
@@ -2812,5 +2842,18 @@ extern "C" spia_result spia__osd_subdivide(const spia_mesh *mesh, const spia_adj
         return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory subdividing the cage");
     } catch (...) {
         return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "unexpected failure subdividing the cage");
+    }
+}
+
+extern "C" spia_result spia__osd_sharpness(const spia_mesh *mesh, const spia_adjacency *adj, const spia_options *options,
+                                           int two_edge_rule, int32_t *count, int32_t *pairs, float *edge_sharpness,
+                                           float *vertex_sharpness, spia_status *status) {
+    try {
+        return sharpness(mesh, adj, options, two_edge_rule != 0, count, pairs, edge_sharpness, vertex_sharpness,
+                         status);
+    } catch (const std::bad_alloc &) {
+        return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory reading the creases");
+    } catch (...) {
+        return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "unexpected failure reading the creases");
     }
 }

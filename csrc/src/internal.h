@@ -342,6 +342,12 @@ spia_result spia__loop_hoppe_refine_limit(const spia_mesh *mesh, const spia_opti
 
 /* Catmull-Clark refinement of the control mesh (spia_subdivide), in
  * catmark_osd.cpp.  Counts only when positions is NULL. */
+/* spia_sharpness's work (catmark_osd.cpp): the sharpness handed to
+ * OpenSubdiv, in the mesh's numbering; two_edge_rule 0 leaves Blender's
+ * two-edge rule out. */
+spia_result spia__osd_sharpness(const spia_mesh *mesh, const spia_adjacency *adj, const spia_options *options,
+                                int two_edge_rule, int32_t *count, int32_t *pairs, float *edge_sharpness,
+                                float *vertex_sharpness, spia_status *status);
 spia_result spia__osd_subdivide(const spia_mesh *mesh, const spia_adjacency *adj, const spia_options *options,
                                 int32_t levels, int32_t *vertex_count, int32_t *face_count, int32_t *edge_count,
                                 float *positions, int32_t *face_vertices, int32_t *edges, float *edge_creases,

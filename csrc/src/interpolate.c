@@ -249,3 +249,23 @@ spia_result spia_subdivide(const spia_mesh *mesh, const spia_options *options, i
     return subdivide_dispatch(mesh, options, levels, &nv, &nf, &ne, positions, face_vertices, edges, edge_creases,
                               vertex_creases, status);
 }
+
+/* ---- sharpness ------------------------------------------------------------ */
+
+spia_result spia_sharpness(const spia_mesh *mesh, const spia_options *options, int32_t flags, int32_t *crease_count,
+                           int32_t *crease_pairs, float *crease_sharpness, float *vertex_sharpness,
+                           spia_status *status) {
+    if (!crease_count) return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "crease_count must not be NULL");
+    if (flags & ~SPIA_SHARPNESS_NO_TWO_EDGE_RULE)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "unknown sharpness flags 0x%x", (unsigned)flags);
+    spia_options opt;
+    spia_result r = spia__resolve_options(options, &opt, status);
+    if (r != SPIA_OK) return r;
+    if ((r = spia_mesh_validate(mesh, status)) != SPIA_OK) return r;
+    spia_adjacency adj;
+    if ((r = spia__adjacency_build(mesh, &adj, status)) != SPIA_OK) return r;
+    r = spia__osd_sharpness(mesh, &adj, &opt, !(flags & SPIA_SHARPNESS_NO_TWO_EDGE_RULE), crease_count, crease_pairs,
+                            crease_sharpness, vertex_sharpness, status);
+    spia__adjacency_free(&adj);
+    return r;
+}

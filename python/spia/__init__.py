@@ -44,7 +44,7 @@ __all__ = [
     "Mesh", "Report", "Stencils", "PiaError", "PiaCancelled",
     "available", "load_error", "library_path", "platform_tag", "version", "available_memory", "opensubdiv_version_number", "validate", "limit_stencils", "solve", "interpolate", "refine",
     "subdivide", "flat_positions", "fit", "fit_detail", "detail_samples", "detail_memory_estimate", "check_detail_memory", "DetailResult", "Scan",
-    "usd_text", "write_usd",
+    "usd_text", "write_usd", "sharpness",
     "SCHEMES", "BOUNDARY_SMOOTH", "BOUNDARY_RULES", "METHODS", "SOLVE_FLAGS",
 ]
 
@@ -332,6 +332,8 @@ def _declare(lib):
        _f32p, _i32p, _i32p, _f32p, _f32p, ctypes.POINTER(_Status))
     fn("spia_flat_positions", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(_Options), _f32p,
        ctypes.POINTER(_Status))
+    fn("spia_sharpness", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(_Options), ctypes.c_int32, _i32p,
+       _i32p, _f32p, _f32p, ctypes.POINTER(_Status))
     fn("spia_interpolate", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(_Options), _f32p,
        ctypes.POINTER(_Report), ctypes.POINTER(_Status))
     fn("spia_surface_stencils_create", ctypes.c_int, ctypes.POINTER(_Mesh), ctypes.POINTER(_Options),
@@ -913,62 +915,44 @@ def _usd_cage(mesh, cage):
     return points
 
 
-def _usd_sharpness(mesh, blender_rules, use_creases, two_edge_rule=True):
+def sharpness(mesh, scheme="CATMULL_CLARK", use_creases=True, two_edge_rule=True):
+    """The sharpness the library hands OpenSubdiv for ``mesh``: ``(pairs (K, 2)
+    int32, crease sharpness (K,) float32, vertex sharpness (N,) float32)``.
+
+    Creases c in [0, 1] become c*c*10 (float32); face edges below 1e-6 are
+    left out and an edge listed more than once takes its largest; pairs are
+    each creased face edge's (smaller, larger) vertex index, sorted.  With
+    Catmull-Clark, Blender's rules: the ends of edges in no face are
+    infinitely sharp (10) and, with ``two_edge_rule``, a vertex with exactly
+    two face edges gets the smaller of their sharpnesses added to its own,
+    capped at 10."""
+    lib = _library()
+    opts, _keep = _options(scheme=scheme, use_creases=use_creases)
+    cm = mesh._c()
+    status = _Status()
+    flags = 0 if two_edge_rule else 1
+    count = ctypes.c_int32(0)
+    code = lib.spia_sharpness(ctypes.byref(cm), ctypes.byref(opts), flags, ctypes.byref(count), None, None, None,
+                              ctypes.byref(status))
+    if code < 0:
+        _raise(code, status)
+    pairs = np.zeros((count.value, 2), np.int32)
+    creases = np.zeros(count.value, np.float32)
+    vertices = np.zeros(mesh.vertex_count, np.float32)
+    code = lib.spia_sharpness(ctypes.byref(cm), ctypes.byref(opts), flags, ctypes.byref(count),
+                              _ptr(pairs, ctypes.c_int32), _ptr(creases, ctypes.c_float),
+                              _ptr(vertices, ctypes.c_float), ctypes.byref(status))
+    if code < 0:
+        _raise(code, status)
+    return pairs, creases, vertices
+
+
+def _usd_sharpness(mesh, scheme, use_creases, two_edge_rule=True):
     """(crease pairs (K, 2), their sharpness (K,), corner vertices (C,), their
-    sharpness (C,)), float32 sharpness as the library gives OpenSubdiv.
-
-    Creases c in [0, 1] become sharpness c*c*10 (float32); face edges below
-    1e-6 are left out, an edge listed more than once takes its largest.
-    With blender_rules (Catmull-Clark, as Blender's modifier builds it): the
-    end points of edges that are in no face (loose edges) are infinitely
-    sharp, and (two_edge_rule) a vertex with exactly two face edges gets the
-    smaller of their sharpnesses added to its own, capped at 10."""
-    n = mesh.vertex_count
-    sizes = mesh.face_sizes.astype(np.int64)
-    fv = mesh.face_vertices.astype(np.int64)
-    starts = np.cumsum(sizes) - sizes
-    following = np.arange(1, len(fv) + 1, dtype=np.int64)
-    following[starts + sizes - 1] = starts
-    a, b = fv, fv[following]
-    keys = np.unique(np.minimum(a, b) * n + np.maximum(a, b))  # the face edges, sorted
-    low, high = keys // n, keys % n
-    used = np.zeros(n, bool)
-    used[fv] = True
-    ten = np.float32(10.0)
-
-    edge_sharpness = np.zeros(len(keys), np.float32)
-    loose_ends = np.zeros(n, bool)
-    if mesh.edges is not None and len(mesh.edges):
-        e = mesh.edges.astype(np.int64)
-        listed = np.minimum(e[:, 0], e[:, 1]) * n + np.maximum(e[:, 0], e[:, 1])
-        where = np.minimum(np.searchsorted(keys, listed), len(keys) - 1)
-        in_face = keys[where] == listed
-        if blender_rules:
-            loose_ends[e[~in_face].ravel()] = True
-            loose_ends &= used
-        if use_creases and mesh.edge_creases is not None:
-            c = mesh.edge_creases[in_face]
-            np.maximum.at(edge_sharpness, where[in_face], c * c * ten)
-            edge_sharpness[edge_sharpness < np.float32(1e-6)] = 0
-
-    vertex_sharpness = np.zeros(n, np.float32)
-    if use_creases and mesh.vertex_creases is not None:
-        c = mesh.vertex_creases
-        vertex_sharpness = c * c * ten
-    if blender_rules and two_edge_rule:
-        valence = np.bincount(low, minlength=n) + np.bincount(high, minlength=n)
-        smaller = np.full(n, np.inf, np.float32)
-        np.minimum.at(smaller, low, edge_sharpness)
-        np.minimum.at(smaller, high, edge_sharpness)
-        two = valence == 2
-        vertex_sharpness[two] = np.minimum(vertex_sharpness[two] + smaller[two], ten)
-    if blender_rules:
-        vertex_sharpness[loose_ends] = _USD_SHARPNESS_INFINITE
-    vertex_sharpness[~used] = 0
-    creased = edge_sharpness > 0
-    corners = np.flatnonzero(vertex_sharpness > 0)
-    return (np.stack([low[creased], high[creased]], axis=1), edge_sharpness[creased],
-            corners, vertex_sharpness[corners])
+    sharpness (C,)): the library's own (:func:`sharpness`)."""
+    pairs, creases, vertices = sharpness(mesh, scheme=scheme, use_creases=use_creases, two_edge_rule=two_edge_rule)
+    corners = np.flatnonzero(vertices > 0)
+    return pairs, creases, corners, vertices[corners]
 
 
 def _usd_loose_points(mesh, points):
@@ -1063,7 +1047,8 @@ def usd_text(mesh, cage=None, *, scheme="CATMULL_CLARK", boundary_smooth="ALL", 
     if scheme == "CATMULL_CLARK":
         points = _usd_loose_points(mesh, points)
     pairs, edge_sharpness, corners, corner_sharpness = _usd_sharpness(
-        mesh, blender_rules=scheme == "CATMULL_CLARK", use_creases=bool(use_creases), two_edge_rule=bool(two_edge_rule))
+        mesh, scheme="CATMULL_CLARK" if scheme == "CATMULL_CLARK" else "LOOP", use_creases=bool(use_creases),
+        two_edge_rule=bool(two_edge_rule))
 
     out = ["#usda 1.0\n(\n",
            '    defaultPrim = "%s"\n' % name,

@@ -255,6 +255,23 @@ int main(void) {
         }
     }
 
+    /* spia_sharpness: a count pointer, known flags, a valid mesh; then a
+     * count of the creased edges alone, with the arrays NULL. */
+    {
+        spia_mesh gm = tmesh_view(&g);
+        int32_t count = -1;
+        CHECK(spia_sharpness(&gm, NULL, 0, NULL, NULL, NULL, NULL, &st) == SPIA_ERROR_INVALID_ARGUMENT,
+              "sharpness without a count: %s", st.message);
+        CHECK(spia_sharpness(&gm, NULL, 6, &count, NULL, NULL, NULL, &st) == SPIA_ERROR_INVALID_ARGUMENT &&
+                  strstr(st.message, "flags"),
+              "sharpness with unknown flags: %s", st.message);
+        CHECK(spia_sharpness(NULL, NULL, 0, &count, NULL, NULL, NULL, &st) == SPIA_ERROR_INVALID_ARGUMENT,
+              "sharpness of no mesh: %s", st.message);
+        CHECK(spia_sharpness(&gm, NULL, SPIA_SHARPNESS_NO_TWO_EDGE_RULE, &count, NULL, NULL, NULL, &st) == SPIA_OK &&
+                  count == 0,
+              "sharpness of an uncreased mesh: %d (%s)", (int)count, st.message);
+    }
+
     /* Every code has a distinct name. */
     for (int c = -11; c <= 2; ++c)
         for (int d = c + 1; d <= 2; ++d)

@@ -489,3 +489,27 @@ def test_bad_mesh_as_the_library_says(native, make, code):
 def test_exported_names(native):
     assert {"usd_text", "write_usd"} <= set(native.__all__)
     assert "write_usd" in native.__doc__
+
+
+def test_the_library_gives_the_sharpness_the_file_carries(native):
+    """spia.sharpness, the one source of the file's sharpness: the same
+    values as the independent reading above, pairs sorted, the two-edge
+    rule switched by its flag, Loop without Blender's rules."""
+    points = np.array([(x, y, 0) for y in range(3) for x in range(3)], np.float32)
+    faces = [(0, 1, 4, 3), (1, 2, 5, 4), (3, 4, 7, 6), (4, 5, 8, 7)]
+    edges = [(1, 0), (3, 0), (8, 5), (8, 7), (1, 2), (4, 5)]
+    vertex_creases = np.zeros(9, np.float32)
+    vertex_creases[0] = 0.1
+    mesh = native.Mesh.from_faces(points, faces, edges=edges, edge_creases=[0.5, 0.3, 1.0, 1.0, 0.0, 0.4],
+                                  vertex_creases=vertex_creases)
+    pairs, creases, vertices = native.sharpness(mesh)
+    assert pairs.tolist() == [[0, 1], [0, 3], [4, 5], [5, 8], [7, 8]]
+    sq = lambda c: np.float32(c) * np.float32(c) * TEN  # noqa: E731
+    np.testing.assert_array_equal(creases, [sq(0.5), sq(0.3), sq(0.4), TEN, TEN])
+    assert vertices[0] == sq(0.1) + sq(0.3) and vertices[8] == TEN and vertices[4] == 0
+    _, _, plain = native.sharpness(mesh, two_edge_rule=False)
+    assert plain[0] == sq(0.1) and plain[8] == 0
+    _, attributes = the_mesh(native.usd_text(mesh))
+    crease, corner = written_sharpness(attributes)
+    assert corner == {int(v): vertices[v] for v in np.flatnonzero(vertices)}
+    assert native.sharpness(mesh, scheme="LOOP")[2][8] == 0  # no two-edge rule for Loop
