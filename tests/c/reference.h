@@ -104,17 +104,51 @@ static std::vector<bool> off_nonmanifold_creases(int n, int nf, const int *sizes
 // osd_version: spia_options.opensubdiv_version.  With per_edge > 0: the
 // rows of the samples inside the faces instead (spia_surface_stencils_create's
 // layout), from the factory at every ptex face.
-static Rows reference_rows(const tmesh &m, int quality, bool preserve_corners, bool use_creases, int osd_version = 0,
-                           int per_edge = 0) {
-    std::vector<int> used(m.nv, -1), back;
+// The vertices faces use, renumbered densely in order (used: mesh ->
+// reference numbering, -1 for the others; back: the inverse), and the
+// faces in that numbering.
+static void renumber_used(const tmesh &m, std::vector<int> &used, std::vector<int> &back, std::vector<int> &fv) {
+    used.assign((size_t)m.nv, -1);
+    back.clear();
     for (int64_t c = 0; c < m.nfv; ++c) used[m.fv[c]] = 1;
     for (int v = 0; v < m.nv; ++v)
         if (used[v] > 0) {
             used[v] = (int)back.size();
             back.push_back(v);
         }
-    std::vector<int> fv(m.fv, m.fv + m.nfv);
+    fv.assign(m.fv, m.fv + m.nfv);
     for (int &v : fv) v = used[v];
+}
+
+// OpenSubdiv's refiner of m's faces (fv in reference numbering, n
+// vertices) with these creases and corners, as the library sets it up.
+static Far::TopologyRefiner *refiner_of(const tmesh &m, int n, const std::vector<int> &fv,
+                                        const std::vector<int> &pairs, const std::vector<float> &pair_w,
+                                        const std::vector<int> &corners, const std::vector<float> &corner_w,
+                                        bool preserve_corners, Sdc::SchemeType scheme) {
+    Far::TopologyDescriptor d;
+    d.numVertices = n;
+    d.numFaces = m.nf;
+    d.numVertsPerFace = m.sizes;
+    d.vertIndicesPerFace = fv.data();
+    d.numCreases = (int)pair_w.size();
+    d.creaseVertexIndexPairs = pairs.data();
+    d.creaseWeights = pair_w.data();
+    d.numCorners = (int)corner_w.size();
+    d.cornerVertexIndices = corners.data();
+    d.cornerWeights = corner_w.data();
+    Sdc::Options sdc;
+    sdc.SetVtxBoundaryInterpolation(preserve_corners ? Sdc::Options::VTX_BOUNDARY_EDGE_AND_CORNER
+                                                     : Sdc::Options::VTX_BOUNDARY_EDGE_ONLY);
+    sdc.SetCreasingMethod(Sdc::Options::CREASE_UNIFORM);
+    typedef Far::TopologyRefinerFactory<Far::TopologyDescriptor> F;
+    return F::Create(d, F::Options(scheme, sdc));
+}
+
+static Rows reference_rows(const tmesh &m, int quality, bool preserve_corners, bool use_creases, int osd_version = 0,
+                           int per_edge = 0) {
+    std::vector<int> used, back, fv;
+    renumber_used(m, used, back, fv);
     std::set<std::pair<int, int>> face_edges;
     std::vector<std::set<int>> neighbours(back.size());
     int64_t c = 0;
@@ -183,23 +217,8 @@ static Rows reference_rows(const tmesh &m, int quality, bool preserve_corners, b
             }
         }
     }
-    Far::TopologyDescriptor d;
-    d.numVertices = (int)back.size();
-    d.numFaces = m.nf;
-    d.numVertsPerFace = m.sizes;
-    d.vertIndicesPerFace = fv.data();
-    d.numCreases = (int)pair_w.size();
-    d.creaseVertexIndexPairs = pairs.data();
-    d.creaseWeights = pair_w.data();
-    d.numCorners = (int)corner_w.size();
-    d.cornerVertexIndices = corners.data();
-    d.cornerWeights = corner_w.data();
-    Sdc::Options sdc;
-    sdc.SetVtxBoundaryInterpolation(preserve_corners ? Sdc::Options::VTX_BOUNDARY_EDGE_AND_CORNER
-                                                     : Sdc::Options::VTX_BOUNDARY_EDGE_ONLY);
-    sdc.SetCreasingMethod(Sdc::Options::CREASE_UNIFORM);
-    typedef Far::TopologyRefinerFactory<Far::TopologyDescriptor> F;
-    std::unique_ptr<Far::TopologyRefiner> r(F::Create(d, F::Options(Sdc::SCHEME_CATMARK, sdc)));
+    std::unique_ptr<Far::TopologyRefiner> r(
+        refiner_of(m, (int)back.size(), fv, pairs, pair_w, corners, corner_w, preserve_corners, Sdc::SCHEME_CATMARK));
     Far::TopologyRefiner::AdaptiveOptions ao(quality);
     ao.useInfSharpPatch = true;
     r->RefineAdaptive(ao);
@@ -301,15 +320,8 @@ struct LoopStencil {
 
 static bool loop_uniform_rows(const tmesh &m, bool preserve_corners, bool use_creases, int64_t max_faces, Rows &rows) {
     rows.clear();
-    std::vector<int> used(m.nv, -1), back;
-    for (int64_t c = 0; c < m.nfv; ++c) used[m.fv[c]] = 1;
-    for (int v = 0; v < m.nv; ++v)
-        if (used[v] > 0) {
-            used[v] = (int)back.size();
-            back.push_back(v);
-        }
-    std::vector<int> fv(m.fv, m.fv + m.nfv);
-    for (int &v : fv) v = used[v];
+    std::vector<int> used, back, fv;
+    renumber_used(m, used, back, fv);
     std::set<std::pair<int, int>> face_edges;
     for (int f = 0, c = 0; f < m.nf; c += m.sizes[f++])
         for (int k = 0; k < m.sizes[f]; ++k) {
@@ -345,23 +357,8 @@ static bool loop_uniform_rows(const tmesh &m, bool preserve_corners, bool use_cr
     int64_t faces = m.nf;
     for (int l = 0; l < levels; ++l) faces *= 4;
     if (faces > max_faces) return false;
-    Far::TopologyDescriptor d;
-    d.numVertices = (int)back.size();
-    d.numFaces = m.nf;
-    d.numVertsPerFace = m.sizes;
-    d.vertIndicesPerFace = fv.data();
-    d.numCreases = (int)pair_w.size();
-    d.creaseVertexIndexPairs = pairs.data();
-    d.creaseWeights = pair_w.data();
-    d.numCorners = (int)corner_w.size();
-    d.cornerVertexIndices = corners.data();
-    d.cornerWeights = corner_w.data();
-    Sdc::Options sdc;
-    sdc.SetVtxBoundaryInterpolation(preserve_corners ? Sdc::Options::VTX_BOUNDARY_EDGE_AND_CORNER
-                                                     : Sdc::Options::VTX_BOUNDARY_EDGE_ONLY);
-    sdc.SetCreasingMethod(Sdc::Options::CREASE_UNIFORM);
-    typedef Far::TopologyRefinerFactory<Far::TopologyDescriptor> F;
-    std::unique_ptr<Far::TopologyRefiner> r(F::Create(d, F::Options(Sdc::SCHEME_LOOP, sdc)));
+    std::unique_ptr<Far::TopologyRefiner> r(
+        refiner_of(m, (int)back.size(), fv, pairs, pair_w, corners, corner_w, preserve_corners, Sdc::SCHEME_LOOP));
     if (!r) return false;
     Far::TopologyRefiner::UniformOptions uniform(levels);
     uniform.fullTopologyInLastLevel = true;
