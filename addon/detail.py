@@ -9,8 +9,7 @@ Subdivision Surface modifier with Use Limit Surface off, on a copy of the
 cage, gives the finest level's topology in Blender's order with each vertex
 at its control position, which is the library's subdivided cage
 (native.subdivide) in another order; each of Blender's vertices is matched
-to the library's vertex at the same place (both sorted on their rounded
-coordinates; a closest-point search for the few that leaves apart).  Then a Multires modifier is
+to the library's vertex at the same place.  Then a Multires modifier is
 subdivided to the same level and reshaped (Blender's Reshape, from a copy
 of its finest level with the fitted positions).
 
@@ -87,79 +86,25 @@ def _subsurf_topology(obj, levels, settings, context):
         bpy.data.objects.remove(copy)
 
 
-def _same_place(blender_points, positions, scale):
-    """For each of Blender's points, the library's vertex at the same place,
-    found by sorting both on their coordinates rounded to a grid of
-    MATCH_TOLERANCE / 4 of the diagonal (one int64 key a point: 21 bits an
-    axis, enough for the 400,000 cells a diagonal spans), or -1 where
-    rounding does not pair it with exactly one vertex (a coordinate next to
-    a grid line, or two vertices in one cell)."""
-    order = np.full(len(blender_points), -1, np.int64)
-    if not len(positions) or not len(blender_points):
-        return order
-    step = scale * MATCH_TOLERANCE / 4.0
-    origin = positions.min(axis=0)
-    bits = 21
-
-    def keys(points):
-        cells = np.floor((points - origin) / step)
-        inside = np.all((cells >= 0) & (cells < (1 << bits)), axis=1)
-        cells = np.where(inside[:, None], cells, 0).astype(np.int64)
-        key = (cells[:, 0] << (2 * bits)) | (cells[:, 1] << bits) | cells[:, 2]
-        return np.where(inside, key, -1)
-    ours, theirs = keys(positions), keys(blender_points)
-    sort = np.argsort(ours)
-    ours_sorted = ours[sort]
-    unique = np.ones(len(ours_sorted), bool)
-    same = ours_sorted[1:] == ours_sorted[:-1]
-    unique[1:] &= ~same
-    unique[:-1] &= ~same
-    # (searched in sorted order: as fast as a sort, where queries in
-    # Blender's order miss the cache five times as long)
-    theirs_sort = np.argsort(theirs)
-    at = np.empty(len(theirs), np.int64)
-    at[theirs_sort] = np.searchsorted(ours_sorted, theirs[theirs_sort])
-    at = np.minimum(at, len(ours_sorted) - 1)
-    found = (theirs >= 0) & (ours_sorted[at] == theirs) & unique[at]
-    order[found] = sort[at[found]]
-    # Two of Blender's points in one cell would take one vertex twice.
-    taken = order[found]
-    if len(np.unique(taken)) != len(taken):
-        values, counts = np.unique(taken, return_counts=True)
-        order[np.isin(order, values[counts > 1])] = -1
-    return order
-
-
 def match_order(blender_points, faces_mesh, diagonal):
     """For each of Blender's vertices, the library's vertex at the same
-    place: by sorting both on their rounded coordinates (_same_place), and
-    for the few that leaves, the closest face of the library's mesh (a
-    native.Mesh of its subdivided cage, by the library's closest-point
-    search) and its closest corner; where that corner is not at the same
-    place (a face of a folded cage passing nearer), a search over every
-    vertex.  Raises RuntimeError where a vertex has no match within
-    MATCH_TOLERANCE or two share one."""
+    place: the closest face of the library's mesh (a native.Mesh of its
+    subdivided cage, by the library's closest-point search) and its closest
+    corner; where that corner is not at the same place (a face of a folded
+    cage passing nearer), a search over every vertex.  Raises RuntimeError
+    where a vertex has no match within MATCH_TOLERANCE or two share one."""
     scale = max(diagonal, 1e-30)
-    blender_points = np.asarray(blender_points, np.float64)
-    positions = np.asarray(faces_mesh.positions, np.float64)
-    order = _same_place(blender_points, positions, scale)
-    rest = np.flatnonzero(order < 0)
-    gap = np.zeros(len(order))
-    if len(rest):
-        gap[order >= 0] = np.linalg.norm(positions[order[order >= 0]] - blender_points[order >= 0], axis=1) / scale
-        scan = native.Scan(faces_mesh)
-        faces = scan.closest_points(blender_points[rest].astype(np.float32))[3]
-        starts = np.concatenate(([0], np.cumsum(faces_mesh.face_sizes)[:-1]))
-        corners = faces_mesh.face_vertices[starts[faces][:, None] + np.arange(4)[None, :]]
-        gaps = np.linalg.norm(positions[corners] - blender_points[rest][:, None, :], axis=2)
-        pick = np.argmin(gaps, axis=1)
-        order[rest] = corners[np.arange(len(corners)), pick]
-        gap[rest] = gaps[np.arange(len(corners)), pick] / scale
-    else:
-        gap = np.linalg.norm(positions[order] - blender_points, axis=1) / scale
+    scan = native.Scan(faces_mesh)
+    faces = scan.closest_points(blender_points)[3]
+    starts = np.concatenate(([0], np.cumsum(faces_mesh.face_sizes)[:-1]))
+    corners = faces_mesh.face_vertices[starts[faces][:, None] + np.arange(4)[None, :]]
+    gaps = np.linalg.norm(faces_mesh.positions[corners] - blender_points[:, None, :], axis=2)
+    pick = np.argmin(gaps, axis=1)
+    order = corners[np.arange(len(corners)), pick]
+    gap = gaps[np.arange(len(corners)), pick] / scale
     astray = np.flatnonzero(gap > MATCH_TOLERANCE)
     for j in astray[:MAX_SEARCHED]:
-        distances = np.linalg.norm(positions - blender_points[j], axis=1)
+        distances = np.linalg.norm(faces_mesh.positions - blender_points[j], axis=1)
         order[j] = int(np.argmin(distances))
         gap[j] = distances[order[j]] / scale
     # Where Blender's rules for a non-manifold vertex differ from the
@@ -172,12 +117,12 @@ def match_order(blender_points, faces_mesh, diagonal):
     first[by_gap[keep]] = True
     left = np.flatnonzero(~first)
     if len(left):
-        free = np.setdiff1d(np.arange(len(positions)), order[first])
+        free = np.setdiff1d(np.arange(len(faces_mesh.positions)), order[first])
         if len(left) > MAX_SEARCHED or len(free) != len(left):
             raise RuntimeError("Blender's Multires levels do not match the library's subdivision (%d of %d "
                                "vertices apart); the detail levels were not made" % (len(left), len(order)))
         for j in left:
-            distances = np.linalg.norm(positions[free] - blender_points[j], axis=1)
+            distances = np.linalg.norm(faces_mesh.positions[free] - blender_points[j], axis=1)
             k = int(np.argmin(distances))
             order[j], gap[j] = free[k], distances[k] / scale
             free = np.delete(free, k)
