@@ -8,6 +8,8 @@ edges of sharpness 4.9 to 9.8) run in child processes limited to 2 GB of
 address space, as `ulimit -v` limits a shell: Loop (both boundary rules),
 Catmull-Clark at qualities 1 to 10 and Doo-Sabin each finish within 2 s and
 300 MB, and a refinement too deep for the limit is refused at once."""
+import re
+
 import pytest
 
 from crease_cases import CREASES, MESHES, creased_mesh, run_limited
@@ -46,7 +48,11 @@ def test_a_refinement_beyond_the_address_space_is_refused_before_it_allocates():
     assert out["killed"] is None, out["stderr"]
     refused, done = out["calls"]
     assert refused["outcome"] == "refused" and refused["code"] == "OUT_OF_MEMORY", refused
-    assert "refining 8 levels" in refused["message"] and "at most 6 levels fit" in refused["message"], refused
+    # (6 levels, 5.2M triangles, need about 1.5 GB: they fit in what the
+    # interpreter leaves of 2 GB, unless its own address space grows past
+    # 0.5 GB)
+    assert "refining 8 levels" in refused["message"], refused
+    assert re.search(r"at most [56] levels fit", refused["message"]), refused
     assert "GB of memory available" in refused["message"], refused
     assert refused["seconds"] < 0.5, refused
     assert done["outcome"] == "done" and done["result"]["faces"] == 1280 * 16, done
