@@ -97,22 +97,24 @@ static spia_result resolve_fit(const spia_fit_options *in, spia_fit_options *out
 /* The check before a fit or a table of surface samples: samples_per_edge
  * (k) and the most that fits.  Without surface samples (Loop, Doo-Sabin)
  * a fit takes the limit points alone. */
+typedef struct samples_need {
+    const spia_mesh *m;
+    int surface;
+} samples_need;
+static double samples_bytes(const void *context, int32_t k) {
+    const samples_need *n = (const samples_need *)context;
+    const double samples = n->surface ? (double)spia_surface_sample_count(n->m, k) : (double)n->m->vertex_count;
+    return spia__table_bytes(n->m) + FIT_BYTES_PER_SAMPLE * samples;
+}
 static spia_result samples_memory(const spia_mesh *m, const spia_options *o, int32_t k, int surface,
                                   const char *work, spia_status *status) {
-    const int64_t budget = spia__memory_budget(o);
-    if (budget < 0) return SPIA_OK;
-    const double table = spia__table_bytes(m);
-    const double samples = surface ? (double)spia_surface_sample_count(m, k) : (double)m->vertex_count;
-    if (table + FIT_BYTES_PER_SAMPLE * samples <= (double)budget) return SPIA_OK;
-    int32_t fit = surface ? k : 0;
-    while (fit > 0 && table + FIT_BYTES_PER_SAMPLE * (double)spia_surface_sample_count(m, fit) > (double)budget) --fit;
-    char what[128], fits[64];
-    snprintf(what, sizeof what, "%s with %d samples per edge (%.0f samples)", work, (int)k, samples);
-    if (fit > 0)
-        snprintf(fits, sizeof fits, "at most %d samples per edge fit", (int)fit);
-    else
-        snprintf(fits, sizeof fits, "try a smaller cage");
-    return spia__memory_check(o, table + FIT_BYTES_PER_SAMPLE * samples, what, fits, status);
+    const samples_need context = {m, surface};
+    char what[128];
+    snprintf(what, sizeof what, "%s with %d samples per edge (%.0f samples)", work, (int)k,
+             surface ? (double)spia_surface_sample_count(m, k) : (double)m->vertex_count);
+    /* (without surface samples no number of them fits better) */
+    return spia__memory_check_setting(o, samples_bytes, &context, surface ? k : 0, what,
+                                      "at most %d samples per edge fit%.0s", "try a smaller cage", status);
 }
 
 spia_result spia_surface_stencils_create(const spia_mesh *mesh, const spia_options *options,

@@ -127,6 +127,14 @@ int64_t spia__memory_budget(const spia_options *o);
 spia_result spia__memory_check(const spia_options *o, double need, const char *what, const char *fits,
                                spia_status *status);
 double spia__table_bytes(const spia_mesh *m);
+/* The check for a setting that makes the need grow (levels, samples per
+ * edge): need(context, k) in bytes at setting k; where `setting` does not
+ * fit, the message says the largest that does, fits_format taking it and
+ * an "s" for the plural ("at most %d level%s fit"), or nothing_fits. */
+typedef double (*spia__need_fn)(const void *context, int32_t setting);
+spia_result spia__memory_check_setting(const spia_options *o, spia__need_fn need, const void *context, int32_t setting,
+                                       const char *what, const char *fits_format, const char *nothing_fits,
+                                       spia_status *status);
 
 /* Monotonic wall clock in seconds. */
 double spia__now(void);

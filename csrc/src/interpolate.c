@@ -129,23 +129,22 @@ static double refine_bytes_per_face(spia_scheme scheme) {
 }
 
 /* The check before a refinement: the levels asked for, and the most that fit. */
+typedef struct refine_need {
+    const spia_mesh *m;
+    spia_scheme scheme;
+} refine_need;
+static double refine_bytes(const void *context, int32_t levels) {
+    const refine_need *r = (const refine_need *)context;
+    return refine_bytes_per_face(r->scheme) * refined_faces(r->m, r->scheme, levels);
+}
 static spia_result refine_memory(const spia_mesh *m, const spia_options *o, int32_t levels, const char *work,
                                  spia_status *status) {
-    const int64_t budget = spia__memory_budget(o);
-    if (budget < 0) return SPIA_OK;
-    const double per_face = refine_bytes_per_face(o->scheme);
-    const double need = per_face * refined_faces(m, o->scheme, levels);
-    if (need <= (double)budget) return SPIA_OK;
-    int32_t fit = levels;
-    while (fit > 0 && per_face * refined_faces(m, o->scheme, fit) > (double)budget) --fit;
-    char what[128], fits[64];
+    const refine_need context = {m, o->scheme};
+    char what[128];
     snprintf(what, sizeof what, "%s %d level%s (%.0f faces)", work, (int)levels, levels == 1 ? "" : "s",
              refined_faces(m, o->scheme, levels));
-    if (fit > 0)
-        snprintf(fits, sizeof fits, "at most %d level%s fit", (int)fit, fit == 1 ? "" : "s");
-    else
-        snprintf(fits, sizeof fits, "not one level fits");
-    return spia__memory_check(o, need, what, fits, status);
+    return spia__memory_check_setting(o, refine_bytes, &context, levels, what, "at most %d level%s fit",
+                                      "not one level fits", status);
 }
 
 static spia_result refine_dispatch(const spia_mesh *mesh, const spia_options *options, int32_t levels,

@@ -132,3 +132,20 @@ double spia__table_bytes(const spia_mesh *m) {
     }
     return 4.0 * 12.0 * weights + 200.0 * (double)m->vertex_count;
 }
+
+spia_result spia__memory_check_setting(const spia_options *o, spia__need_fn need, const void *context, int32_t setting,
+                                       const char *what, const char *fits_format, const char *nothing_fits,
+                                       spia_status *status) {
+    const int64_t budget = spia__memory_budget(o);
+    if (budget < 0) return SPIA_OK;
+    const double bytes = need(context, setting);
+    if (bytes <= (double)budget) return SPIA_OK;
+    int32_t fit = setting;
+    while (fit > 0 && need(context, fit) > (double)budget) --fit;
+    char fits[96];
+    if (fit > 0)
+        snprintf(fits, sizeof fits, fits_format, (int)fit, fit == 1 ? "" : "s");
+    else
+        snprintf(fits, sizeof fits, "%s", nothing_fits);
+    return spia__memory_check(o, bytes, what, fits, status);
+}
