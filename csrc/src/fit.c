@@ -37,6 +37,7 @@
  *
  * VERTICES: the cage's limit points go to their closest scan points and the
  * cage is solved to interpolate them. */
+#include "bvh.h"
 #include "internal.h"
 #include "threads.h"
 
@@ -1063,10 +1064,14 @@ typedef struct fit_buffers {
      * their positions, its quads and their sizes, all 4), and the scan
      * vertices measured, in double. */
     sample_blocks grid;
-    int32_t grid_vertices, grid_faces;
+    int32_t grid_vertices, grid_faces, grid_side;
+    /* A grid of more than SCAN_GRID_FACES quads is searched through its
+     * ptex faces' corners (coarse_pos, grid_quads one quad a ptex face),
+     * then within the closest one's own quads (scan_face). */
+    int coarse;
     spia_scan *surface; /* the grid as a scan: built by the first measure, moved by later ones */
-    float *grid_pos, *scan_d, *scan_scratch;
-    int32_t *grid_sizes, *grid_quads, *scan_vertex, *scan_near;
+    float *grid_pos, *coarse_pos, *scan_d, *scan_scratch;
+    int32_t *grid_sizes, *grid_quads, *scan_vertex, *scan_near, *scan_face;
     double *scan_pts;
     int64_t scan_count;
     /* The scan's pull (SPIA_FIT_SCAN_PULL): the samples as the quads of
@@ -1089,7 +1094,7 @@ static void buffers_free(fit_buffers *b) {
     blocks_free(&b->grid);
     spia_scan_free(b->surface);
     free(b->grid_pos), free(b->scan_d), free(b->scan_scratch), free(b->grid_sizes);
-    free(b->grid_quads), free(b->scan_vertex);
+    free(b->grid_quads), free(b->scan_vertex), free(b->coarse_pos), free(b->scan_face);
     free(b->scan_near);
     free(b->scan_pts);
     spia_scan_free(b->pull_surface);
@@ -1373,7 +1378,11 @@ static spia_result scan_points_prepare(const spia_scan *scan, fit_buffers *b) {
  * blocks like the samples' (each ptex face's own, so the points along its
  * edges repeat those of its neighbour: the grid is not welded, which a
  * distance does not see), made face by face between progress calls; each
- * cage's grid is then one pass over them. */
+ * cage's grid is then one pass over them.  A grid still larger than
+ * SCAN_GRID_FACES (a detail level's millions of faces) gets no hierarchy
+ * of its own: the search runs over the ptex faces' corners, one quad a
+ * face, and each scan vertex then takes its distance to the grid's quads
+ * of the face it found (coarse_measure). */
 #define SCAN_GRID_FACES (2 << 20)
 static spia_result scan_side_prepare(const spia_mesh *cage, const spia_adjacency *adj, const spia_options *opt,
                                      int32_t per_edge, const spia_scan *scan, fit_buffers *b, fit_clock *clock,
@@ -1392,17 +1401,21 @@ static spia_result scan_side_prepare(const spia_mesh *cage, const spia_adjacency
     spia_result r = blocks_build(cage, adj, opt, side, 1, &b->grid, clock, status);
     if (r != SPIA_OK) return r == SPIA_ERROR_CANCELLED ? scan_side_cancelled(status) : r;
     if (clock_tick(clock)) return scan_side_cancelled(status);
-    const int32_t gv = (int32_t)(ptex * side * side), gf = (int32_t)(ptex << (2 * levels));
-    b->grid_vertices = gv, b->grid_faces = gf;
+    const int32_t gv = (int32_t)(ptex * side * side);
+    b->coarse = (ptex << (2 * levels)) > SCAN_GRID_FACES;
+    /* The quads searched: the grid's, or one a ptex face through its corners. */
+    const int32_t gf = (int32_t)(b->coarse ? ptex : ptex << (2 * levels));
+    const int32_t cells = b->coarse ? 1 : side - 1, row = b->coarse ? 2 : side;
+    b->grid_vertices = gv, b->grid_faces = gf, b->grid_side = side;
     b->grid_quads = malloc(sizeof(int32_t) * 4 * (size_t)gf);
     if (!b->grid_quads) return SPIA_ERROR_OUT_OF_MEMORY;
     {
         int32_t *q = b->grid_quads;
         for (int64_t g = 0; g < ptex; ++g)
-            for (int32_t j = 0; j + 1 < side; ++j)
-                for (int32_t i = 0; i + 1 < side; ++i) {
-                    const int32_t v = (int32_t)(g * side * side) + j * side + i;
-                    q[0] = v, q[1] = v + 1, q[2] = v + side + 1, q[3] = v + side;
+            for (int32_t j = 0; j < cells; ++j)
+                for (int32_t i = 0; i < cells; ++i) {
+                    const int32_t v = (int32_t)(g * row * row) + j * row + i;
+                    q[0] = v, q[1] = v + 1, q[2] = v + row + 1, q[3] = v + row;
                     q += 4;
                 }
     }
@@ -1410,7 +1423,47 @@ static spia_result scan_side_prepare(const spia_mesh *cage, const spia_adjacency
     b->grid_sizes = malloc(sizeof(int32_t) * (size_t)(gf > 0 ? gf : 1));
     if (!b->grid_pos || !b->grid_sizes) return SPIA_ERROR_OUT_OF_MEMORY;
     for (int32_t f = 0; f < gf; ++f) b->grid_sizes[f] = 4;
-    return scan_points_prepare(scan, b);
+    if (b->coarse) {
+        b->coarse_pos = malloc(sizeof(float) * 12 * (size_t)(ptex > 0 ? ptex : 1));
+        if (!b->coarse_pos) return SPIA_ERROR_OUT_OF_MEMORY;
+    }
+    const spia_result r2 = scan_points_prepare(scan, b);
+    if (r2 != SPIA_OK || !b->coarse) return r2;
+    b->scan_face = malloc(sizeof(int32_t) * (size_t)(b->scan_count + 1));
+    return b->scan_face ? SPIA_OK : SPIA_ERROR_OUT_OF_MEMORY;
+}
+
+/* The corners of each ptex face's grid, the coarse search's quads. */
+static void coarse_corners(fit_buffers *b) {
+    const int64_t side = b->grid_side, per = side * side;
+    const int64_t corner[4] = {0, side - 1, per - side, per - 1}; /* in grid_quads' order: (0,0) (1,0) (0,1) (1,1) */
+    for (int64_t g = 0; g < b->grid_faces; ++g)
+        for (int c = 0; c < 4; ++c)
+            memcpy(b->coarse_pos + 12 * g + 3 * c, b->grid_pos + 3 * (g * per + corner[c]), sizeof(float) * 3);
+}
+
+/* Each scan vertex's distance to the grid's quads of the ptex face its
+ * coarse search found (each quad as the scan triangulates it, across its
+ * first corner). */
+static void coarse_range(void *context, int64_t begin, int64_t end, int thread) {
+    (void)thread;
+    const fit_buffers *b = (const fit_buffers *)context;
+    const int32_t side = b->grid_side;
+    for (int64_t k = begin; k < end; ++k) {
+        const int64_t g = b->scan_face[k];
+        if (g < 0) continue;
+        const float *P = b->grid_pos + 3 * g * side * side;
+        double best = INFINITY, bary[3], point[3];
+        for (int32_t j = 0; j + 1 < side; ++j)
+            for (int32_t i = 0; i + 1 < side; ++i) {
+                const float *q0 = P + 3 * (j * side + i), *q1 = q0 + 3, *q3 = q0 + 3 * side, *q2 = q3 + 3;
+                const double d0 = spia__triangle_distance2(b->scan_pts + 3 * k, q0, q1, q2, bary, point);
+                const double d1 = spia__triangle_distance2(b->scan_pts + 3 * k, q0, q2, q3, bary, point);
+                if (d0 < best) best = d0;
+                if (d1 < best) best = d1;
+            }
+        b->scan_d[k] = (float)sqrt(best);
+    }
 }
 
 /* The distances of the scan vertices to the limit surface of cage V.  The
@@ -1422,27 +1475,30 @@ static spia_result scan_side_measure(fit_buffers *b, const double *V, double cut
                                      int warm, fit_clock *clock, spia_fit_distances *out, spia_status *status) {
     spia_result r;
     blocks_apply_float(&b->grid, V, b->grid_pos);
+    if (b->coarse) coarse_corners(b);
     if (clock_tick(clock)) return scan_side_cancelled(status);
     if (!warm)
         for (int64_t k = 0; k < b->scan_count; ++k) b->scan_near[k] = -1;
+    float *searched = b->coarse ? b->coarse_pos : b->grid_pos;
     if (!b->surface) {
         spia_mesh view;
         memset(&view, 0, sizeof view);
-        view.vertex_count = b->grid_vertices;
-        view.positions = b->grid_pos;
+        view.vertex_count = b->coarse ? 4 * b->grid_faces : b->grid_vertices;
+        view.positions = searched;
         view.face_count = b->grid_faces;
         view.face_sizes = b->grid_sizes;
         view.face_vertices = b->grid_quads;
         r = spia__scan_create_bare(&view, clock->fn ? clock_scan_tick : NULL, clock, &b->surface, status);
         if (r != SPIA_OK) return r == SPIA_ERROR_CANCELLED ? scan_side_cancelled(status) : r;
-    } else if ((r = spia__scan_move(b->surface, b->grid_pos)) != SPIA_OK) {
+    } else if ((r = spia__scan_move(b->surface, searched)) != SPIA_OK) {
         return spia__fail(status, r, -1, "%s moving the surface's grid to the fitted cage",
                           r == SPIA_ERROR_NONFINITE ? "non-finite positions" : "out of memory");
     }
     const int cancelled = clock_tick(clock) ||
                           closest_in_chunks(b->surface, b->scan_count, b->scan_pts, b->scan_near, NULL, NULL,
-                                            b->scan_d, NULL, NULL, threads, clock);
+                                            b->scan_d, b->scan_face, NULL, threads, clock);
     if (cancelled) return scan_side_cancelled(status);
+    if (b->coarse) spia__parallel_for(threads, b->scan_count, 4096, coarse_range, b);
     *out = distance_stats(b->scan_d, b->scan_count, cutoff_abs, diagonal, b->scan_scratch);
     return SPIA_OK;
 }

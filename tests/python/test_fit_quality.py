@@ -116,6 +116,38 @@ def test_scan_distances_over_every_kind_of_face(native):
     assert rep.scan_before.mean * unit == pytest.approx(0.5 * delta, rel=0.1)
 
 
+def _plane_grid(native, n, height):
+    """An n x n quad grid over the unit square, z = height(x, y)."""
+    x, y = np.meshgrid(np.linspace(0.0, 1.0, n + 1), np.linspace(0.0, 1.0, n + 1))
+    pos = np.stack([x.ravel(), y.ravel(), height(x, y).ravel()], axis=1).astype(np.float32)
+    v = (np.arange(n)[None, :] + (n + 1) * np.arange(n)[:, None]).ravel()
+    faces = np.stack([v, v + 1, v + n + 2, v + n + 1], axis=1).astype(np.int32)
+    return native.Mesh(pos, np.full(n * n, 4, np.int32), faces.ravel())
+
+
+def test_scan_distances_of_a_cage_of_half_a_million_faces(native):
+    """A cage whose measuring grid has more than 2M quads (533k faces at 1
+    sample per edge: a 3 x 3 grid of limit points each) is searched through
+    its faces' corners and then within the face found.  Its scan distances
+    are those of an exact search over the same grid: the cage subdivided
+    once, whose vertices' limit points are that grid, as a scan."""
+    cage = _plane_grid(native, 730, lambda x, y: 0.0 * x)
+    scan_mesh = _plane_grid(native, 60, lambda x, y: 0.02 * np.sin(7.0 * x) * np.cos(5.0 * y))
+    scan = native.Scan(scan_mesh)
+    out, rep = native.fit(cage, scan, samples_per_edge=1, max_rounds=1, solver_iterations=2)
+    fine = native.subdivide(native.Mesh(out, cage.face_sizes, cage.face_vertices), 1)
+    grid = native.limit_stencils(fine).limit_points(fine.positions).astype(np.float32)
+    exact = native.Scan(native.Mesh(grid, fine.face_sizes, fine.face_vertices))
+    pts = scan_mesh.positions
+    d = np.linalg.norm(exact.closest_points(pts)[0] - pts, axis=1) / scan.diagonal
+    assert rep.scan_point_count == len(pts)
+    # the fits' quads are split along the other diagonal here and there:
+    # differences of a few thousandths of the largest distance
+    assert np.abs(rep.scan_distances - d).max() < 0.01 * d.max()
+    assert rep.scan_after.mean == pytest.approx(d.mean(), rel=1e-3)
+    assert rep.scan_after.max == pytest.approx(d.max(), rel=1e-2)
+
+
 def _folded_share(native, cage, V, scan_mesh, scan, k=8, cutoff=0.02):
     """Share of the samples within the cut-off (a k x k grid per ptex face)
     whose normal, from differences on the grid, faces away from the normal
