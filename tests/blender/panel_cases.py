@@ -103,7 +103,7 @@ CASES = (
     Case("loop", loop_mesh,
          [PRESETS, BUTTON, prop("scheme"), prop("levels"), prop("target_object"), prop("live")],
          ["Subdivision", "Loop", "Solver", "Cleanup"], "Make Interpolating Cage"),
-    Case("fit", finished_fit,
+    Case("fitted", finished_fit,
          [PRESETS, BUTTON, prop("use_modifier_settings"), prop("scheme"), prop("target_object"), prop("live"),
           LIVE_SWITCH],
          ["Solver", "Scan Fit", "Cleanup", "Last Result"], "Fit Cage to 'Scan'", status='CHECKMARK'),
