@@ -61,33 +61,21 @@ def draw_subdivision(layout, settings):
     layout.prop(settings, "use_creases")
 
 
-def loop_applies(settings, has_target, from_modifier):
-    return settings.scheme == 'LOOP'
-
-
-def draw_loop(layout, settings):
-    layout.prop(settings, "boundary_rule")
-    layout.prop(settings, "triangulate")
-    layout.prop(settings, "staged")
-
-
-def doo_sabin_applies(settings, has_target, from_modifier):
-    return settings.scheme == 'DOO_SABIN'
-
-
-def draw_doo_sabin(layout, settings):
-    layout.prop(settings, "shape_parameter")
-    layout.prop(settings, "shape_attribute")
+def scheme_is(scheme):
+    """When a group applies: while the settings' scheme is `scheme`."""
+    return lambda settings, has_target, from_modifier: settings.scheme == scheme
 
 
 def always(settings, has_target, from_modifier):
     return True
 
 
-def draw_solver(layout, settings):
-    layout.prop(settings, "method")
-    layout.prop(settings, "tolerance")
-    layout.prop(settings, "max_iterations")
+def drawing(*names):
+    """A group's body that draws these properties, one a row."""
+    def draw(layout, settings):
+        for name in names:
+            layout.prop(settings, name)
+    return draw
 
 
 def scan_fit_applies(settings, has_target, from_modifier):
@@ -132,9 +120,9 @@ class Group:
 # In the order the panel and the redo panel show them.
 GROUPS = (
     Group("subdivision", "Subdivision", subdivision_applies, draw_subdivision),
-    Group("loop", "Loop", loop_applies, draw_loop),
-    Group("doo_sabin", "Doo-Sabin", doo_sabin_applies, draw_doo_sabin),
-    Group("solver", "Solver", always, draw_solver),
+    Group("loop", "Loop", scheme_is('LOOP'), drawing("boundary_rule", "triangulate", "staged")),
+    Group("doo_sabin", "Doo-Sabin", scheme_is('DOO_SABIN'), drawing("shape_parameter", "shape_attribute")),
+    Group("solver", "Solver", always, drawing("method", "tolerance", "max_iterations")),
     Group("scan_fit", "Scan Fit", scan_fit_applies, draw_scan_fit),
     Group("cleanup", "Cleanup", always, draw_cleanup, draw_cleanup_header),
 )
