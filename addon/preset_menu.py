@@ -22,6 +22,7 @@ from .properties import PRESET_NAMES
 PRESET_SUBDIR = "subdiv_pia"
 BUILTIN_PRESETS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "presets")
 PRESET_EXTENSION = ".py"
+SETTINGS_PATH = "bpy.context.scene.subdiv_pia"
 
 
 def reset_settings(settings):
@@ -89,8 +90,10 @@ class OBJECT_OT_subdiv_pia_preset_add(AddPresetBase, bpy.types.Operator):
     bl_label = "Add Interpolating Cage Preset"
     preset_menu = SUBDIV_PIA_PT_presets.__name__
     preset_subdir = PRESET_SUBDIR
-    preset_defines = ["settings = bpy.context.scene.subdiv_pia"]
-    preset_values = ["settings." + name for name in PRESET_NAMES]
+    # Full paths, no preset_defines: where Blender runs on Python 3.13 with a
+    # presets.py that exec()s the defines inside a function (Debian's 4.3.2),
+    # the names they define are not seen by the eval() of the values.
+    preset_values = [SETTINGS_PATH + "." + name for name in PRESET_NAMES]
 
 
 classes = (SUBDIV_PIA_PT_presets, OBJECT_OT_subdiv_pia_preset_add)

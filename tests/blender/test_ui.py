@@ -270,9 +270,10 @@ def preset_values(path):
     """name: value of every `settings.name = value` line of a preset file."""
     values = {}
     for line in open(path, encoding="utf-8"):
-        if line.startswith("settings.") and "=" in line:
-            name, value = line[len("settings."):].split("=", 1)
-            values[name.strip()] = eval(value.strip())
+        for prefix in ("settings.", preset_menu.SETTINGS_PATH + "."):
+            if line.startswith(prefix) and "=" in line:
+                name, value = line[len(prefix):].split("=", 1)
+                values[name.strip()] = eval(value.strip())
     return values
 
 
@@ -337,6 +338,7 @@ def test_the_preset_menu_lists_builtins_and_the_users_own(tmp_path, monkeypatch)
     assert bpy.ops.object.subdiv_pia_preset_add(name="My Loop") == {'FINISHED'}
     written = folder / "My_Loop.py"
     assert written.is_file()
+    assert set(preset_values(str(written))) == set(PRESET_NAMES), "a preset of yours holds every setting"
     panel_cases.clear()
     apply_preset(str(written))
     assert (settings.scheme, settings.levels) == ('LOOP', 3) and settings.tolerance == pytest.approx(1e-3)
