@@ -133,9 +133,11 @@ BLENDER_SUITE_FLAGS ?=
 test-blender: package
 	$(SUDO) $(PYTHON) tools/blenders.py test $(BLENDER_SUITE_FLAGS) $(EXTENSION) --legacy $(LEGACY)
 
-# The operator in Blender's window (Xvfb, software OpenGL), in the Blenders
-# that have one (Debian's, on the machine and in the chroot): it runs modal,
-# the window stays live, Esc cancels and leaves nothing.
+# The operator and the panel in Blender's window (Xvfb, software OpenGL), in
+# the Blenders that have one (Debian's, on the machine and in the chroot):
+# the operator runs modal, the window stays live, Esc cancels and leaves
+# nothing; the panel draws without an error, shows at its top what applies
+# and no more, and is photographed (build/window/<Blender>/panel_*.png).
 test-window: package
 	$(SUDO) $(PYTHON) tools/blenders.py window $(LEGACY)
 

@@ -37,12 +37,12 @@ except ImportError:  # outside Blender: only `native` is usable
     bpy = None
 
 if bpy is not None:
-    from . import properties, operators, ui, live
+    from . import properties, operators, preset_menu, ui, live
     from .api import (interpolate, refresh_limit, find_limit_object,  # noqa: F401
                       settings_from_modifier, DEFAULT_SETTINGS)
     from .live import set_live, is_live  # noqa: F401
 
-    _modules = (properties, operators, ui, live)
+    _modules = (properties, operators, preset_menu, ui, live)
 
     def register():
         for module in _modules:

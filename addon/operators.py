@@ -5,7 +5,7 @@ import bpy
 
 from bpy.props import BoolProperty
 
-from . import api, live, native
+from . import api, live, native, sections
 from .properties import SETTING_NAMES, settings_annotations
 
 LIVE_DESCRIPTION = ("Live: while on, every change of the source mesh's vertex positions solves the "
@@ -37,14 +37,6 @@ class _Progress:
             self.wm = None
 
 
-def draw_cleanup_settings(layout, settings):
-    """Cleanup and its merge distance (greyed out while cleanup is off)."""
-    layout.prop(settings, "cleanup")
-    row = layout.row()
-    row.enabled = settings.cleanup
-    row.prop(settings, "cleanup_distance")
-
-
 def result_line(new_obj, report, settings):
     """The operator's report: the interpolation's or fit's line, and what the cleanup did."""
     if isinstance(report, native.FitReport):
@@ -58,66 +50,14 @@ def result_line(new_obj, report, settings):
                              "; " + not_painted if not_painted else "")
 
 
-def draw_settings(layout, settings, from_modifier=False):
-    """The subdivision settings, shared by the redo panel and the Modifiers-tab panel.
-
-    Settings that do not apply are greyed out: boundary rule and triangulate
-    unless Loop; shape parameter and attribute unless Doo-Sabin; render
-    levels and quality for Loop and Doo-Sabin (no modifier); Boundary Smooth
-    for Loop with Hoppe's rules and for Doo-Sabin (closed meshes only), and
-    creases for Doo-Sabin.
-    """
-    loop = settings.scheme == 'LOOP'
-    doo_sabin = settings.scheme == 'DOO_SABIN'
-    no_modifier = loop or doo_sabin
-    layout.prop(settings, "scheme")
-    col = layout.column()
-    col.enabled = loop
-    col.prop(settings, "boundary_rule")
-    col.prop(settings, "triangulate")
-    col.prop(settings, "staged")
-    col = layout.column()
-    col.enabled = doo_sabin
-    col.prop(settings, "shape_parameter")
-    col.prop(settings, "shape_attribute")
-    col = layout.column()
-    col.enabled = not from_modifier
-    sub = col.column(align=True)
-    sub.prop(settings, "levels")
-    row = sub.row()
-    row.enabled = not no_modifier
-    row.prop(settings, "render_levels")
-    row = col.row()
-    row.enabled = not no_modifier
-    row.prop(settings, "quality")
-    row = col.row()
-    row.enabled = not (doo_sabin or (loop and settings.boundary_rule == 'HOPPE'))
-    row.prop(settings, "boundary_smooth")
-    row = col.row()
-    row.enabled = not doo_sabin
-    row.prop(settings, "use_creases")
-
+# Why the last run on an object (by name) made nothing, for the panel's
+# status line; kept while Blender runs, forgotten when a run on it succeeds.
+LAST_FAILURES = {}
 
 # native.fit's default number of least-squares rounds: the progress bar's length.
 FIT_ROUNDS = 20
 # How often (seconds) the running operator looks at the library's thread.
 MODAL_INTERVAL = 0.05
-
-
-def draw_fit_settings(layout, settings, has_target):
-    """Fit, cut-off, smoothing and samples, greyed out without a target;
-    the target itself is drawn by the caller (a name in the operator, a
-    pointer in the panel)."""
-    col = layout.column()
-    col.enabled = has_target
-    col.prop(settings, "fit")
-    col.prop(settings, "fit_cutoff")
-    sub = col.column()
-    sub.enabled = settings.fit == 'SURFACE'
-    sub.prop(settings, "fit_smoothing")
-    sub.prop(settings, "fit_samples")
-    sub.prop(settings, "fit_detail_levels")
-    col.prop(settings, "fit_paint_scan")
 
 
 class _ModalJob:
@@ -240,18 +180,23 @@ class OBJECT_OT_subdiv_pia_interpolate(_ModalJob, bpy.types.Operator):
                 pass
 
     def _failed(self, context, source, error):
-        """Reports why nothing was made; {'CANCELLED'}."""
+        """Reports why nothing was made, and keeps it for the panel; {'CANCELLED'}."""
         self._back_to_edit(context)
+        name = getattr(source, "name", source)
         if isinstance(error, native.PiaError):  # the library's words, with the object named
-            self.report({'ERROR'}, "'%s': %s" % (getattr(source, "name", source), error))
+            message = "'%s': %s" % (name, error)
         elif isinstance(error, (ValueError, RuntimeError)):  # already in the user's terms
-            self.report({'ERROR'}, str(error))
+            message = str(error)
         else:
-            self.report({'ERROR'}, "'%s': %s: %s" % (getattr(source, "name", source), type(error).__name__, error))
+            message = "'%s': %s: %s" % (name, type(error).__name__, error)
+        if isinstance(name, str) and name:
+            LAST_FAILURES[name] = message
+        self.report({'ERROR'}, message)
         return {'CANCELLED'}
 
     def _made(self, new_obj, report, settings):
         """Reports the new object; {'FINISHED'}."""
+        LAST_FAILURES.pop(getattr(self, "_source_name", None), None)
         fine = api.report_converged(report) and not new_obj.get("pia_fit_scan_not_painted")
         self.report({'INFO'} if fine else {'WARNING'}, result_line(new_obj, report, settings))
         return {'FINISHED'}
@@ -280,20 +225,16 @@ class OBJECT_OT_subdiv_pia_interpolate(_ModalJob, bpy.types.Operator):
         return self._made(*result, self._settings)
 
     def draw(self, context):
+        """The redo panel (F9), grouped as the Modifiers-tab panel: the top,
+        then each group of settings that applies under its label."""
         layout = self.layout
         layout.use_property_split = True
         layout.use_property_decorate = False
-        draw_settings(layout, self)
-        layout.separator()
-        layout.prop(self, "method")
-        layout.prop(self, "tolerance")
-        layout.prop(self, "max_iterations")
-        draw_cleanup_settings(layout, self)
-        layout.separator()
+        layout.prop(self, "scheme")
+        sections.draw_levels(layout, self)
         layout.prop_search(self, "target", context.blend_data, "objects")
-        draw_fit_settings(layout, self, bool(self.target))
-        layout.separator()
         layout.prop(self, "live")
+        sections.draw_groups_inline(layout, self, bool(self.target))
 
     def execute(self, context):
         if not native.available():  # say what is needed; touch nothing
@@ -420,10 +361,6 @@ class OBJECT_OT_subdiv_pia_live(bpy.types.Operator):
         else:
             self.report({'INFO'}, "%s: Live off" % cage.name)
         return {'FINISHED'}
-
-
-def menu_func(self, context):
-    self.layout.operator(OBJECT_OT_subdiv_pia_interpolate.bl_idname, icon='MOD_SUBSURF')
 
 
 classes = (OBJECT_OT_subdiv_pia_interpolate, OBJECT_OT_subdiv_pia_refresh_limit, OBJECT_OT_subdiv_pia_live)

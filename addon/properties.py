@@ -62,7 +62,7 @@ def settings_annotations():
                                description="Subdivision scheme whose limit surface must interpolate"),
         "boundary_rule": EnumProperty(name="Boundary Rule", items=BOUNDARY_RULE_ITEMS,
                                       default=d["boundary_rule"],
-                                      description="Loop boundary rules (Loop scheme only)"),
+                                      description="Which boundary rules Loop subdivision follows (Loop scheme only)"),
         "triangulate": BoolProperty(name="Triangulate", default=d["triangulate"],
                                     description="Loop scheme: make the cage from a copy of the mesh "
                                                 "with quads and n-gons split into triangles (Beauty "
@@ -72,26 +72,30 @@ def settings_annotations():
                                            "interior with the boundary fixed, as the open-mesh paper "
                                            "does (same cage; the report gives both stages' iterations)"),
         "levels": IntProperty(name="Levels Viewport", default=d["levels"], min=0, max=11, soft_max=6,
-                              description="Viewport levels of the new Subdivision Surface modifier "
-                                          "(Loop, Doo-Sabin: subdivision levels of the limit "
-                                          "surface object)"),
+                              description="Subdivision steps the new object's Subdivision Surface "
+                                          "modifier shows in the viewport (Loop, Doo-Sabin: steps "
+                                          "of the limit surface object); the cage itself does not "
+                                          "depend on it"),
         "render_levels": IntProperty(name="Render", default=d["render_levels"], min=0, max=11, soft_max=6,
-                                     description="Render levels of the new Subdivision Surface modifier"),
+                                     description="Subdivision steps the new object's Subdivision Surface "
+                                                 "modifier renders with (Catmull-Clark)"),
         "quality": IntProperty(name="Quality", default=d["quality"], min=1, max=10,
-                               description="Limit surface accuracy, as the modifier's Quality "
-                                           "(the cage is made for exactly this value)"),
+                               description="Limit surface accuracy, 1 to 10, as the modifier's "
+                                           "Quality (the cage is made for exactly this value)"),
         "boundary_smooth": EnumProperty(name="Boundary Smooth", items=BOUNDARY_SMOOTH_ITEMS,
                                         default=d["boundary_smooth"],
-                                        description="Boundary rule, as the modifier's"),
+                                        description="How open boundaries and their corners are smoothed, as the "
+                                                    "modifier's Boundary Smooth"),
         "use_creases": BoolProperty(name="Use Creases", default=d["use_creases"],
-                                    description="Use edge and vertex creases, as the modifier"),
+                                    description="Use the mesh's edge and vertex creases, as the modifier's "
+                                                "Use Creases (not Doo-Sabin)"),
         # No hard range: a value outside (0, 1) is refused with a message
         # rather than silently clamped.
         "shape_parameter": FloatProperty(name="Shape Parameter", default=d["shape_parameter"],
                                          soft_min=0.01, soft_max=0.99, precision=3, step=1,
                                          description="Shape parameter of every face in the first "
-                                                     "subdivision step: close to 1 hugs the mesh, "
-                                                     "lower relaxes it"),
+                                                     "subdivision step, between 0 and 1 (no unit): "
+                                                     "close to 1 hugs the mesh, lower relaxes it"),
         "shape_attribute": StringProperty(name="Shape Attribute", default=d["shape_attribute"],
                                           description="Name of a float Face attribute: where the "
                                                       "mesh has it, its per-face values win over "
@@ -109,14 +113,15 @@ def settings_annotations():
                                                       "to the bounding-box diagonal, are merged "
                                                       "(faces thinner than it are removed)"),
         "method": EnumProperty(name="Method", items=METHOD_ITEMS, default=d["method"],
-                               description="Iterative solver"),
+                               description="Iterative solver that finds the cage"),
         "tolerance": FloatProperty(name="Tolerance", default=d["tolerance"], min=1e-12, max=1.0,
                                    precision=8, step=0.0001,
                                    description="Stop when every vertex is this close to the surface, "
                                                "relative to the bounding-box diagonal"),
         "max_iterations": IntProperty(name="Max Iterations", default=d["max_iterations"],
                                       min=1, max=1000000,
-                                      description="Stop after this many iterations"),
+                                      description="Stop after this many solver iterations at "
+                                                  "the latest (the cage is still made, with a warning)"),
         # An operator cannot hold a pointer to an object: the target is named.
         "target": StringProperty(name="Target",
                                  default=d["target"],
@@ -131,8 +136,9 @@ def settings_annotations():
                                                 "not pull: holes and areas the scan misses"),
         "fit_smoothing": FloatProperty(name="Smoothing", default=d["fit_smoothing"], min=0.0, max=1.0,
                                        precision=7, step=0.0001,
-                                       description="Surface fit: fairness weight; larger keeps the "
-                                                   "cage smoother and farther from the target"),
+                                       description="Surface fit: fairness weight (no unit, against "
+                                                   "the distance term); larger keeps the cage "
+                                                   "smoother and farther from the target"),
         "fit_samples": IntProperty(name="Samples per Edge", default=d["fit_samples"], min=1, max=64,
                                    soft_max=8,
                                    description="Surface fit: samples per face edge (the square "
@@ -158,6 +164,9 @@ SETTING_NAMES = tuple(settings_annotations())
 # The panel picks the target with a pointer (target_object) and passes its name.
 SCENE_SETTING_NAMES = tuple(name for name in SETTING_NAMES if name != "target")
 
+# What a preset holds: every panel setting but the target, an object of one file.
+PRESET_NAMES = SCENE_SETTING_NAMES + ("use_modifier_settings", "live")
+
 
 def _is_mesh(_settings, obj):
     return obj.type == 'MESH'
@@ -175,9 +184,10 @@ class SubdivPiaSettings(bpy.types.PropertyGroup):
             name="Live", default=False,
             description="Make the new cage live: it follows every later change of the source mesh"),
         use_modifier_settings=BoolProperty(
-            name="From Modifier", default=True,
-            description="Take levels, quality, boundary and creases from the active object's "
-                        "Subdivision Surface modifier when it has one"),
+            name="Use Modifier Settings", default=True,
+            description="Take levels, render levels, quality, boundary smooth and creases from the "
+                        "active object's Subdivision Surface modifier (the last one) instead of the "
+                        "panel's"),
     )
 
 

@@ -3,7 +3,7 @@
 the command line.  Writes nothing."""
 
 from . import cleanup
-from .objects import UNREACHABLE_GROUP, cleanup_stats
+from .objects import REACHABLE_MAX_ERROR, UNREACHABLE_COUNT, UNREACHABLE_GROUP, cleanup_stats
 
 FIT_NAMES = {'SURFACE': "Surface", 'VERTICES': "Vertices"}
 
@@ -86,3 +86,33 @@ def format_report(report):
     elif not report.converged and report.message:
         line += " (%s)" % report.message
     return line
+
+
+def status_line(obj):
+    """(icon, text): the result of the run that made obj, in one line for
+    the panel (converged and how close, or what went wrong); None when obj
+    was not made by a run."""
+    status = obj.get("pia_status")
+    if status is None:
+        return None
+    fine = status == 'CONVERGED'
+    if "pia_fit" in obj:
+        text = "Fitted to '%s': mean distance %.2g of the scan's diagonal (was %.2g)" % (
+            obj.get("pia_fit_target", "?"), float(obj.get("pia_fit_mean_after", 0.0)),
+            float(obj.get("pia_fit_mean_before", 0.0)))
+        if not fine:
+            text = "%s: %s" % (status.capitalize().replace("_", " "), text)
+        if obj.get("pia_fit_scan_not_painted"):
+            fine, text = False, obj["pia_fit_scan_not_painted"]
+        return ('CHECKMARK' if fine else 'ERROR'), text
+    unreachable = int(obj.get(UNREACHABLE_COUNT, 0))
+    if unreachable:
+        return 'ERROR', "%d %s cannot be reached; max error on the others %.2g of the diagonal" % (
+            unreachable, "vertex" if unreachable == 1 else "vertices", float(obj.get(REACHABLE_MAX_ERROR, 0.0)))
+    error = float(obj.get("pia_max_error", 0.0))
+    iterations = int(obj.get("pia_iterations", 0))
+    if fine:
+        return 'CHECKMARK', "Converged in %d iterations: max error %.2g of the diagonal" % (iterations, error)
+    if status == 'STAGNATED':
+        return 'ERROR', "Stagnated at max error %.2g of the diagonal: tolerance not reached" % error
+    return 'ERROR', "Stopped after %d iterations at max error %.2g: tolerance not reached" % (iterations, error)

@@ -1,10 +1,12 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Screenshot of the add-on's panel in Blender's interface (for the README).
+"""Screenshot of the add-on's panel in Blender's interface beside the
+result in the 3D viewport (the manual's pictures of the panel alone come
+from tests/window/panel.py, which checks what they show).
 
     xvfb-run -a -s "-screen 0 1600x1500x24" blender --factory-startup \
-        --python bench/screenshot_panel.py -- docs/panel.png
+        --python bench/screenshot_panel.py -- out/panel.png
     xvfb-run -a -s "-screen 0 1600x1500x24" blender --factory-startup \
-        --python bench/screenshot_panel.py -- --live          (docs/panel_live.png)
+        --python bench/screenshot_panel.py -- --live          (out/panel_live.png)
 
 Imports tests/data/mushroom.obj, gives it a Subdivision Surface modifier
 (levels 2, limit surface), runs the add-on's operator, and with the new
@@ -23,12 +25,13 @@ import tempfile
 import traceback
 
 import bpy
-import numpy as np
 from mathutils import Euler, Vector
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, "build", "addon"))
 import subdiv_pia  # noqa: E402
+sys.path.insert(0, os.path.join(ROOT, "tests", "window"))
+from window import crop, edge_move, find_area, region  # noqa: E402,F401  (screenshot_fit.py uses them too)
 
 MESH = os.path.join(ROOT, "tests", "data", "mushroom.obj")
 PROPERTIES_WIDTH = 500   # pixels, Properties/Outliner column
@@ -48,7 +51,7 @@ LIVE = "--live" in script_args()
 def output_path():
     argv = [a for a in script_args() if not a.startswith("--")]
     default = "panel_live.png" if LIVE else "panel.png"
-    return os.path.abspath(argv[0] if argv else os.path.join(ROOT, "docs", default))
+    return os.path.abspath(argv[0] if argv else os.path.join(ROOT, "out", default))
 
 
 def setup_scene():
@@ -80,23 +83,6 @@ def setup_scene():
     source.hide_set(True)  # both occupy the same place; show the result
     new_obj.select_set(True)
     return new_obj
-
-
-def find_area(window, kind):
-    areas = [a for a in window.screen.areas if a.type == kind]
-    return max(areas, key=lambda a: a.width * a.height) if areas else None
-
-
-def region(area, kind='WINDOW'):
-    return next(r for r in area.regions if r.type == kind)
-
-
-def edge_move(window, area, x, y, delta):
-    """Drag the area edge at (x, y) by delta pixels (the operator's poll wants
-    no active region, i.e. the mouse on an edge, so it is put there first)."""
-    window.event_simulate('MOUSEMOVE', 'NOTHING', x=x, y=y)
-    with bpy.context.temp_override(window=window, screen=window.screen, area=area):
-        bpy.ops.screen.area_move(x=x, y=y, delta=delta)
 
 
 def arrange_steps(window):
@@ -143,26 +129,6 @@ def arrange_steps(window):
         a.tag_redraw()
 
 
-def crop(full_path, out_path, window):
-    props = find_area(window, 'PROPERTIES')
-    image = bpy.data.images.load(full_path)
-    w, h = image.size
-    px = np.empty(w * h * 4, np.float32)
-    image.pixels.foreach_get(px)
-    px = px.reshape(h, w, 4)  # rows bottom to top
-    x0 = max(props.x - CROP_VIEW_WIDTH, 0)
-    part = np.ascontiguousarray(px[:, x0:, :])
-    part[:, :, 3] = 1.0
-    out = bpy.data.images.new("crop", width=part.shape[1], height=part.shape[0], alpha=False)
-    out.pixels.foreach_set(part.reshape(-1))
-    settings = bpy.context.scene.render.image_settings
-    settings.file_format = 'PNG'
-    settings.color_mode = 'RGB'
-    settings.color_depth = '8'
-    settings.compression = 100
-    out.save_render(out_path)
-
-
 def main():
     if getattr(bpy.app, "module", False) or bpy.app.background:
         # The bpy module and background mode have no window to take a picture of.
@@ -201,7 +167,7 @@ def main():
         with bpy.context.temp_override(window=window, screen=window.screen,
                                        area=find_area(window, 'VIEW_3D')):
             bpy.ops.screen.screenshot(filepath=full_path)
-        crop(full_path, out_path, window)
+        crop(full_path, out_path, max(find_area(window, 'PROPERTIES').x - CROP_VIEW_WIDTH, 0))
         print("screenshot_panel: wrote", full_path, "and", out_path)
         bpy.ops.wm.quit_blender()
         return None

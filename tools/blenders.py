@@ -5,7 +5,7 @@ suite (tests/blender) run in each of them against the package.
 
     python3 tools/blenders.py list
     python3 tools/blenders.py test EXTENSION.zip [--legacy LEGACY.zip] [-j 2] [--only NAME ...] [-- PYTEST ARGS]
-    python3 tools/blenders.py window LEGACY.zip
+    python3 tools/blenders.py window LEGACY.zip|ADDON_FOLDER
 
 The Blenders:
 - Debian's `blender` on the machine (3.4.1 on Debian 12, 4.3.2 on 13);
@@ -24,9 +24,12 @@ that copy.  Prints a
 table of Blender (and how it was installed) against passed, failed,
 skipped, and exits 1 if any suite failed or did not run.
 
-`window` runs tests/window/modal_fit.py (the operator in Blender's window:
-modal, Esc cancels) with the package's add-on, under Xvfb, in the Blenders
-that have a window: Debian's two (the bpy module has none).
+`window` runs the window tests with the package's add-on (or the add-on in
+a folder, such as build/addon), under Xvfb, in the Blenders that have a
+window: Debian's two (the bpy module has none): tests/window/modal_fit.py
+(the operator in Blender's window: modal, Esc cancels) and
+tests/window/panel.py (the panel as Blender draws it, with screenshots under
+build/window/<Blender>/).
 """
 import argparse
 import concurrent.futures
@@ -52,8 +55,9 @@ FIRST_BPY = (4, 2)  # the first release with extensions; older bpy wheels are go
 # Python minor version each bpy release needs.
 PYTHON_OF_BPY = [((5, 1), "3.13"), ((4, 1), "3.11")]
 RUN_PY = "tests/blender/run.py"
-WINDOW_PY = "tests/window/modal_fit.py"
-WINDOW_ADDON = os.path.join(BUILD, "window", "addon")
+WINDOW_SCRIPTS = ("tests/window/modal_fit.py", "tests/window/panel.py")
+WINDOW = os.path.join(BUILD, "window")
+WINDOW_ADDON = os.path.join(WINDOW, "addon")
 XVFB_RUN = 'xvfb-run -a -s "-screen 0 1600x900x24"'
 
 
@@ -344,33 +348,40 @@ def test(package, jobs, only, extra, discard, legacy=None):
 
 
 def window(package):
-    """tests/window/modal_fit.py with the package's add-on, in a window under
-    Xvfb, in each Blender that has one; 0 when it passed in all of them."""
+    """The window tests with the package's add-on (a zip, or a folder holding
+    subdiv_pia), in a window under Xvfb, in each Blender that has one; 0
+    when they passed in all of them."""
     blenders, notes = discover()
-    shutil.rmtree(WINDOW_ADDON, ignore_errors=True)
-    os.makedirs(WINDOW_ADDON)
-    with zipfile.ZipFile(package) as z:
-        z.extractall(WINDOW_ADDON)
+    if os.path.isdir(package):
+        addon_folder = package
+    else:
+        shutil.rmtree(WINDOW_ADDON, ignore_errors=True)
+        os.makedirs(WINDOW_ADDON)
+        with zipfile.ZipFile(package) as z:
+            z.extractall(WINDOW_ADDON)
+        addon_folder = WINDOW_ADDON
     results = []
     for b in blenders:
         if b.prepare:
             continue  # the bpy module: no window
-        addon = WINDOW_ADDON
-        command = "%s blender --factory-startup --enable-event-simulate --python %s" % (XVFB_RUN, WINDOW_PY)
         if b.root:
             enter_chroot(b)
-            addon = "/src/" + os.path.relpath(WINDOW_ADDON, ROOT)
-            print("the window test in %s (%s)" % (b.name, b.how), flush=True)
-            code = debian.in_chroot(b.chroot_path, "cd /src && " + command, binds=[(ROOT, "/src")],
-                                    env={"SUBDIV_PIA_ADDON_DIR": addon}, check=False).returncode
-        else:
-            print("the window test in %s (%s)" % (b.name, b.how), flush=True)
-            code = subprocess.call(command, shell=True, cwd=ROOT,
-                                   env=dict(clean_environment(), SUBDIV_PIA_ADDON_DIR=addon))
-        results.append((b, code))
-    for b, code in results:
-        print("%s (%s): %s" % (b.name, b.how, "passed" if code == 0 else "FAILED (exit %s)" % code))
-    return 0 if results and all(code == 0 for _, code in results) else 1
+        inside = (lambda path: "/src/" + os.path.relpath(path, ROOT)) if b.root else (lambda path: path)  # noqa: E731
+        pictures = os.path.join(WINDOW, re.sub(r"[^A-Za-z0-9.]+", "-", b.name))
+        for script in WINDOW_SCRIPTS:
+            command = "%s blender --factory-startup --enable-event-simulate --python %s%s" % (
+                XVFB_RUN, script, " -- --screenshots %s" % inside(pictures) if script.endswith("panel.py") else "")
+            print("%s in %s (%s)" % (script, b.name, b.how), flush=True)
+            if b.root:
+                code = debian.in_chroot(b.chroot_path, "cd /src && " + command, binds=[(ROOT, "/src")],
+                                        env={"SUBDIV_PIA_ADDON_DIR": inside(addon_folder)}, check=False).returncode
+            else:
+                code = subprocess.call(command, shell=True, cwd=ROOT,
+                                       env=dict(clean_environment(), SUBDIV_PIA_ADDON_DIR=addon_folder))
+            results.append((b, script, code))
+    for b, script, code in results:
+        print("%s, %s (%s): %s" % (script, b.name, b.how, "passed" if code == 0 else "FAILED (exit %s)" % code))
+    return 0 if results and all(code == 0 for _, _, code in results) else 1
 
 
 def main(argv):
@@ -385,7 +396,7 @@ def main(argv):
     t.add_argument("--discard-venvs", action="store_true",
                    help="remove each bpy venv after its suite (default: keep them for the next run)")
     w = sub.add_parser("window")
-    w.add_argument("package")
+    w.add_argument("package", help="the legacy add-on zip, or a folder holding subdiv_pia (build/addon)")
     extra = argv[argv.index("--") + 1:] if "--" in argv else []
     args = parser.parse_args(argv[:argv.index("--")] if "--" in argv else argv)
     if args.command == "list":

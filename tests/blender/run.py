@@ -33,7 +33,7 @@ ROOT = os.path.dirname(os.path.dirname(HERE))
 IN_EXECUTABLE = "bpy" in sys.modules
 PACKAGE_NAME = "subdiv_pia"
 SUBMODULES = ("native", "cleanup", "settings", "mesh_io", "compute", "objects", "reports", "detail", "live", "steps", "jobs",
-              "api", "properties", "operators", "ui", "cli")
+              "api", "properties", "sections", "operators", "preset_menu", "ui", "cli")
 
 
 def _argv():

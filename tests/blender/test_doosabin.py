@@ -23,7 +23,6 @@ from subdiv_pia import api, native
 from conftest import (DATA, MATCH, assert_unchanged, diagonal, expect_error, import_obj, make_limit_cage,
                       positions, run_operator, snapshot, world)
 from test_api_cli import run_cli
-from test_ui import Recorder
 
 SETTING_KEYS = ("pia_scheme", "pia_levels", "pia_shape_parameter", "pia_shape_attribute",
                 "pia_status", "pia_method", "pia_iterations", "pia_max_error", "pia_tolerance")
@@ -321,52 +320,23 @@ def test_cli_doosabin_refuses_open_mesh(tmp_path):
     assert not os.path.exists(output)
 
 
-class EnabledRecorder(Recorder):
-    """Records each property with whether its layout (and its parents) is enabled."""
-
-    def __init__(self, log=None, parent=None):
-        super().__init__(log)
-        self.parent = parent
-
-    def _child(self, *args, **kwargs):
-        return EnabledRecorder(self.log, self)
-
-    column = row = box = _child
-
-    def active(self):
-        node = self
-        while node is not None:
-            if not node.enabled:
-                return False
-            node = node.parent
-        return True
-
-    def prop(self, data, name, **kwargs):
-        assert hasattr(data, name), name
-        self.log.append(("prop", name, self))
-
-
-def enabled_props(scheme):
-    from subdiv_pia import ui
+def drawn_props(scheme):
+    from test_ui import draw_panel
     bpy.context.scene.subdiv_pia.scheme = scheme
-    layout = EnabledRecorder()
-    panel = type("Panel", (), {"layout": layout})()
-    ui.DATA_PT_subdiv_pia.draw(panel, bpy.context)
-    return {entry[1]: entry[2].active() for entry in layout.log if entry[0] == "prop"}
+    return {name for kind, name in draw_panel() if kind == "prop"}
 
 
-def test_panel_greys_settings_by_scheme():
+def test_panel_shows_settings_by_scheme():
     source = shapes.cube()
-    ds = enabled_props('DOO_SABIN')
-    assert ds["shape_parameter"] and ds["shape_attribute"] and ds["levels"]
-    for name in ("boundary_smooth", "quality", "use_creases", "render_levels", "boundary_rule",
-                 "triangulate"):
-        assert not ds[name], name
-    cc = enabled_props('CATMULL_CLARK')
-    assert not cc["shape_parameter"] and not cc["shape_attribute"]
-    assert cc["boundary_smooth"] and cc["quality"] and cc["use_creases"]
-    loop = enabled_props('LOOP')
-    assert not loop["shape_parameter"] and loop["use_creases"]
+    ds = drawn_props('DOO_SABIN')
+    assert {"shape_parameter", "shape_attribute", "levels"} <= ds
+    for name in ("boundary_smooth", "quality", "use_creases", "render_levels", "boundary_rule", "triangulate"):
+        assert name not in ds, name
+    cc = drawn_props('CATMULL_CLARK')
+    assert "shape_parameter" not in cc and "shape_attribute" not in cc
+    assert {"boundary_smooth", "quality", "use_creases"} <= cc
+    loop = drawn_props('LOOP')
+    assert "shape_parameter" not in loop and "use_creases" in loop
     # The refresh button shows for a Doo-Sabin cage and its child.
     bpy.context.scene.subdiv_pia.scheme = 'DOO_SABIN'
     source.select_set(True)

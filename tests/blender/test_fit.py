@@ -622,10 +622,11 @@ def test_panel_passes_the_target():
     scan = fine_sphere(segments=32, rings=16)
     cage = quad_sphere(cuts=1)
     settings = bpy.context.scene.subdiv_pia
+    assert ("prop", "target_object") in draw_panel() and ("prop", "fit") not in draw_panel()
+    settings.target_object = scan
     log = draw_panel()
     for name in ("target_object", "fit", "fit_cutoff", "fit_smoothing", "fit_samples", "fit_paint_scan"):
         assert ("prop", name) in log, name
-    settings.target_object = scan
     # a one-cut cube around the sphere is farther from it than the default cut-off
     assert bpy.ops.object.subdiv_pia_interpolate(target=settings.target_object.name,
                                                  fit_cutoff=0.2) == {'FINISHED'}

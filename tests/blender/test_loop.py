@@ -328,6 +328,9 @@ def test_cli_loop_refuses_quads(tmp_path):
 def test_panel_shows_loop_settings_and_refresh_button():
     source = shapes.ico_sphere()
     log = draw_panel()
+    assert ("prop", "boundary_rule") not in log and ("prop", "triangulate") not in log  # Catmull-Clark
+    bpy.context.scene.subdiv_pia.scheme = 'LOOP'
+    log = draw_panel()
     assert ("prop", "boundary_rule") in log and ("prop", "triangulate") in log
     assert ("operator", "object.subdiv_pia_refresh_limit") not in log
     make_loop(source, levels=1)

@@ -146,6 +146,9 @@ def wheel_contents(platform):
     with zipfile.ZipFile(os.path.join(DIST, package.legacy_name(platform))) as zf:
         if data.get("spia/" + library_name) != zf.read("subdiv_pia/spia/" + library_name):
             problems.append("the legacy zip holds another library")
+        missing = sorted(set("subdiv_pia/" + n for n in addon_files()) - set(zf.namelist()))
+        if missing:
+            problems.append("the legacy zip lacks %s" % missing)
     record = [line.split(",") for line in data[dist_info + "/RECORD"].decode().splitlines()]
     listed = {r[0]: r for r in record}
     if sorted(listed) != sorted(names):
@@ -180,6 +183,15 @@ def wheel_contents(platform):
     return open(path, "rb").read()
 
 
+def addon_files():
+    """The add-on's files as a package holds them (relative to its folder):
+    its modules and its built-in presets (addon/presets/)."""
+    folder = os.path.join(ROOT, "addon")
+    return [os.path.relpath(os.path.join(d, n), folder).replace(os.sep, "/")
+            for d, dirs, files in os.walk(folder) if "__pycache__" not in d
+            for n in files if n.endswith(".py")]
+
+
 def extension(platform, wheel_bytes):
     path = os.path.join(DIST, package.extension_name(platform))
     problems = []
@@ -211,6 +223,9 @@ def extension(platform, wheel_bytes):
         problems.append("a binding outside the wheel")
     if "__init__.py" not in names or "native.py" not in names:
         problems.append("not the add-on: %s" % names)
+    missing = sorted(set(addon_files()) - set(names))
+    if missing:  # the add-on's modules, and its built-in presets
+        problems.append("the add-on's %s missing" % missing)
     python, tool, tags = package.blender_extension_tool()
     out = run([python, tool, "validate", "--valid-tags=" + tags, path])
     if out.returncode != 0:
