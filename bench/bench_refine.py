@@ -50,8 +50,9 @@ def octahedron_sphere(splits):
 
 
 def use(library):
-    """Makes native's functions call `library` (a loaded, declared CDLL)."""
-    native._lib = library
+    """Makes native's functions call `library` (a loaded, declared CDLL):
+    the loader's own state, which they read (spia/library.py)."""
+    native.library._lib = library
 
 
 def libraries(compare):

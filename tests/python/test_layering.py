@@ -1,7 +1,8 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""The add-on's modules import one another without circles, and the binding
-(python/spia, and addon/native.py that stands for it) imports no Blender
-module and nothing of the add-on's.
+"""The add-on's modules import one another without circles, and so do the
+binding's (python/spia), whose __init__ none of them imports; the binding
+(and addon/native.py that stands for it) imports no Blender module and
+nothing of the add-on's.
 
 Read from the sources with ast: nothing is imported, Blender is not needed.
 Imports inside functions count as much as those at the top of a module.
@@ -15,6 +16,7 @@ import pytest
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 ADDON = os.path.join(ROOT, "addon")
 BINDING = os.path.join(ROOT, "python", "spia")
+BINDING_PACKAGE = "spia"
 PACKAGE = "subdiv_pia"  # the add-on's name once installed (setup.py build, the packages)
 PACKAGE_MODULE = "__init__"
 BLENDER_MODULES = {"bpy", "bmesh", "mathutils", "bpy_extras", "bl_math", "gpu", "gpu_extras", "blf", "aud",
@@ -116,6 +118,22 @@ def test_addon_modules_import_one_another_without_circles():
     assert {"api", "live", "native"} <= set(graph)
     cycle = find_cycle(graph)
     assert cycle is None, "import circle in addon/: " + describe(cycle, graph)
+
+
+def test_binding_modules_import_one_another_without_circles():
+    graph = import_graph(BINDING, BINDING_PACKAGE)
+    assert {PACKAGE_MODULE, "library", "header", "mesh", "interpolation", "usd", "fitting"} <= set(graph)
+    cycle = find_cycle(graph)
+    assert cycle is None, "import circle in python/spia/: " + describe(cycle, graph)
+
+
+def test_the_binding_package_is_imported_by_none_of_its_modules():
+    # __init__ gathers the modules' names: a module that imported it would
+    # be imported before the names it needs were there.
+    graph = import_graph(BINDING, BINDING_PACKAGE)
+    users = sorted(m for m in graph if PACKAGE_MODULE in graph[m])
+    assert not users, "modules of python/spia import its __init__: %s" % users
+    assert set(graph) - {PACKAGE_MODULE} <= set(graph[PACKAGE_MODULE]), "modules __init__ does not gather"
 
 
 def test_the_facade_is_imported_by_no_module_it_names():
