@@ -23,9 +23,10 @@ import time
 
 import bpy
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(HERE)
-sys.path.insert(0, os.environ.get("SUBDIV_PIA_ADDON_DIR", os.path.join(ROOT, "build", "addon")))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from harness import OUT, ROOT, addon_on_path  # noqa: E402
+
+addon_on_path()
 import subdiv_pia  # noqa: E402
 from subdiv_pia import api  # noqa: E402
 
@@ -51,7 +52,7 @@ def argument(name, default, many=False):
 CAGE = int(argument("--cage", 50000))
 SCAN = argument("--scan", "dragon_s1t1")
 DELAYS = [float(d) for d in argument("--delays", ["0.5", "2", "4", "6"], many=True)]
-CACHE = os.path.join(ROOT, "out", "bench", "fit_scale", "blender-%d.%d" % bpy.app.version[:2])
+CACHE = os.path.join(OUT, "fit_scale", "blender-%d.%d" % bpy.app.version[:2])
 LIMIT = 120.0
 
 JOBS = []

@@ -37,14 +37,10 @@ import time
 import bpy
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(HERE)
-sys.path.insert(0, HERE)
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import detail_workflow  # noqa: E402
 import fit_cases  # noqa: E402
-from bench_fit import CASES, ensure_addon, finish, script_args  # noqa: E402
-
-OUT = os.path.join(ROOT, "out", "bench")
+from harness import DATA, FIT_CASES as CASES, OUT, ensure_addon, finish, script_args  # noqa: E402
 HEADER = ["| case | method | surface to scan mean / p95 / max | scan to surface mean / median / p95 / max "
           "| scan the start covers: mean | faces turned (where the start faced the scan / folds) | s |",
           "|---|---|---|---|---:|---:|---:|"]
@@ -104,8 +100,8 @@ def run_case(name, levels):
     scan_file, _faces, cage_file = CASES[name]
     bpy.ops.wm.read_homefile(use_empty=True)
     api = ensure_addon().api
-    scan = fit_cases.import_obj(os.path.join(ROOT, "tests", "data", scan_file), "Scan")
-    cage = fit_cases.import_obj(os.path.join(ROOT, "tests", "data", cage_file), "Cage")
+    scan = fit_cases.import_obj(os.path.join(DATA, scan_file), "Scan")
+    cage = fit_cases.import_obj(os.path.join(DATA, cage_file), "Cage")
     start_obj = plain_levels(cage, levels)
     start = detail_workflow.top_level_mesh(start_obj)
     facing = start_facing(start, scan)

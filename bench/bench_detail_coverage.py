@@ -47,7 +47,7 @@ def main():
     print("| case | surface to scan: all | over holes | the rest | scan to surface: all | uncovered | the rest | s |")
     print("|---|---|---:|---|---|---:|---|---:|")
     for name in args.cases:
-        scan_file, cage_file = CASES[name]
+        scan_file, _faces, cage_file = CASES[name]
         scan_mesh = load(scan_file)
         scan = spia.Scan(scan_mesh)
         cage = load(cage_file)

@@ -11,10 +11,10 @@ import sys
 import time
 
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(HERE)
-sys.path.insert(0, os.path.join(ROOT, "build", "addon"))
-sys.path.insert(0, HERE)
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from harness import ROOT, addon_on_path  # noqa: E402
+
+addon_on_path()
 from meshes import scan  # noqa: E402
 from subdiv_pia import native  # noqa: E402
 

@@ -27,51 +27,13 @@ import time
 import bpy
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(HERE)
-sys.path.insert(0, HERE)
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import fit_cases  # noqa: E402
+from harness import FIT_CASES as CASES, OUT, ROOT, ensure_addon, finish, script_args  # noqa: E402
 
-OUT = os.path.join(ROOT, "out", "bench")
 LEVELS = 3
 CUTOFF = 0.02
 SEED = 0
-
-# name: (scan in tests/data, QuadriFlow target faces, cage file in tests/data)
-CASES = {
-    "bunny": ("bun_zipper.obj", 3000, "bun_zipper_quadriflow_cage.obj"),
-    "dragon": ("dragon_res2.obj", 10000, "dragon_res2_quadriflow_cage.obj"),
-    "armadillo": ("armadillo.obj", 3000, "armadillo_quadriflow_cage.obj"),
-    "chinese_dragon": ("ChineseDragon-10kv.obj", 3000, "ChineseDragon-10kv_quadriflow_cage.obj"),
-    "elephant": ("elephant-with-holes.obj", 3000, "elephant-with-holes_quadriflow_cage.obj"),
-}
-
-
-def finish():
-    """Exit; the bpy module at once (Blender 4.2 and 4.3 crash on exit after
-    an add-on registered classes, 4.5 does not exit while they are)."""
-    sys.stdout.flush()
-    sys.stderr.flush()
-    if getattr(bpy.app, "module", False):
-        os._exit(0)
-
-
-def script_args():
-    """The script's arguments: after "--" (blender -b --python SCRIPT -- ARGS), or
-    all of them where Blender is the bpy module (python SCRIPT [--] ARGS)."""
-    if "--" in sys.argv:
-        return sys.argv[sys.argv.index("--") + 1:]
-    return sys.argv[1:] if getattr(bpy.app, "module", False) else []
-
-
-def ensure_addon():
-    """Register subdiv_pia from build/addon (for methods that call its
-    operator); returns the package."""
-    sys.path.insert(0, os.path.join(ROOT, "build", "addon"))
-    import subdiv_pia
-    if not hasattr(bpy.types, "OBJECT_OT_subdiv_pia_interpolate"):
-        subdiv_pia.register()
-    return subdiv_pia
 
 
 # --------------------------------------------------------------------------

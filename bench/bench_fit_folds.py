@@ -23,26 +23,18 @@ import time
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(HERE)
+from harness import DATA, FIT_CASES as CASES, ROOT
+
 sys.path.insert(0, os.path.join(ROOT, "python"))
 sys.path.insert(0, os.path.join(ROOT, "tests", "python"))
 import spia  # noqa: E402
 from meshio import read_obj  # noqa: E402
 
-# As bench_fit.py's CASES (which needs Blender to import).
-CASES = {
-    "bunny": ("bun_zipper.obj", "bun_zipper_quadriflow_cage.obj"),
-    "dragon": ("dragon_res2.obj", "dragon_res2_quadriflow_cage.obj"),
-    "armadillo": ("armadillo.obj", "armadillo_quadriflow_cage.obj"),
-    "chinese_dragon": ("ChineseDragon-10kv.obj", "ChineseDragon-10kv_quadriflow_cage.obj"),
-    "elephant": ("elephant-with-holes.obj", "elephant-with-holes_quadriflow_cage.obj"),
-}
 PER_EDGE = 8
 
 
 def load(name):
-    positions, faces, _creases = read_obj(os.path.join(ROOT, "tests", "data", name))
+    positions, faces, _creases = read_obj(os.path.join(DATA, name))
     return spia.Mesh.from_faces(positions, faces)
 
 
@@ -100,7 +92,7 @@ def main():
           "faced the scan | of those, folds | s |")
     print("|---|---:|---:|---:|---:|---:|---:|")
     for name in args.cases:
-        scan_file, cage_file = CASES[name]
+        scan_file, _faces, cage_file = CASES[name]
         scan = spia.Scan(load(scan_file))
         cage = load(cage_file)
         t = time.perf_counter()

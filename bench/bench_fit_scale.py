@@ -51,12 +51,11 @@ import time
 import bpy
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(HERE)
-sys.path.insert(0, HERE)
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import fit_cases  # noqa: E402
+# (bench_detail_scale.py takes these from here too.)
+from harness import OUT, ROOT, ensure_addon, finish, proc_status, reset_peak, script_args  # noqa: E402
 
-OUT = os.path.join(ROOT, "out", "bench")
 # Per Blender version: a .blend written by one cannot always be read by an
 # older one (5.0 changed the file header).
 CACHE = os.path.join(OUT, "fit_scale", "blender-%d.%d" % bpy.app.version[:2])
@@ -71,55 +70,6 @@ SCANS = {
     "dragon_s1t1": (2, True),
 }
 LARGEST_SCAN = "dragon_s1t1"
-
-
-def finish(code=0):
-    """Exit; the bpy module at once (Blender 4.2 and 4.3 crash on exit after
-    an add-on registered classes, 4.5 does not exit while they are)."""
-    sys.stdout.flush()
-    sys.stderr.flush()
-    if getattr(bpy.app, "module", False) or code:
-        os._exit(code)
-
-
-def script_args():
-    if "--" in sys.argv:
-        return sys.argv[sys.argv.index("--") + 1:]
-    return sys.argv[1:] if getattr(bpy.app, "module", False) else []
-
-
-def ensure_addon():
-    sys.path.insert(0, os.path.join(ROOT, os.environ.get("SUBDIV_PIA_ADDON_DIR", os.path.join("build", "addon"))))
-    import subdiv_pia
-    if not hasattr(bpy.types, "OBJECT_OT_subdiv_pia_interpolate"):
-        subdiv_pia.register()
-    return subdiv_pia
-
-
-# --------------------------------------------------------------------------
-# Memory of this process (Linux)
-
-def proc_status(field):
-    """A /proc/self/status field in bytes (VmRSS, VmHWM), or None."""
-    try:
-        with open("/proc/self/status") as f:
-            for line in f:
-                if line.startswith(field + ":"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return None
-
-
-def reset_peak():
-    """Sets the peak resident size (VmHWM) to the current one; False where
-    the kernel does not allow it."""
-    try:
-        with open("/proc/self/clear_refs", "w") as f:
-            f.write("5")
-        return True
-    except OSError:
-        return False
 
 
 # --------------------------------------------------------------------------

@@ -33,7 +33,9 @@ import time
 import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(HERE)
+sys.path.insert(0, HERE)
+from harness import ROOT, addon_on_path  # noqa: E402
+
 CACHE = os.path.join(ROOT, "build", "bench-hard")
 QUALITIES = (1, 3, 6, 10)
 QUICK_QUALITIES = (1, 3)
@@ -52,7 +54,7 @@ def target(quality):
 # --------------------------------------------------------------------------
 
 def child(spec):
-    sys.path.insert(0, os.path.join(ROOT, "build", "addon"))
+    addon_on_path()
     from subdiv_pia import native
     data = np.load(spec["path"])
     P = data["points"]
@@ -228,7 +230,7 @@ def main():
             sys.exit(f"unknown mesh {', '.join(unknown)}; the meshes: {', '.join(names)}")
         names = args.only
     qualities = QUICK_QUALITIES if args.quick else QUALITIES
-    sys.path.insert(0, os.path.join(ROOT, "build", "addon"))
+    addon_on_path()
     from subdiv_pia import native
     if not native.available():
         sys.exit(f"the library cannot be loaded ({native.load_error()}): make build first")

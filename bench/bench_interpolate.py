@@ -16,13 +16,13 @@ import sys
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(HERE)
+sys.path.insert(0, HERE)
+from harness import ROOT, addon_on_path, proc_status, reset_peak  # noqa: E402
 
 
 def child(spec):
     import numpy as np
-    sys.path.insert(0, HERE)
-    sys.path.insert(0, os.path.join(ROOT, "build", "addon"))
+    addon_on_path()
     from meshes import quad_sphere, scan
     from subdiv_pia import native
     if spec["mesh"].startswith("sphere"):
@@ -32,21 +32,14 @@ def child(spec):
         P, sizes, fv = scan(spec["mesh"])
         mesh = native.Mesh(P, sizes, fv)
 
-    def status(field):
-        with open("/proc/self/status") as fh:
-            for line in fh:
-                if line.startswith(field):
-                    return int(line.split()[1]) * 1024
-    with open("/proc/self/clear_refs", "w") as fh:
-        fh.write("5")  # reset the peak to the current size
-    rss0 = status("VmRSS")
+    rss0 = reset_peak()
     t = time.perf_counter()
     stencils = native.limit_stencils(mesh)
     t_stencils = time.perf_counter() - t
     t = time.perf_counter()
     cage, report = stencils.solve(P, method=spec["method"], max_iterations=2000)
     t_solve = time.perf_counter() - t
-    peak = status("VmHWM") - rss0
+    peak = proc_status("VmHWM") - rss0
     print(json.dumps(dict(vertices=len(P), weights=int(stencils.weights.size), stencil_s=t_stencils,
                           solve_s=t_solve, iterations=report.iterations, status=report.status,
                           max_error=report.max_error_relative, unreachable=report.unreachable_count,

@@ -18,11 +18,11 @@ import time
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(HERE)
-sys.path.insert(0, os.path.join(ROOT, "build", "addon"))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from harness import DATA, ROOT, addon_on_path  # noqa: E402
+
+addon_on_path()
 sys.path.insert(0, os.path.join(ROOT, "tools"))
-sys.path.insert(0, HERE)
 from subdiv_pia import native  # noqa: E402
 import osd_shapes  # noqa: E402
 from bench_refine import libraries, use  # noqa: E402
@@ -37,7 +37,7 @@ CASES = [("catmark_val2_interior", dict(use_creases=False, quality=1)),
 
 def load(name):
     if name == "dragon_res2":
-        path = os.path.join(ROOT, "tests", "data", "dragon_res2.obj")
+        path = os.path.join(DATA, "dragon_res2.obj")
         points, faces = [], []
         with open(path) as f:
             for line in f:

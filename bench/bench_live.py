@@ -23,7 +23,9 @@ import bpy
 import bmesh
 import numpy as np
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from harness import addon_on_path  # noqa: E402
+
 TARGETS = {10000: 0.030, 50000: 0.150}  # seconds, per update
 
 
@@ -33,8 +35,7 @@ def _argv():
 
 
 def load_addon():
-    addon_dir = os.path.abspath(os.environ.get("SUBDIV_PIA_ADDON_DIR") or os.path.join(ROOT, "build", "addon"))
-    sys.path.insert(0, addon_dir)
+    addon_on_path()
     import subdiv_pia
     subdiv_pia.register()
     return subdiv_pia

@@ -33,9 +33,10 @@ import scipy.linalg as la
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(HERE)
-sys.path.insert(0, os.path.join(ROOT, "build", "addon"))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from harness import DATA, ROOT, addon_on_path  # noqa: E402
+
+addon_on_path()
 sys.path.insert(0, os.path.join(ROOT, "tests", "python"))
 
 from meshio import read_obj  # noqa: E402
@@ -61,7 +62,7 @@ PAPER_ITERS_1E3 = (6, 13)
 
 def load(name):
     """Positions scaled to a unit box, faces, vertex count in the file."""
-    P, faces, _ = read_obj(os.path.join(ROOT, "tests", "data", name + ".obj"))
+    P, faces, _ = read_obj(os.path.join(DATA, name + ".obj"))
     F = np.asarray(faces, dtype=np.int64)
     if F.ndim != 2 or F.shape[1] != 3:
         raise SystemExit(f"{name}: not a triangle mesh")

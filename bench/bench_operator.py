@@ -39,15 +39,8 @@ import bpy
 import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(HERE)
-
-
-def script_args():
-    """The script's arguments: after "--" (blender -b --python SCRIPT -- ARGS), or
-    all of them where Blender is the bpy module (python SCRIPT [--] ARGS)."""
-    if "--" in sys.argv:
-        return sys.argv[sys.argv.index("--") + 1:]
-    return sys.argv[1:] if getattr(bpy.app, "module", False) else []
+sys.path.insert(0, HERE)
+from harness import addon_on_path, script_args  # noqa: E402
 
 
 def build_sphere(k):
@@ -152,8 +145,7 @@ def main():
 
     for o in list(bpy.data.objects):
         bpy.data.objects.remove(o)
-    addon_dir = os.path.abspath(os.environ.get("SUBDIV_PIA_ADDON_DIR") or os.path.join(ROOT, "build", "addon"))
-    sys.path.insert(0, addon_dir)
+    addon_on_path()
     import subdiv_pia
     from subdiv_pia import api, native, operators
     subdiv_pia.register()

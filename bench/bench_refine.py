@@ -16,9 +16,10 @@ import time
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(HERE)
-sys.path.insert(0, os.path.join(ROOT, "build", "addon"))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from harness import addon_on_path  # noqa: E402
+
+addon_on_path()
 from subdiv_pia import native  # noqa: E402
 
 SCHEMES = [("Loop", dict(scheme="LOOP")), ("Loop, Hoppe", dict(scheme="LOOP", boundary_rule="HOPPE")),
@@ -50,8 +51,9 @@ def octahedron_sphere(splits):
 
 
 def use(library):
-    """Makes native's functions call `library` (a loaded, declared CDLL)."""
-    native._lib = library
+    """Makes native's functions call `library` (a loaded, declared CDLL):
+    the loader's own state, which they read (spia/library.py)."""
+    native.library._lib = library
 
 
 def libraries(compare):

@@ -39,8 +39,9 @@ import time
 import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(HERE)
-ADDON = os.path.join(ROOT, "build", "addon")
+sys.path.insert(0, HERE)
+from harness import ADDON_DIR as ADDON, ROOT, proc_status, reset_peak  # noqa: E402
+
 OSD_HELPER = os.path.join(ROOT, "build", "bench", "bench", "spia_bench_osd")
 
 SPHERES = [("10k", 41), ("30k", 71), ("100k", 129), ("300k", 224), ("1M", 408), ("2M", 577), ("4M", 816)]
@@ -59,20 +60,6 @@ TARGET_RUNS = 3        # processes for the targets' case (the 1M sphere with AUT
 # --------------------------------------------------------------------------
 # Child processes
 # --------------------------------------------------------------------------
-
-def _status(field):
-    with open("/proc/self/status") as fh:
-        for line in fh:
-            if line.startswith(field):
-                return int(line.split()[1]) * 1024
-    return 0
-
-
-def _reset_peak():
-    with open("/proc/self/clear_refs", "w") as fh:
-        fh.write("5")  # VmHWM back to the current resident size
-    return _status("VmRSS")
-
 
 def cache_path(cache, name, ext="npz"):
     return os.path.join(cache, f"{name}.{ext}")
@@ -140,18 +127,18 @@ def load_mesh(cache, name):
 def child_spia(spec):
     native, mesh, P = load_mesh(spec["cache"], spec["mesh"])
     scheme = "LOOP" if spec["mesh"].startswith("loop") else "CATMULL_CLARK"
-    rss0 = _reset_peak()
+    rss0 = reset_peak()
     t = time.perf_counter()
     stencils = native.limit_stencils(mesh, scheme=scheme)
     t_stencils = time.perf_counter() - t
-    stencil_peak = _status("VmHWM") - rss0
+    stencil_peak = proc_status("VmHWM") - rss0
     t = time.perf_counter()
     try:
         cage, report = stencils.solve(P, method=spec["method"], tolerance=TOLERANCE, max_iterations=MAX_ITERATIONS)
     except native.PiaError as error:
         return dict(refused=f"{error.code}: {error.message}", vertices=len(P), stencil_s=t_stencils)
     t_solve = time.perf_counter() - t
-    peak = _status("VmHWM") - rss0
+    peak = proc_status("VmHWM") - rss0
     out = dict(vertices=len(P), weights=int(stencils.weights.size), stencil_s=t_stencils, solve_s=t_solve,
                iterations=report.iterations, status=report.status, method_used=report.method,
                max_error=report.max_error_relative, initial_error=report.initial_max_error_relative,
@@ -186,7 +173,7 @@ def child_direct(spec):
     L = native.limit_stencils(mesh).to_scipy()
     P64 = np.asarray(P, np.float64)
     diagonal = float(np.linalg.norm(P64.max(0) - P64.min(0)))
-    rss0 = _reset_peak()
+    rss0 = reset_peak()
     t = time.perf_counter()
     extra = {}
     if spec["solver"] == "SuperLU":
@@ -201,7 +188,7 @@ def child_direct(spec):
             return dict(refused=f"D^-1 L not symmetric ({extra['symmetry_error']:.1e})", **extra)
         V = direct.solve_cholmod_spd(S, P64 / d[:, None])
     seconds = time.perf_counter() - t
-    peak = _status("VmHWM") - rss0
+    peak = proc_status("VmHWM") - rss0
     error = float(np.linalg.norm(L @ V - P64, axis=1).max() / diagonal)
     return dict(vertices=len(P), seconds=seconds, peak_bytes=peak, max_error=error, **extra)
 

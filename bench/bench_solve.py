@@ -40,7 +40,8 @@ import sys
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(HERE)
+sys.path.insert(0, HERE)
+from harness import ROOT, addon_on_path, proc_status, reset_peak  # noqa: E402
 
 VARIANTS = [
     ("GS_PIA", ()),
@@ -62,23 +63,8 @@ def label(method, flags):
     return method + "".join(f" +{short.get(f, f)}" for f in flags)
 
 
-def _status(field):
-    with open("/proc/self/status") as fh:
-        for line in fh:
-            if line.startswith(field):
-                return int(line.split()[1]) * 1024
-    return 0
-
-
-def _reset_peak():
-    with open("/proc/self/clear_refs", "w") as fh:
-        fh.write("5")  # VmHWM back to the current resident size
-    return _status("VmRSS")
-
-
 def load(mesh_name):
-    sys.path.insert(0, HERE)
-    sys.path.insert(0, os.path.join(ROOT, "build", "addon"))
+    addon_on_path()
     import numpy as np
     from meshes import quad_sphere, scan
     from subdiv_pia import native
@@ -139,23 +125,23 @@ def child_memory(spec):
     opts, _keep = native._options(threads=2, method=spec["method"], solve_flags=tuple(spec["flags"]))
     handle = ctypes.c_void_p()
     st = native._Status()
-    rss0 = _reset_peak()
+    rss0 = reset_peak()
     t = time.perf_counter()
     code = lib.spia_limit_stencils_create(ctypes.byref(mesh._c()), ctypes.byref(opts), ctypes.byref(handle),
                                           ctypes.byref(st))
     out["stencil_s"] = time.perf_counter() - t
     if code != 0:
         return dict(failed=st.message.decode())
-    out["build_peak"] = (_status("VmHWM") - rss0) / n
-    out["table"] = (_status("VmRSS") - rss0) / n
+    out["build_peak"] = (proc_status("VmHWM") - rss0) / n
+    out["table"] = (proc_status("VmRSS") - rss0) / n
     import numpy as np
     cage = np.empty_like(P)
     rep = native._Report()
-    rss1 = _reset_peak()
+    rss1 = reset_peak()
     code = lib.spia_solve(handle, native._ptr(P, ctypes.c_float), ctypes.byref(opts), native._ptr(cage, ctypes.c_float),
                           ctypes.byref(rep), ctypes.byref(st))
-    out["solve"] = (_status("VmHWM") - rss1) / n
-    out["table_and_solve"] = (_status("VmHWM") - rss0) / n
+    out["solve"] = (proc_status("VmHWM") - rss1) / n
+    out["table_and_solve"] = (proc_status("VmHWM") - rss0) / n
     out["solve_s"] = rep.solve_seconds
     out["method_used"] = native.METHODS[rep.method]
     lib.spia_stencils_free(handle)

@@ -26,12 +26,10 @@ import sys
 
 import bpy
 import numpy as np
-from mathutils import Vector
 from mathutils.bvhtree import BVHTree
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
-import bench_detail  # noqa: E402
 import bench_fit  # noqa: E402
 import detail_workflow  # noqa: E402
 import fit_cases  # noqa: E402

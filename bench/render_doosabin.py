@@ -16,21 +16,14 @@ import sys
 import bpy
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(os.path.dirname(HERE), "build", "addon"))
-sys.path.insert(0, HERE)
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from harness import addon_on_path, script_args  # noqa: E402
 from render_comparison import material, point_markers, render_row  # noqa: E402
+
+addon_on_path()
 from subdiv_pia import api, cli, native  # noqa: E402
 
 LEVELS = 4
-
-
-def script_args():
-    """The script's arguments: after "--" (blender -b --python SCRIPT -- ARGS), or
-    all of them where Blender is the bpy module (python SCRIPT [--] ARGS)."""
-    if "--" in sys.argv:
-        return sys.argv[sys.argv.index("--") + 1:]
-    return sys.argv[1:] if getattr(bpy.app, "module", False) else []
 
 
 def main(argv):

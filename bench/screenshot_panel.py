@@ -27,13 +27,15 @@ import traceback
 import bpy
 from mathutils import Euler, Vector
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, os.path.join(ROOT, "build", "addon"))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from harness import DATA, ROOT, addon_on_path  # noqa: E402
+
+addon_on_path()
 import subdiv_pia  # noqa: E402
 sys.path.insert(0, os.path.join(ROOT, "tests", "window"))
 from window import crop, edge_move, find_area, region  # noqa: E402,F401  (screenshot_fit.py uses them too)
 
-MESH = os.path.join(ROOT, "tests", "data", "mushroom.obj")
+MESH = os.path.join(DATA, "mushroom.obj")
 PROPERTIES_WIDTH = 500   # pixels, Properties/Outliner column
 OUTLINER_HEIGHT = 110    # pixels
 CROP_VIEW_WIDTH = 600    # pixels of 3D viewport kept left of the Properties editor

@@ -414,14 +414,22 @@ def _record_hash(data):
     return "sha256=" + digest
 
 
+def binding_files():
+    """(name in the wheel, path) of each module of the binding, python/spia/*.py,
+    in order of name: what every package carries of it beside the library."""
+    folder = os.path.join(ROOT, "python", "spia")
+    return [("spia/" + name, os.path.join(folder, name)) for name in sorted(os.listdir(folder))
+            if name.endswith(".py")]
+
+
 def write_wheel(platform, library, pkg_info):
     """dist/subdiv_pia-<version>-py3-none-<tag>.whl around the built library,
     following the wheel specification (the same bytes for the same inputs)."""
     platform_dir = os.path.dirname(library)
     dist_info = "subdiv_pia-%s.dist-info" % version()
     licences = [(os.path.basename(name), path) for name, path in licence_files(platform_dir)]
-    files = [("spia/__init__.py", open(os.path.join(ROOT, "python", "spia", "__init__.py"), "rb").read(), 0o644),
-             ("spia/" + LIBRARY_NAMES[platform], open(library, "rb").read(), 0o755)]
+    files = [(name, open(path, "rb").read(), 0o644) for name, path in binding_files()]
+    files.append(("spia/" + LIBRARY_NAMES[platform], open(library, "rb").read(), 0o755))
     files += [("%s/licenses/%s" % (dist_info, name), open(path, "rb").read(), 0o644) for name, path in licences]
     files.append(("%s/METADATA" % dist_info,
                   wheel_metadata(pkg_info, platform, [n for n, _p in licences]).encode("utf-8"), 0o644))

@@ -12,9 +12,10 @@ auditwheel read what is shipped.)
 2. twine: `twine check --strict` on every wheel and the sdist.
 3. auditwheel: `auditwheel show` finds the Linux wheel consistent with
    manylinux_2_17_x86_64.
-4. wheels: each holds the binding, its platform's library (the same bytes
-   as the library built, audited and tested for that platform, and as the
-   legacy zip's) and its .dist-info: RECORD's hashes and sizes, WHEEL's tag
+4. wheels: each holds the binding (every module of python/spia, the same
+   bytes as the legacy zip's; the sdist has them too), its platform's
+   library (the same bytes as the library built, audited and tested for
+   that platform, and as the legacy zip's) and its .dist-info: RECORD's hashes and sizes, WHEEL's tag
    as the file name says, METADATA valid (packaging's parser), its version
    the add-on's, numpy required, a licence expression naming everything
    inside and a License-File line for each text.
@@ -134,21 +135,27 @@ def wheel_contents(platform):
         names = zf.namelist()
         data = {n: zf.read(n) for n in names}
     licences = sorted(n for n in names if n.startswith(dist_info + "/licenses/"))
-    expected = sorted(["spia/__init__.py", "spia/" + library_name, dist_info + "/METADATA", dist_info + "/WHEEL",
-                       dist_info + "/RECORD"] + licences)
-    if sorted(names) != expected or len(licences) < 4:
+    binding = package.binding_files()
+    expected = sorted([name for name, _path in binding] + ["spia/" + library_name, dist_info + "/METADATA",
+                                                           dist_info + "/WHEEL", dist_info + "/RECORD"] + licences)
+    if sorted(names) != expected or len(licences) < 4 or "spia/__init__.py" not in dict(binding):
         problems.append("contents %s" % names)
-    if data.get("spia/__init__.py") != open(os.path.join(ROOT, "python", "spia", "__init__.py"), "rb").read():
-        problems.append("spia/__init__.py is not python/spia/__init__.py")
+    for name, source in binding:
+        if data.get(name) != open(source, "rb").read():
+            problems.append("%s is not %s" % (name, os.path.relpath(source, ROOT)))
     built = os.path.join(package.BUILD, "package", platform, library_name)
     if data.get("spia/" + library_name) != open(built, "rb").read():
         problems.append("the library is not %s" % built)
     with zipfile.ZipFile(os.path.join(DIST, package.legacy_name(platform))) as zf:
+        legacy = set(zf.namelist())
         if data.get("spia/" + library_name) != zf.read("subdiv_pia/spia/" + library_name):
             problems.append("the legacy zip holds another library")
-        missing = sorted(set("subdiv_pia/" + n for n in addon_files()) - set(zf.namelist()))
+        missing = sorted(set("subdiv_pia/" + n for n in addon_files()) - legacy)
         if missing:
             problems.append("the legacy zip lacks %s" % missing)
+        for name, source in binding:
+            if "subdiv_pia/" + name not in legacy or zf.read("subdiv_pia/" + name) != open(source, "rb").read():
+                problems.append("the legacy zip's %s is not %s" % (name, os.path.relpath(source, ROOT)))
     record = [line.split(",") for line in data[dist_info + "/RECORD"].decode().splitlines()]
     listed = {r[0]: r for r in record}
     if sorted(listed) != sorted(names):
@@ -283,6 +290,7 @@ def sdist():
         names = tar.getnames()
     top = "subdiv_pia-%s/" % package.version()
     stray = [n for n in names if n.startswith(tuple(top + d for d in ("tests", "bench", "build", "dist", "tools")))]
+    missing = [name for name, _path in package.binding_files() if top + "python/" + name not in names]
     prefix = opensubdiv_prefix()
     python = venv(sys.executable, os.path.join(WORK, "venv-sdist"))
     t0 = time.time()
@@ -291,9 +299,10 @@ def sdist():
     if out.returncode != 0:
         return check("sdist", False, "pip install failed: %s" % out.stdout[-1500:])
     ok, line = client_check(python, WORK)
-    check("sdist", ok and not stray and top + "PKG-INFO" in names,
-          "%d files; built with scikit-build-core against %s and installed in %.0f s; %s%s" % (
-              len(names), prefix, seconds, line, "; stray: %s" % stray[:5] if stray else ""))
+    check("sdist", ok and not stray and not missing and top + "PKG-INFO" in names,
+          "%d files; built with scikit-build-core against %s and installed in %.0f s; %s%s%s" % (
+              len(names), prefix, seconds, line, "; stray: %s" % stray[:5] if stray else "",
+              "; binding modules missing: %s" % missing if missing else ""))
 
 
 def one_venv(minor, numpy):

@@ -458,3 +458,22 @@ def test_binding_runs_without_blender():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip().count(".") == 2
+
+
+def test_the_package_holds_every_public_name_of_its_modules(native):
+    # `from spia import X` for whatever a module of the binding defines, and
+    # __all__ names only what the package holds.
+    import importlib
+    import os
+    import types
+    modules = sorted(n[:-3] for n in os.listdir(native.__path__[0]) if n.endswith(".py") and n != "__init__.py")
+    assert {"library", "header", "mesh", "interpolation", "refinement", "usd", "fitting"} <= set(modules)
+    missing = []
+    for name in modules:
+        module = importlib.import_module(native.__name__ + "." + name)
+        for key, value in vars(module).items():
+            if not key.startswith("_") and not isinstance(value, types.ModuleType) \
+                    and getattr(native, key, None) is not value:
+                missing.append("%s.%s" % (name, key))
+    assert not missing, "not the package's: %s" % missing
+    assert all(hasattr(native, name) for name in native.__all__)

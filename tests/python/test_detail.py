@@ -101,6 +101,25 @@ def test_detail_levels_lie_on_the_sphere(native):
         native.fit_detail(base, scan, 0)
 
 
+def test_detail_stages_go_through_the_package(native, monkeypatch):
+    # A script that wraps spia.subdivide, spia.fit and spia.flat_positions
+    # (bench/bench_detail_scale.py times each stage so) sees fit_detail's
+    # own calls: one subdivision and one fit a level, then the flat positions.
+    scan_positions, triangles = icosphere(3)
+    scan = native.Scan(_mesh(native, scan_positions, triangles))
+    positions, quads = cube_sphere(1, radius=0.95)
+    cage = _mesh(native, positions, quads)
+    calls = []
+    for name in ("subdivide", "fit", "flat_positions"):
+        def wrapper(mesh, *args, _name=name, _real=getattr(native, name), **kwargs):
+            calls.append((_name, mesh.vertex_count))
+            return _real(mesh, *args, **kwargs)
+        monkeypatch.setattr(native, name, wrapper)
+    detail = native.fit_detail(cage, scan, 2, cutoff=0.3)
+    assert calls == [("subdivide", 8), ("fit", 26), ("subdivide", 26), ("fit", 98), ("flat_positions", 98)]
+    assert len(detail.points) == 98
+
+
 def test_detail_samples_halve_down_to_two(native):
     assert [native.detail_samples(8, level) for level in range(1, 5)] == [4, 2, 2, 2]
     assert native.detail_samples(4, 1) == 2

@@ -1,7 +1,9 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""The add-on's modules import one another without circles, and the binding
-(python/spia, and addon/native.py that stands for it) imports no Blender
-module and nothing of the add-on's.
+"""The add-on's modules import one another without circles, and so do the
+binding's (python/spia), whose __init__ none of them imports; the binding
+(and addon/native.py that stands for it) imports no Blender module and
+nothing of the add-on's.  The scripts (bench/, tools/, tests/, setup.py),
+which import one another by their file names, have no circle either.
 
 Read from the sources with ast: nothing is imported, Blender is not needed.
 Imports inside functions count as much as those at the top of a module.
@@ -15,7 +17,12 @@ import pytest
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 ADDON = os.path.join(ROOT, "addon")
 BINDING = os.path.join(ROOT, "python", "spia")
+BINDING_PACKAGE = "spia"
 PACKAGE = "subdiv_pia"  # the add-on's name once installed (setup.py build, the packages)
+# The folders of scripts that import one another by file name (each puts the
+# folders it needs on sys.path); "." is setup.py's.
+SCRIPT_FOLDERS = ["bench", "tools", os.path.join("tests", "python"), os.path.join("tests", "package"),
+                  os.path.join("tests", "blender"), os.path.join("tests", "window"), "."]
 PACKAGE_MODULE = "__init__"
 BLENDER_MODULES = {"bpy", "bmesh", "mathutils", "bpy_extras", "bl_math", "gpu", "gpu_extras", "blf", "aud",
                    "idprop", "freestyle", "imbuf", "bgl"}
@@ -118,6 +125,22 @@ def test_addon_modules_import_one_another_without_circles():
     assert cycle is None, "import circle in addon/: " + describe(cycle, graph)
 
 
+def test_binding_modules_import_one_another_without_circles():
+    graph = import_graph(BINDING, BINDING_PACKAGE)
+    assert {PACKAGE_MODULE, "library", "header", "mesh", "interpolation", "usd", "fitting"} <= set(graph)
+    cycle = find_cycle(graph)
+    assert cycle is None, "import circle in python/spia/: " + describe(cycle, graph)
+
+
+def test_the_binding_package_is_imported_by_none_of_its_modules():
+    # __init__ gathers the modules' names: a module that imported it would
+    # be imported before the names it needs were there.
+    graph = import_graph(BINDING, BINDING_PACKAGE)
+    users = sorted(m for m in graph if PACKAGE_MODULE in graph[m])
+    assert not users, "modules of python/spia import its __init__: %s" % users
+    assert set(graph) - {PACKAGE_MODULE} <= set(graph[PACKAGE_MODULE]), "modules __init__ does not gather"
+
+
 def test_the_facade_is_imported_by_no_module_it_names():
     # api names what scripts use from the others: none of those may need it.
     graph = import_graph(ADDON)
@@ -188,3 +211,48 @@ def test_a_blender_import_in_the_binding_is_found(tmp_path, text):
     path = tmp_path / "mod.py"
     path.write_text(text)
     assert _foreign_imports(str(path), allowed_relative=True)
+
+
+def script_graph(root=ROOT, folders=SCRIPT_FOLDERS):
+    """{script: {script it imports: first line of such an import}} over the
+    .py files directly in `folders` (under root), named by their path
+    without .py.  An import's first name is the file of that name in the
+    importer's own folder, else in whichever of the other folders has one."""
+    found = {folder: _sources(os.path.join(root, folder)) for folder in folders
+             if os.path.isdir(os.path.join(root, folder))}
+    graph = {}
+    for folder, sources in found.items():
+        for name, path in sources.items():
+            edges = graph.setdefault(os.path.normpath(os.path.join(folder, name)), {})
+            for line, level, module, _names in _imports(_parse(path)):
+                head = (module or "").split(".")[0]
+                if level or not head:
+                    continue
+                homes = [folder] if head in sources else [f for f in found if head in found[f]]
+                for home in homes:
+                    target = os.path.normpath(os.path.join(home, head))
+                    if target != os.path.normpath(os.path.join(folder, name)):
+                        edges.setdefault(target, line)
+    return graph
+
+
+def test_scripts_import_one_another_without_circles():
+    graph = script_graph()
+    assert {"bench/bench_fit", "bench/fit_cases", "tools/package", "tests/package/dist", "setup"} <= set(graph)
+    assert "tools/package" in graph["tests/package/dist"] and "bench/meshes" in graph["bench/bench_scale"]
+    cycle = find_cycle(graph)
+    assert cycle is None, "import circle among the scripts: " + describe(cycle, graph)
+
+
+def test_a_circle_among_scripts_in_two_folders_is_found(tmp_path):
+    for folder, files in {"bench": {"a.py": "import sys\nimport b\n", "b.py": "def f():\n    import helper\n"},
+                          "tools": {"helper.py": "import os\nfrom a import thing\n", "b.py": ""}}.items():
+        (tmp_path / folder).mkdir()
+        for name, text in files.items():
+            (tmp_path / folder / name).write_text(text)
+    graph = script_graph(str(tmp_path), ["bench", "tools"])
+    assert graph["bench/b"] == {"tools/helper": 2}  # its own folder's b, not tools/b
+    cycle = find_cycle(graph)
+    assert cycle == ["bench/a", "bench/b", "tools/helper", "bench/a"], cycle
+    (tmp_path / "tools" / "helper.py").write_text("import os\n")
+    assert find_cycle(script_graph(str(tmp_path), ["bench", "tools"])) is None

@@ -4,8 +4,10 @@ package for another platform, a glibc older than the library needs, a
 missing dependency, a missing or bogus file (plain Python, no library
 needed: the platform and the files are faked)."""
 import importlib.util
+import itertools
 import os
 import shutil
+import sys
 
 import pytest
 
@@ -14,17 +16,28 @@ from conftest import ADDON_DIR
 MANIFEST = 'id = "subdiv_pia"\nversion = "0.2.0"\nplatforms = ["linux-x64"]\n'
 
 
+COPIES = itertools.count()
+
+
 @pytest.fixture
 def native(tmp_path, monkeypatch):
-    """A fresh copy of the binding (spia) in a package folder of its own (tmp_path),
-    with the manifest of a Linux x64 package and no library yet."""
-    shutil.copy(os.path.join(ADDON_DIR, "subdiv_pia", "spia", "__init__.py"), tmp_path / "native.py")
+    """A fresh copy of the binding (spia's modules) as a package of its own in
+    tmp_path, with the manifest of a Linux x64 package and no library yet."""
+    binding = os.path.join(ADDON_DIR, "subdiv_pia", "spia")
+    for name in os.listdir(binding):
+        if name.endswith(".py"):
+            shutil.copy(os.path.join(binding, name), tmp_path / name)
     (tmp_path / "blender_manifest.toml").write_text(MANIFEST)
-    spec = importlib.util.spec_from_file_location("native_copy", tmp_path / "native.py")
+    name = "native_copy_%d" % next(COPIES)
+    spec = importlib.util.spec_from_file_location(name, tmp_path / "__init__.py",
+                                                  submodule_search_locations=[str(tmp_path)])
     module = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, name, module)  # its modules import one another through it
     spec.loader.exec_module(module)
     monkeypatch.delenv("SUBDIV_PIA_LIBRARY", raising=False)
-    return module
+    yield module
+    for key in [k for k in sys.modules if k.startswith(name + ".")]:
+        del sys.modules[key]
 
 
 def fake_platform(monkeypatch, native, system, machine):
@@ -129,7 +142,7 @@ def test_library_for_another_machine(tmp_path, monkeypatch, native):
 
 @pytest.mark.parametrize("kind", ("missing", "bogus"))
 def test_library_named_by_the_environment_is_the_only_one_tried(tmp_path, monkeypatch, native, kind):
-    (tmp_path / "libsubdiv_pia.so").write_bytes(b"\x7fELF")  # beside native.py: not tried
+    (tmp_path / "libsubdiv_pia.so").write_bytes(b"\x7fELF")  # beside the binding: not tried
     named = tmp_path / "elsewhere.so"
     if kind == "bogus":
         named.write_text("not a library\n")
@@ -142,7 +155,6 @@ def test_library_named_by_the_environment_is_the_only_one_tried(tmp_path, monkey
 
 
 def test_the_real_library_loads_and_says_where_from():
-    import sys
     sys.path.insert(0, ADDON_DIR)
     from subdiv_pia import native
     assert native.available(), native.load_error()
