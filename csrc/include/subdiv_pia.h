@@ -794,9 +794,10 @@ typedef struct spia_fit_report {
     /* Distances the other way: from each scan vertex that a face uses to
      * the limit surface (as a grid of its points with 2^levels quads along
      * each ptex face's edge, levels = ceil(log2 samples_per_edge) + 1, one
-     * fewer at a time while that would make more than 2M quads), relative
-     * to the scan's
-     * diagonal, for the cage given and the cage written.  `ignored` counts
+     * fewer at a time while that would make more than 2M quads, down to
+     * one level; a grid still larger is searched through its ptex faces'
+     * corners, each scan vertex then measured against the grid's quads of
+     * the face found), relative to the scan's diagonal, for the cage given and the cage written.  `ignored` counts
      * the scan vertices farther than the cut-off: scan parts the surface
      * does not reach.  Catmull-Clark only; all zero with
      * SPIA_FIT_NO_SCAN_DISTANCES. */
