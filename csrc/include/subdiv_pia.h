@@ -797,9 +797,9 @@ typedef struct spia_fit_report {
      * fewer at a time while that would make more than 2M quads, down to
      * one level; a grid still larger is searched through its ptex faces'
      * corners, each scan vertex then measured against the grid's quads of
-     * the face found), relative to the scan's diagonal, for the cage given and the cage written.  `ignored` counts
-     * the scan vertices farther than the cut-off: scan parts the surface
-     * does not reach.  Catmull-Clark only; all zero with
+     * the face found), relative to the scan's diagonal, for the cage given
+     * and the cage written.  `ignored` counts the scan vertices farther
+     * than the cut-off: scan parts the surface does not reach.  Catmull-Clark only; all zero with
      * SPIA_FIT_NO_SCAN_DISTANCES. */
     int64_t scan_point_count;
     spia_fit_distances scan_before, scan_after;
