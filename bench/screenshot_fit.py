@@ -9,7 +9,9 @@ QuadriFlow cage (tests/data/bun_zipper_quadriflow_cage.obj), picks the scan
 as the panel's Target with a Surface fit, runs the add-on's operator on the
 cage, hides the scan and the cage, and shows the new `<cage>_pia` object
 coloured by its `pia_distance_color` heat map (Solid shading, colour
-Attribute) beside the Modifiers tab with the panel and its "Last fit" box.
+Attribute) beside the Modifiers tab with the panel as an artist sees it
+after the fit: open, its one-line status under the controls, and its "Scan
+Fit" and "Last Result" sub-panels opened (the others closed, as they come).
 With --detail N the fit makes N detail levels (the panel's Detail, the
 result's Multires shown at its finest level; docs/panel_detail.png).
 With --paint-scan (after the output path) the fit runs with Paint Scan on
@@ -55,8 +57,21 @@ def load_panel_script():
 panel = load_panel_script()
 panel_arrange_steps = panel.arrange_steps
 # A shorter Outliner (its header only) leaves the Properties editor room for
-# the whole panel down to the "Last fit" box.
+# the whole panel down to the end of its "Last Result" sub-panel.
 panel.OUTLINER_HEIGHT = 26
+# A wider one, so that the panel's one-line status is read whole.
+panel.PROPERTIES_WIDTH = 600
+# The sub-panels an artist opens after a fit: what the fit used and what it
+# did.  A sub-panel registered without DEFAULT_CLOSED is drawn open the
+# first time the editor shows it; the others stay closed.
+OPENED = ("Scan Fit", "Last Result")
+for cls in panel.subdiv_pia.ui.classes:
+    if getattr(cls, "bl_parent_id", "") == panel.subdiv_pia.ui.DATA_PT_subdiv_pia.__name__ \
+            and cls.bl_label in OPENED:
+        cls.bl_options = set()
+if sorted(c.bl_label for c in panel.subdiv_pia.ui.classes if c.bl_label in OPENED and not c.bl_options) \
+        != sorted(OPENED):
+    raise SystemExit("screenshot_fit: the panel has no sub-panels %s to open" % (OPENED,))
 
 
 ARGV = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
@@ -118,7 +133,7 @@ def arrange_steps(window):
     r3d = space.region_3d
     r3d.view_distance *= VIEW_DISTANCE_SCALE
     r3d.view_location = centre + (r3d.view_location - centre) * VIEW_DISTANCE_SCALE
-    # Scroll the Properties editor to its end, where the "Last fit" box is.
+    # Scroll the Properties editor to its end, the "Last Result" sub-panel.
     # (Scrolling is limited to the extent of the last redraw: a few rounds.)
     props = panel.find_area(window, 'PROPERTIES')
     for _ in range(4):
