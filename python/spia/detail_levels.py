@@ -48,18 +48,42 @@ def detail_samples(samples_per_edge, level):
 # The peak of fit_detail is the fit of its level with the most samples
 # (the finest, unless halving samples_per_edge drops a remainder): the
 # samples' stencils, closest points and normals, the fold guard's and the
-# scan's pull's buffers, the level itself, and the scan side's hierarchy.
-# Measured on the bunny's cage on two threads, the peak resident size over
-# the call: 0.25e9, 0.41e9, 1.61e9 and 6.32e9 bytes at 2 to 5 levels
-# (0.18M to 11.5M samples): 547 bytes a sample from 4 to 5 levels, and up
-# to 0.15e9 bytes besides.  The estimate keeps a tenth or more over both.
-# A measuring grid of more than 2M quads is now searched through its faces'
-# corners, a quarter of it: the dragon's 50k-vertex cage at 3 levels (12.9M
-# samples) grew 5.64e9 bytes over its finest fit, 437 a sample, and 5.8e9
-# over the whole call in Blender; a 3,052-face cage at 5 levels (12.5M
-# samples) 5.6e9.  The estimate keeps 600, which grids at the cap need.
-DETAIL_BYTES_PER_SAMPLE = 600
+# scan's pull's buffers and the level itself, DETAIL_BYTES_PER_SAMPLE; at
+# the finest level, the grid that measures the scan's distances besides
+# (:func:`_measure_grid`): its points, and the hierarchy over its quads, or
+# over one quad a ptex face once the grid has more than 2M quads.
+# Measured on two threads, the growth of the resident size: over the
+# bunny's cage's 3 levels, 0.41e9 bytes (0.72M samples, a grid of 0.72M
+# quads); over the finest fit of the dragon's 50k-vertex cage at 3 levels,
+# 5.64e9 (12.9M samples, 3.2M ptex faces searched), and 6.2e9 over the
+# whole call in Blender, the scan's hierarchy included; a 3,052-face cage
+# at 5 levels, 6.0e9 over the call (12.5M samples).  The estimate is 0.78e9 and 6.54e9 for the first two:
+# the fixed part weighs on small cages, and it keeps a tenth or more over
+# the large ones.
+DETAIL_BYTES_PER_SAMPLE = 380
+DETAIL_BYTES_PER_GRID_POINT = 16
+DETAIL_BYTES_PER_SEARCHED_QUAD = 280
 DETAIL_BYTES_FIXED = 256 << 20
+# The largest grid searched through a hierarchy of its own (the library's
+# SCAN_GRID_FACES).
+MEASURE_GRID_QUADS = 2 << 20
+
+
+def _measure_grid(ptex, per_edge):
+    """(points, quads searched) of the grid on which the library measures
+    the scan's distances to a surface of ``ptex`` ptex faces sampled
+    ``per_edge`` times an edge: 2^L quads along a ptex edge, L one more
+    than ceil(log2 per_edge) and one fewer while the grid would have more
+    than MEASURE_GRID_QUADS quads (at least one); a grid still larger is
+    searched through one quad a ptex face."""
+    levels = 1
+    while (1 << levels) < per_edge:
+        levels += 1
+    levels += 1
+    while levels > 1 and ptex << (2 * levels) > MEASURE_GRID_QUADS:
+        levels -= 1
+    quads = ptex << (2 * levels)
+    return ptex * ((1 << levels) + 1) ** 2, ptex if quads > MEASURE_GRID_QUADS else quads
 
 
 def detail_memory_estimate(cage, levels, samples_per_edge=4):
@@ -68,17 +92,25 @@ def detail_memory_estimate(cage, levels, samples_per_edge=4):
     ``cage``: a :class:`Mesh`, or its number of face corners (the sum of
     its face sizes).  Each level turns an n-sided face into n quads (a quad
     into 4), each level's fit takes DETAIL_BYTES_PER_SAMPLE per sample
-    (:func:`detail_samples` squared per face), and the level with the most
-    samples sets the peak, with DETAIL_BYTES_FIXED besides: about 2.4 KB
-    per finest face at the default samples.  fit_detail itself does not
-    refuse: a script checks this against the memory it has."""
+    (:func:`detail_samples` squared per face) and the finest level's the
+    grid that measures the scan besides (:func:`_measure_grid`); the level
+    that needs the most sets the peak, with DETAIL_BYTES_FIXED besides:
+    about 1.9 KB per finest face of a large cage at the default samples.
+    fit_detail itself does not refuse: a script checks this against the
+    memory it has."""
     levels = int(levels)
     if levels <= 0:
         return 0, 0
     corners = int(np.sum(np.asarray(cage.face_sizes, np.int64))) if hasattr(cage, "face_sizes") else int(cage)
-    samples = max(corners * 4 ** (level - 1) * detail_samples(samples_per_edge, level) ** 2
-                  for level in range(1, levels + 1))
-    return DETAIL_BYTES_FIXED + DETAIL_BYTES_PER_SAMPLE * samples, corners * 4 ** (levels - 1)
+
+    def need(level):
+        ptex, per_edge = corners * 4 ** (level - 1), detail_samples(samples_per_edge, level)
+        total = DETAIL_BYTES_PER_SAMPLE * ptex * per_edge ** 2
+        if level == levels:
+            points, searched = _measure_grid(ptex, per_edge)
+            total += DETAIL_BYTES_PER_GRID_POINT * points + DETAIL_BYTES_PER_SEARCHED_QUAD * searched
+        return total
+    return DETAIL_BYTES_FIXED + max(need(level) for level in range(1, levels + 1)), corners * 4 ** (levels - 1)
 
 
 def check_detail_memory(cage, levels, samples_per_edge=4, memory_budget=0):

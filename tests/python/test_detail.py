@@ -301,11 +301,42 @@ def test_detail_memory_estimate_counts_the_levels_samples(native):
         detail = native.fit_detail(cage, scan, levels, samples_per_edge=samples_per_edge, cutoff=0.3)
         counts[samples_per_edge] = [report.sample_count for report in detail.reports]
         need, faces = native.detail_memory_estimate(cage, levels, samples_per_edge)
-        assert need == native.DETAIL_BYTES_FIXED + native.DETAIL_BYTES_PER_SAMPLE * max(counts[samples_per_edge])
-        assert faces == len(detail.mesh.face_sizes)
+        # the finest level's measuring grid: 2 samples an edge, so 4 x 4
+        # quads (5 x 5 points) a ptex face, two levels finer: far below 2M
+        finest = len(detail.mesh.face_sizes)
+        grid = native.DETAIL_BYTES_PER_GRID_POINT * 25 * finest + native.DETAIL_BYTES_PER_SEARCHED_QUAD * 16 * finest
+        per_level = [native.DETAIL_BYTES_PER_SAMPLE * n for n in counts[samples_per_edge]]
+        per_level[-1] += grid
+        assert need == native.DETAIL_BYTES_FIXED + max(per_level)
+        assert faces == finest
     # Both cases as the docstring has them, so the first is the remainder's.
     assert counts[10][0] > counts[10][1] and counts[4][0] < counts[4][1], counts
     assert native.detail_memory_estimate(int(np.sum(cage.face_sizes)), 2, 10) == native.detail_memory_estimate(cage, 2, 10)
+
+
+def test_detail_memory_estimate_searches_a_large_grid_through_its_faces(native):
+    """Past MEASURE_GRID_QUADS quads the finest level's grid is searched
+    through one quad a ptex face: 5 levels on a 3,052-quad cage (3.1M ptex
+    faces at the finest, 2 samples an edge) count 9 grid points (the grid
+    one level finer, not two, to stay near the cap) and 1 searched quad a
+    face; at the cap, 4 a face."""
+    d = native.detail_levels
+    corners = 4 * 3052
+    finest = corners * 4 ** 4
+    need, faces = d.detail_memory_estimate(corners, 5)
+    assert faces == finest
+    assert need == (d.DETAIL_BYTES_FIXED + d.DETAIL_BYTES_PER_SAMPLE * 4 * finest
+                    + d.DETAIL_BYTES_PER_GRID_POINT * 9 * finest + d.DETAIL_BYTES_PER_SEARCHED_QUAD * finest)
+    small = d.MEASURE_GRID_QUADS // 4  # 4 quads a face: exactly at the cap
+    assert d._measure_grid(small, 2) == (9 * small, 4 * small)
+    assert d._measure_grid(small + 1, 2) == (9 * (small + 1), small + 1)
+    # the measured growth on the dragon's finest fit (5.64e9 bytes over 12.9M
+    # samples) is within the estimate, by less than a third
+    ptex = 3226624
+    points, searched = d._measure_grid(ptex, 2)
+    estimate = (d.DETAIL_BYTES_FIXED + d.DETAIL_BYTES_PER_SAMPLE * 4 * ptex + d.DETAIL_BYTES_PER_GRID_POINT * points
+                + d.DETAIL_BYTES_PER_SEARCHED_QUAD * searched)
+    assert 5.64e9 < estimate < 1.33 * 5.64e9
 
 
 @pytest.mark.skipif(not os.path.exists("/proc/self/clear_refs"), reason="needs Linux's peak resident size reset")
