@@ -12,7 +12,7 @@ at their defaults (clear()).
 
 import bpy
 
-from test_fit import fine_sphere, quad_sphere
+from shapes import fine_sphere, quad_sphere
 
 # The bound: a fresh mesh shows at most this many controls before a
 # sub-panel is opened (26 before the panel was regrouped).

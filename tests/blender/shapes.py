@@ -201,3 +201,24 @@ def mixed():
 
 ALL = (cube, uv_sphere, ico_sphere, ngon_cylinder, open_grid, edge_creases,
        vertex_creases, loose_parts, fin, double_sided_fins, creased_pages, mixed)
+
+
+def quad_sphere(name="Cage", cuts=3, radius=1.0):
+    """A cube cut `cuts` times and pushed onto a sphere: all quads, eight
+    valence-3 vertices; its vertices lie on the sphere, as if shrinkwrapped."""
+    bm = bmesh.new()
+    bmesh.ops.create_cube(bm, size=2.0)
+    bmesh.ops.subdivide_edges(bm, edges=bm.edges[:], cuts=cuts, use_grid_fill=True)
+    for vert in bm.verts:
+        vert.co = vert.co.normalized() * radius
+    mesh = bpy.data.meshes.new(name)
+    bm.to_mesh(mesh)
+    bm.free()
+    return link_and_activate(bpy.data.objects.new(name, mesh))
+
+
+def fine_sphere(name="Scan", segments=256, rings=128):
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=segments, ring_count=rings, radius=1.0)
+    scan = bpy.context.active_object
+    scan.name = name
+    return scan

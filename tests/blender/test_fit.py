@@ -9,7 +9,6 @@ import os
 import re
 import subprocess
 
-import bmesh
 import bpy
 import numpy as np
 import pytest
@@ -19,6 +18,7 @@ from mathutils.kdtree import KDTree
 
 import shapes
 import subdiv_pia
+from shapes import fine_sphere, quad_sphere
 from subdiv_pia import api, native, objects
 from conftest import (DATA, assert_unchanged, evaluated_control_points, evaluated_points, expect_error, import_obj,
                       link_and_activate, link_and_activate_existing, object_from_pydata, positions,
@@ -26,27 +26,6 @@ from conftest import (DATA, assert_unchanged, evaluated_control_points, evaluate
 
 
 # --- helpers ---------------------------------------------------------------------
-
-def quad_sphere(name="Cage", cuts=3, radius=1.0):
-    """A cube cut `cuts` times and pushed onto a sphere: all quads, eight
-    valence-3 vertices; its vertices lie on the sphere, as if shrinkwrapped."""
-    bm = bmesh.new()
-    bmesh.ops.create_cube(bm, size=2.0)
-    bmesh.ops.subdivide_edges(bm, edges=bm.edges[:], cuts=cuts, use_grid_fill=True)
-    for vert in bm.verts:
-        vert.co = vert.co.normalized() * radius
-    mesh = bpy.data.meshes.new(name)
-    bm.to_mesh(mesh)
-    bm.free()
-    return link_and_activate(bpy.data.objects.new(name, mesh))
-
-
-def fine_sphere(name="Scan", segments=256, rings=128):
-    bpy.ops.mesh.primitive_uv_sphere_add(segments=segments, ring_count=rings, radius=1.0)
-    scan = bpy.context.active_object
-    scan.name = name
-    return scan
-
 
 def activate(obj):
     return link_and_activate_existing(obj)
