@@ -4,7 +4,7 @@
  *
  * Blender's modifier evaluates a control vertex on adaptive patches, which at
  * most vertices reproduce the exact limit point.  Where that point has a
- * closed form, the row is written here; OpenSubdiv (catmark_osd.cpp) is
+ * closed form, the row is written here; OpenSubdiv (osd_*.cpp) is
  * built only around the other vertices.  The closed forms, with sharpness as
  * OpenSubdiv takes it (boundary edges and sharpness >= 10 infinitely sharp):
  *
