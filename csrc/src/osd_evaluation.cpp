@@ -19,6 +19,74 @@ static bool next_to_high_valence(const Far::TopologyLevel &base, Far::Index v) {
     return false;
 }
 
+// The corner at which Bfr evaluates a smooth vertex: its corner of its
+// first face, or of the first face with no non-manifold vertex, since
+// Bfr's irregular patch builder in OpenSubdiv 3.5 writes out of bounds on
+// some faces next to non-manifold vertices (seen on the Stanford dragon
+// scan).  The limit point of a smooth vertex is the same from every face.
+// Whether mesh face f is such a face.
+static bool is_clean_face(const spia_mesh *m, const spia_adjacency *adj, const Prepared &p, const Part &part,
+                          int32_t f) {
+    const Far::TopologyLevel &base = part.refiner->GetLevel(0);
+    for (int64_t d = adj->corner_start[f]; d < adj->corner_start[f + 1]; ++d)
+        if (base.IsVertexNonManifold(part.vertex(p.osd_of[m->face_vertices[d]]))) return false;
+    return true;
+}
+
+// Step 5's last part, for the vertices `approx` marks (Bfr at the
+// isolation level) and those at Bfr's default levels.
+static void share_level_faces(const spia_mesh *m, const spia_adjacency *adj, const Prepared &p, const Part &part,
+                              const std::vector<int32_t> &wanted, const std::vector<char> &approx, Evaluation &ev) {
+    auto clean_face = [&](int32_t f) { return is_clean_face(m, adj, p, part, f); };
+    // 6. Vertices with a closed form come out the same from any of their
+    //    faces and at any level: where one of their clean faces already
+    //    gives a vertex at the isolation level, they share its surface
+    //    instead of costing one more (a sharp face at Bfr's default levels is
+    //    the dearest of all).  The same holds for the vertices taken at the
+    //    isolation level (Blender evaluates them on their first face; their
+    //    limit point is the corner their patches share, which
+    //    test_reference checks with the last face as well): each takes a
+    //    clean face that already gives one, else the clean face with the
+    //    most such vertices, so that fewer irregular surfaces are built.
+    ev.level_face.assign((size_t)m->face_count, 0);
+    for (int32_t o : wanted) {
+        if (!approx[o]) continue;
+        const int32_t v = p.vertex_of[o];
+        int64_t best = -1;
+        int best_count = -1;
+        for (int64_t i = adj->first[v]; i < adj->first[v + 1]; ++i) {
+            const int64_t c = adj->corner_of[i];
+            const int32_t f = adj->face_of_corner[c];
+            if (!clean_face(f)) continue;
+            int count = 0;
+            if (ev.level_face[f]) {
+                count = INT32_MAX;
+            } else {
+                for (int64_t d = adj->corner_start[f]; d < adj->corner_start[f + 1]; ++d)
+                    count += approx[p.osd_of[m->face_vertices[d]]];
+            }
+            if (count > best_count) {
+                best_count = count;
+                best = c;
+            }
+        }
+        ev.bfr_corner[o] = (int32_t)best;  // the loop above found a clean face, so best >= 0
+        ev.level_face[adj->face_of_corner[best]] = 1;
+    }
+    for (int32_t o : wanted) {
+        if (approx[o] || ev.bfr_corner[o] < 0 || ev.level_face[adj->face_of_corner[ev.bfr_corner[o]]]) continue;
+        const int32_t v = p.vertex_of[o];
+        for (int64_t i = adj->first[v]; i < adj->first[v + 1]; ++i) {
+            const int64_t c = adj->corner_of[i];
+            const int32_t f = adj->face_of_corner[c];
+            if (ev.level_face[f] && clean_face(f)) {
+                ev.bfr_corner[o] = (int32_t)c;
+                break;
+            }
+        }
+    }
+}
+
 // 5. How each vertex of `wanted` (osd numbering) is evaluated.  At
 //    semi-sharp features and darts of manifold meshes Blender's surface
 //    depends on the isolation level.  Semi-sharp vertices of manifold fans
@@ -42,17 +110,7 @@ void choose_evaluation(const spia_mesh *m, const spia_adjacency *adj, const spia
                        const Part &part, const std::vector<int32_t> &wanted, Evaluation &ev) {
     const Far::TopologyLevel &base = part.refiner->GetLevel(0);
     const bool blender = p.blender;
-    auto non_manifold = [&](int32_t o) { return base.IsVertexNonManifold(part.vertex(o)); };
-    // The corner at which Bfr evaluates a smooth vertex: its corner of its
-    // first face, or of the first face with no non-manifold vertex, since
-    // Bfr's irregular patch builder in OpenSubdiv 3.5 writes out of bounds on
-    // some faces next to non-manifold vertices (seen on the Stanford dragon
-    // scan).  The limit point of a smooth vertex is the same from every face.
-    auto clean_face = [&](int32_t f) {
-        for (int64_t d = adj->corner_start[f]; d < adj->corner_start[f + 1]; ++d)
-            if (non_manifold(p.osd_of[m->face_vertices[d]])) return false;
-        return true;
-    };
+    auto clean_face = [&](int32_t f) { return is_clean_face(m, adj, p, part, f); };
     ev.adaptive.assign((size_t)p.osd_n, 0);
     ev.bfr_corner.assign((size_t)p.osd_n, -1);
     std::vector<char> approx((size_t)p.osd_n, 0);
@@ -133,53 +191,7 @@ void choose_evaluation(const spia_mesh *m, const spia_adjacency *adj, const spia
         any_approx = any_approx || approx[o];
     }
     if (!any_approx) return;
-    // 6. Vertices with a closed form come out the same from any of their
-    //    faces and at any level: where one of their clean faces already
-    //    gives a vertex at the isolation level, they share its surface
-    //    instead of costing one more (a sharp face at Bfr's default levels is
-    //    the dearest of all).  The same holds for the vertices taken at the
-    //    isolation level (Blender evaluates them on their first face; their
-    //    limit point is the corner their patches share, which
-    //    test_reference checks with the last face as well): each takes a
-    //    clean face that already gives one, else the clean face with the
-    //    most such vertices, so that fewer irregular surfaces are built.
-    ev.level_face.assign((size_t)m->face_count, 0);
-    for (int32_t o : wanted) {
-        if (!approx[o]) continue;
-        const int32_t v = p.vertex_of[o];
-        int64_t best = -1;
-        int best_count = -1;
-        for (int64_t i = adj->first[v]; i < adj->first[v + 1]; ++i) {
-            const int64_t c = adj->corner_of[i];
-            const int32_t f = adj->face_of_corner[c];
-            if (!clean_face(f)) continue;
-            int count = 0;
-            if (ev.level_face[f]) {
-                count = INT32_MAX;
-            } else {
-                for (int64_t d = adj->corner_start[f]; d < adj->corner_start[f + 1]; ++d)
-                    count += approx[p.osd_of[m->face_vertices[d]]];
-            }
-            if (count > best_count) {
-                best_count = count;
-                best = c;
-            }
-        }
-        ev.bfr_corner[o] = (int32_t)best;  // the loop above found a clean face, so best >= 0
-        ev.level_face[adj->face_of_corner[best]] = 1;
-    }
-    for (int32_t o : wanted) {
-        if (approx[o] || ev.bfr_corner[o] < 0 || ev.level_face[adj->face_of_corner[ev.bfr_corner[o]]]) continue;
-        const int32_t v = p.vertex_of[o];
-        for (int64_t i = adj->first[v]; i < adj->first[v + 1]; ++i) {
-            const int64_t c = adj->corner_of[i];
-            const int32_t f = adj->face_of_corner[c];
-            if (ev.level_face[f] && clean_face(f)) {
-                ev.bfr_corner[o] = (int32_t)c;
-                break;
-            }
-        }
-    }
+    share_level_faces(m, adj, p, part, wanted, approx, ev);
 }
 
 }  // namespace spia_osd

@@ -307,6 +307,49 @@ static std::vector<int32_t> row_room(const spia_mesh *m, const spia_adjacency *a
     return room;
 }
 
+// 8. Each vertex no face uses, its number of loose edges (up to two
+//    counted) and their other ends (Catmull-Clark only; empty otherwise).
+static void loose_edges(const spia_mesh *m, const Prepared &p, std::vector<int32_t> &loose_degree,
+                        std::vector<int32_t> &loose_ends) {
+    const int32_t n = m->vertex_count;
+    if (p.blender && p.osd_n < n && m->edge_count > 0) {
+        loose_degree.assign((size_t)n, 0);
+        loose_ends.assign(2 * (size_t)n, -1);
+        for (int32_t e = 0; e < m->edge_count; ++e)
+            for (int k = 0; k < 2; ++k) {
+                int32_t v = m->edges[2 * (int64_t)e + k], w = m->edges[2 * (int64_t)e + 1 - k];
+                if (p.osd_of[v] >= 0) continue;
+                if (loose_degree[v] < 2) loose_ends[2 * (size_t)v + loose_degree[v]] = w;
+                ++loose_degree[v];
+            }
+    }
+}
+
+// The rows of the vertices no face uses (8), and the held rows (6c, 7),
+// written into the table; the held rows' memory is given back.
+static void write_loose_and_held(const spia_mesh *m, const Prepared &p, const std::vector<int32_t> &loose_degree,
+                                 const std::vector<int32_t> &loose_ends, HeldRows &held, TableWriter &table) {
+    std::vector<Entry> row;
+    for (int32_t v = 0; v < m->vertex_count; ++v) {
+        const int32_t o = p.osd_of[v];
+        row.clear();
+        if (o < 0) {
+            const bool smoothed = !loose_degree.empty() && loose_degree[v] == 2;
+            row.emplace_back(v, smoothed ? 4.0 / 6.0 : 1.0);
+            if (smoothed)
+                for (int k = 0; k < 2; ++k) row.emplace_back(loose_ends[2 * (size_t)v + k], 1.0 / 6.0);
+        } else if (!held.start.empty() && held.start[o] >= 0) {
+            for (int32_t k = 0; k < held.size[o]; ++k)
+                row.emplace_back(held.indices[held.start[o] + k], held.weights[held.start[o] + k]);
+        } else {
+            continue;
+        }
+        table.write(v, row, table.spilled);
+    }
+    std::vector<int32_t>().swap(held.indices);
+    std::vector<double>().swap(held.weights);
+}
+
 static spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const spia_options *opt,
                          unsigned char *on_boundary, spia_stencils **out, spia_status *status) {
     const spia_adjacency *adj = adj_lists;
@@ -319,17 +362,7 @@ static spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const sp
     //    smooths a vertex with exactly two (loose) edges along them:
     //    (prev + 4 V + next) / 6.
     std::vector<int32_t> loose_degree, loose_ends;
-    if (p.blender && p.osd_n < n && m->edge_count > 0) {
-        loose_degree.assign((size_t)n, 0);
-        loose_ends.assign(2 * (size_t)n, -1);
-        for (int32_t e = 0; e < m->edge_count; ++e)
-            for (int k = 0; k < 2; ++k) {
-                int32_t v = m->edges[2 * (int64_t)e + k], w = m->edges[2 * (int64_t)e + 1 - k];
-                if (p.osd_of[v] >= 0) continue;
-                if (loose_degree[v] < 2) loose_ends[2 * (size_t)v + loose_degree[v]] = w;
-                ++loose_degree[v];
-            }
-    }
+    loose_edges(m, p, loose_degree, loose_ends);
 
     // 9. The table, with room for each row.
     TableWriter table;
@@ -372,27 +405,7 @@ static spia_result build(const spia_mesh *m, spia_adjacency *adj_lists, const sp
         if (r != SPIA_OK) return r;
     }
     // Vertices no face uses, and the adaptive rows.
-    {
-        std::vector<Entry> row;
-        for (int32_t v = 0; v < n; ++v) {
-            const int32_t o = p.osd_of[v];
-            row.clear();
-            if (o < 0) {
-                const bool smoothed = !loose_degree.empty() && loose_degree[v] == 2;
-                row.emplace_back(v, smoothed ? 4.0 / 6.0 : 1.0);
-                if (smoothed)
-                    for (int k = 0; k < 2; ++k) row.emplace_back(loose_ends[2 * (size_t)v + k], 1.0 / 6.0);
-            } else if (!held.start.empty() && held.start[o] >= 0) {
-                for (int32_t k = 0; k < held.size[o]; ++k)
-                    row.emplace_back(held.indices[held.start[o] + k], held.weights[held.start[o] + k]);
-            } else {
-                continue;
-            }
-            table.write(v, row, table.spilled);
-        }
-        std::vector<int32_t>().swap(held.indices);
-        std::vector<double>().swap(held.weights);
-    }
+    write_loose_and_held(m, p, loose_degree, loose_ends, held, table);
     // The boundary vertices the closed rows did not learn, then (only
     // corner_start is needed from here on) the vertex lists make room.
     if (spia__boundary_vertices_unknown(m, adj, on_boundary, opt->threads > 0 ? opt->threads : 1) != SPIA_OK)

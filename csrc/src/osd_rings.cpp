@@ -79,6 +79,26 @@ struct RingMask {
 };
 }  // namespace
 
+// The limit mask at a ring's last level into g (centre, edge ends, far
+// corners), semi-sharpness left taken as smooth (es is changed so); false
+// at a dart or where the mask is not of the kind expected.
+static bool last_limit_mask(const Sdc::Scheme<Sdc::SCHEME_CATMARK> &scheme, const Sdc::Crease &crease, int n, int nf,
+                            std::vector<float> &es, float vs, int levels, std::vector<double> &g) {
+    for (float &x : es)
+        if (x < kInfiniteSharpness) x = 0.0f;
+    if (vs < kInfiniteSharpness) vs = 0.0f;
+    RingVertex vertex{n, nf, vs, es.data()};
+    RingMask mask(g.data(), g.data() + 1, g.data() + 1 + n);
+    const Sdc::Crease::Rule rule = crease.DetermineVertexVertexRule(vs, n, es.data());
+    if (rule == Sdc::Crease::RULE_DART || levels == 0) return false;
+    scheme.ComputeVertexLimitMask(vertex, mask, rule);
+    if (mask.nv != 1 || (mask.ne != 0 && mask.ne != n) || (mask.nf != 0 && (mask.nf != nf || mask.centres)))
+        return false;
+    if (mask.ne == 0) std::fill(g.begin() + 1, g.begin() + 1 + n, 0.0);
+    if (mask.nf == 0) std::fill(g.begin() + 1 + n, g.end(), 0.0);
+    return true;
+}
+
 // The row of the ring's centre at `levels` levels, over the mesh's
 // vertices; false where a mask is not of the kind expected.
 bool ring_row(const spia_mesh *m, const spia_adjacency *adj, const Ring &ring, float vertex_sharpness, int levels,
@@ -129,20 +149,7 @@ bool ring_row(const spia_mesh *m, const spia_adjacency *adj, const Ring &ring, f
     // smooth: weights on the centre, the far ends of its edges and the far
     // corners of its faces (quads there).
     s.g.assign(vm, 0.0);
-    {
-        for (float &x : es)
-            if (x < kInfiniteSharpness) x = 0.0f;
-        if (vs < kInfiniteSharpness) vs = 0.0f;
-        RingVertex vertex{n, nf, vs, es.data()};
-        RingMask mask(s.g.data(), s.g.data() + 1, s.g.data() + 1 + n);
-        const Sdc::Crease::Rule rule = crease.DetermineVertexVertexRule(vs, n, es.data());
-        if (rule == Sdc::Crease::RULE_DART || levels == 0) return false;
-        scheme.ComputeVertexLimitMask(vertex, mask, rule);
-        if (mask.nv != 1 || (mask.ne != 0 && mask.ne != n) || (mask.nf != 0 && (mask.nf != nf || mask.centres)))
-            return false;
-        if (mask.ne == 0) std::fill(s.g.begin() + 1, s.g.begin() + 1 + n, 0.0);
-        if (mask.nf == 0) std::fill(s.g.begin() + 1 + n, s.g.end(), 0.0);
-    }
+    if (!last_limit_mask(scheme, crease, n, nf, es, vs, levels, s.g)) return false;
     // Carried back level by level: g holds the weights on the level's
     // ring (centre, edge ends, far corners), centre_of_face those on the
     // centres of its faces, the next level's far corners.

@@ -170,6 +170,82 @@ static std::vector<int32_t> sharpened_after_360(const Far::TopologyLevel &base) 
 // Steps 1 to 3 below, shared by the stencils and by refinement: Blender's
 // (or, for Loop, OpenSubdiv's) sharpness values, and the renumbering that
 
+// Step 1: the vertices used by faces, renumbered densely in vertex order
+// (osd_of: -1 for the others), and the faces' corners in that numbering
+// (remapped, left empty when no vertex is left out).
+static void renumber(const spia_mesh *m, const spia_adjacency *adj, std::vector<int32_t> &osd_of,
+                     std::vector<int32_t> &vertex_of, std::vector<int32_t> &remapped) {
+    const int32_t n = m->vertex_count;
+    osd_of.assign(n, -1);
+    vertex_of.reserve(n);
+    for (int32_t v = 0; v < n; ++v) {
+        if (adj->first[v + 1] > adj->first[v]) {
+            osd_of[v] = (int32_t)vertex_of.size();
+            vertex_of.push_back(v);
+        }
+    }
+    if ((int32_t)vertex_of.size() != n) {
+        remapped.resize((size_t)adj->corner_count);
+        for (int64_t c = 0; c < adj->corner_count; ++c) remapped[c] = osd_of[m->face_vertices[c]];
+    }
+}
+
+// The crease pairs and weights for OpenSubdiv made again from the merged
+// lists (merge_repeated_creases), each edge once, from its smaller end.
+static void crease_pairs_again(int32_t n, const std::vector<int64_t> &crease_first, const std::vector<int32_t> &osd_of,
+                               const Prepared &p, std::vector<int32_t> &crease_pairs,
+                               std::vector<float> &crease_weights) {
+    crease_pairs.clear();
+    crease_weights.clear();
+    for (int32_t a = 0; a < n; ++a)
+        for (int64_t i = crease_first[(size_t)a]; i < crease_first[(size_t)a + 1]; ++i) {
+            const int32_t b = p.crease_other[(size_t)i];
+            if (a > b) continue;
+            crease_pairs.push_back(osd_of[(size_t)a]);
+            crease_pairs.push_back(osd_of[(size_t)b]);
+            crease_weights.push_back(p.crease_sharpness[(size_t)i]);
+        }
+}
+
+// Blender's two-edge rule: vertex v's sharpness s with the smaller
+// sharpness of its two edges added, capped at 10, where it has exactly two
+// distinct neighbours along face edges; s itself otherwise.
+static float with_two_edge_rule(const spia_mesh *m, const spia_adjacency *adj, const Prepared &p,
+                                const std::vector<int64_t> &crease_first, int32_t v, float s) {
+    // Distinct neighbours along face edges.
+    int32_t nb[3];
+    int count = 0;
+    for (int64_t i = adj->first[v]; i < adj->first[v + 1] && count < 3; ++i) {
+        int64_t c = adj->corner_of[i];
+        int32_t cand[2] = {spia__corner_prev(m, adj, c), spia__corner_next(m, adj, c)};
+        for (int32_t w : cand) {
+            bool seen = false;
+            for (int k = 0; k < count; ++k) seen = seen || nb[k] == w;
+            if (!seen && count < 3) nb[count++] = w;
+        }
+    }
+    if (count == 2) {
+        float e_s[2] = {0.0f, 0.0f};
+        for (int k = 0; k < 2; ++k)
+            for (int64_t i = crease_first[v]; i < crease_first[v + 1]; ++i)
+                if (p.crease_other[(size_t)i] == nb[k]) e_s[k] = p.crease_sharpness[(size_t)i];
+        s += std::min(e_s[0], e_s[1]);
+        s = std::min(s, 10.0f);
+    }
+    return s;
+}
+
+// Blender's boundary and creasing options.
+static Sdc::Options blender_options(const spia_options *opt) {
+    Sdc::Options sdc;
+    sdc.SetVtxBoundaryInterpolation(opt->boundary_smooth == SPIA_BOUNDARY_SMOOTH_PRESERVE_CORNERS
+                                        ? Sdc::Options::VTX_BOUNDARY_EDGE_AND_CORNER
+                                        : Sdc::Options::VTX_BOUNDARY_EDGE_ONLY);
+    sdc.SetCreasingMethod(Sdc::Options::CREASE_UNIFORM);
+    sdc.SetFVarLinearInterpolation(Sdc::Options::FVAR_LINEAR_ALL);
+    return sdc;
+}
+
 spia_result prepare_sharpness(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, Prepared &p,
                               bool two_edge_rule) {
     const int32_t n = m->vertex_count;
@@ -181,21 +257,9 @@ spia_result prepare_sharpness(const spia_mesh *m, const spia_adjacency *adj, con
     const Sdc::SchemeType scheme = blender ? Sdc::SCHEME_CATMARK : Sdc::SCHEME_LOOP;
 
     // 1. Vertices used by faces, renumbered densely in vertex order.
-    std::vector<int32_t> osd_of(n, -1), vertex_of;
-    vertex_of.reserve(n);
-    for (int32_t v = 0; v < n; ++v) {
-        if (adj->first[v + 1] > adj->first[v]) {
-            osd_of[v] = (int32_t)vertex_of.size();
-            vertex_of.push_back(v);
-        }
-    }
+    std::vector<int32_t> osd_of, vertex_of, remapped;
+    renumber(m, adj, osd_of, vertex_of, remapped);
     const int32_t osd_n = (int32_t)vertex_of.size();
-    const bool renumbered = osd_n != n;
-    std::vector<int32_t> remapped;
-    if (renumbered) {
-        remapped.resize((size_t)adj->corner_count);
-        for (int64_t c = 0; c < adj->corner_count; ++c) remapped[c] = osd_of[m->face_vertices[c]];
-    }
 
     // 2. Edge sharpness of face edges; loose edges sharpen their end points.
     std::vector<float> vertex_sharpness(osd_n, 0.0f);
@@ -242,18 +306,8 @@ spia_result prepare_sharpness(const spia_mesh *m, const spia_adjacency *adj, con
     }
     // An edge listed more than once takes its largest crease: the lists
     // merged, the pairs for OpenSubdiv are made again from them.
-    if (!crease_first.empty() && merge_repeated_creases(n, crease_first, p.crease_other, p.crease_sharpness)) {
-        crease_pairs.clear();
-        crease_weights.clear();
-        for (int32_t a = 0; a < n; ++a)
-            for (int64_t i = crease_first[(size_t)a]; i < crease_first[(size_t)a + 1]; ++i) {
-                const int32_t b = p.crease_other[(size_t)i];
-                if (a > b) continue;
-                crease_pairs.push_back(osd_of[(size_t)a]);
-                crease_pairs.push_back(osd_of[(size_t)b]);
-                crease_weights.push_back(p.crease_sharpness[(size_t)i]);
-            }
-    }
+    if (!crease_first.empty() && merge_repeated_creases(n, crease_first, p.crease_other, p.crease_sharpness))
+        crease_pairs_again(n, crease_first, osd_of, p, crease_pairs, crease_weights);
     const bool any_edge_crease = !crease_first.empty();
 
     // 3. Vertex sharpness: infinite at loose-edge ends; else the vertex
@@ -268,28 +322,8 @@ spia_result prepare_sharpness(const spia_mesh *m, const spia_adjacency *adj, con
             s = kInfiniteSharpness;
         } else {
             s = (use_creases && m->vertex_creases) ? crease_to_sharpness(m->vertex_creases[v]) : 0.0f;
-            if (blender && two_edge_rule && any_edge_crease && crease_first[v + 1] > crease_first[v]) {
-                // Distinct neighbours along face edges.
-                int32_t nb[3];
-                int count = 0;
-                for (int64_t i = adj->first[v]; i < adj->first[v + 1] && count < 3; ++i) {
-                    int64_t c = adj->corner_of[i];
-                    int32_t cand[2] = {spia__corner_prev(m, adj, c), spia__corner_next(m, adj, c)};
-                    for (int32_t w : cand) {
-                        bool seen = false;
-                        for (int k = 0; k < count; ++k) seen = seen || nb[k] == w;
-                        if (!seen && count < 3) nb[count++] = w;
-                    }
-                }
-                if (count == 2) {
-                    float e_s[2] = {0.0f, 0.0f};
-                    for (int k = 0; k < 2; ++k)
-                        for (int64_t i = crease_first[v]; i < crease_first[v + 1]; ++i)
-                            if (p.crease_other[(size_t)i] == nb[k]) e_s[k] = p.crease_sharpness[(size_t)i];
-                    s += std::min(e_s[0], e_s[1]);
-                    s = std::min(s, 10.0f);
-                }
-            }
+            if (blender && two_edge_rule && any_edge_crease && crease_first[v + 1] > crease_first[v])
+                s = with_two_edge_rule(m, adj, p, crease_first, v, s);
         }
         if (s > 0.0f) {
             corner_indices.push_back(o);
@@ -298,12 +332,6 @@ spia_result prepare_sharpness(const spia_mesh *m, const spia_adjacency *adj, con
         p.vertex_sharpness[(size_t)v] = s;
     }
 
-    Sdc::Options sdc;
-    sdc.SetVtxBoundaryInterpolation(opt->boundary_smooth == SPIA_BOUNDARY_SMOOTH_PRESERVE_CORNERS
-                                        ? Sdc::Options::VTX_BOUNDARY_EDGE_AND_CORNER
-                                        : Sdc::Options::VTX_BOUNDARY_EDGE_ONLY);
-    sdc.SetCreasingMethod(Sdc::Options::CREASE_UNIFORM);
-    sdc.SetFVarLinearInterpolation(Sdc::Options::FVAR_LINEAR_ALL);
     p.osd_n = osd_n;
     p.osd_of.swap(osd_of);
     p.vertex_of.swap(vertex_of);
@@ -315,7 +343,7 @@ spia_result prepare_sharpness(const spia_mesh *m, const spia_adjacency *adj, con
     p.crease_first.swap(crease_first);
     p.blender = blender;
     p.scheme = scheme;
-    p.sdc = sdc;
+    p.sdc = blender_options(opt);
     return SPIA_OK;
 }
 
