@@ -205,6 +205,61 @@ typedef struct tri_level {
     int32_t *F;  /* f * 3 */
 } tri_level;
 
+/* A step's new points at the old vertices (Hoppe's boundary rule, Loop's
+ * beta inside); nonzero when cancelled. */
+static int vertex_points(const tri_level *in, tri_level *out, const spia_mesh *m, const spia_adjacency *adj,
+                         const int32_t *valence, const int32_t *bnd, int32_t *nb, int32_t *cnt, int32_t cap,
+                         spia__refine_clock *clock) {
+    for (int32_t v = 0; v < in->n; ++v) {
+        if (spia__refine_tick(clock, v)) return 1;
+        double *q = out->P + 3 * (int64_t)v;
+        const double *p = in->P + 3 * (int64_t)v;
+        if (valence[v] == 0) {
+            for (int a = 0; a < 3; ++a) q[a] = p[a];
+        } else if (bnd[2 * v] >= 0) {
+            const double *x = in->P + 3 * (int64_t)bnd[2 * v], *y = in->P + 3 * (int64_t)bnd[2 * v + 1];
+            for (int a = 0; a < 3; ++a) q[a] = 0.75 * p[a] + 0.125 * (x[a] + y[a]);
+        } else {
+            int32_t k = spia__vertex_neighbours(m, adj, v, nb, cnt, cap);
+            const double beta = loop_refine_beta(k);
+            for (int a = 0; a < 3; ++a) q[a] = (1.0 - k * beta) * p[a];
+            for (int32_t i = 0; i < k; ++i)
+                for (int a = 0; a < 3; ++a) q[a] += beta * in->P[3 * (int64_t)nb[i] + a];
+        }
+    }
+    return 0;
+}
+
+/* A step's edge points, numbered after the old vertices. */
+static void edge_points(const tri_level *in, tri_level *out, const int64_t *first_edge, const int64_t *edge_other,
+                        const int64_t *edge_opp, const int64_t *edge_faces, const int32_t *valence) {
+    for (int32_t v = 0; v < in->n; ++v)
+        for (int64_t e = first_edge[v]; e < first_edge[v + 1]; ++e) {
+            const int32_t w = (int32_t)edge_other[e];
+            const double *x = in->P + 3 * (int64_t)v, *y = in->P + 3 * (int64_t)w;
+            double *q = out->P + 3 * (int64_t)(in->n + e);
+            if (edge_faces[e] >= 2) {
+                const double *c = in->P + 3 * edge_opp[2 * e], *d = in->P + 3 * edge_opp[2 * e + 1];
+                for (int a = 0; a < 3; ++a) q[a] = 0.375 * (x[a] + y[a]) + 0.125 * (c[a] + d[a]);
+            } else {
+                const int rv = valence[v] == 4, rw = valence[w] == 4;
+                const double wv = rv == rw ? 0.5 : rv ? 0.625 : 0.375;
+                for (int a = 0; a < 3; ++a) q[a] = wv * x[a] + (1.0 - wv) * y[a];
+            }
+        }
+}
+
+/* Each triangle split in four. */
+static void split_faces(const tri_level *in, tri_level *out, const int64_t *edge_of_corner) {
+    for (int32_t f = 0; f < in->f; ++f) {
+        const int32_t a = in->F[3 * f], b = in->F[3 * f + 1], c = in->F[3 * f + 2];
+        const int32_t ab = in->n + (int32_t)edge_of_corner[3 * (int64_t)f], bc = in->n + (int32_t)edge_of_corner[3 * (int64_t)f + 1],
+                      ca = in->n + (int32_t)edge_of_corner[3 * (int64_t)f + 2];
+        const int32_t tris[12] = {a, ab, ca, b, bc, ab, c, ca, bc, ab, bc, ca};
+        memcpy(out->F + 12 * (int64_t)f, tris, sizeof tris);
+    }
+}
+
 /* One subdivision step: old vertices keep their indices, edge points follow. */
 static spia_result hoppe_step(const tri_level *in, tri_level *out, spia__refine_clock *clock) {
     spia_result r = SPIA_ERROR_OUT_OF_MEMORY;
@@ -268,44 +323,9 @@ static spia_result hoppe_step(const tri_level *in, tri_level *out, spia__refine_
     out->P = (double *)malloc(sizeof(double) * 3 * (size_t)out->n);
     out->F = (int32_t *)malloc(sizeof(int32_t) * 3 * (size_t)out->f);
     if (!out->P || !out->F) goto done;
-    for (int32_t v = 0; v < in->n; ++v) {
-        if (spia__refine_tick(clock, v)) goto cancelled;
-        double *q = out->P + 3 * (int64_t)v;
-        const double *p = in->P + 3 * (int64_t)v;
-        if (valence[v] == 0) {
-            for (int a = 0; a < 3; ++a) q[a] = p[a];
-        } else if (bnd[2 * v] >= 0) {
-            const double *x = in->P + 3 * (int64_t)bnd[2 * v], *y = in->P + 3 * (int64_t)bnd[2 * v + 1];
-            for (int a = 0; a < 3; ++a) q[a] = 0.75 * p[a] + 0.125 * (x[a] + y[a]);
-        } else {
-            int32_t k = spia__vertex_neighbours(&m, &adj, v, nb, cnt, cap);
-            const double beta = loop_refine_beta(k);
-            for (int a = 0; a < 3; ++a) q[a] = (1.0 - k * beta) * p[a];
-            for (int32_t i = 0; i < k; ++i)
-                for (int a = 0; a < 3; ++a) q[a] += beta * in->P[3 * (int64_t)nb[i] + a];
-        }
-    }
-    for (int32_t v = 0; v < in->n; ++v)
-        for (int64_t e = first_edge[v]; e < first_edge[v + 1]; ++e) {
-            const int32_t w = (int32_t)edge_other[e];
-            const double *x = in->P + 3 * (int64_t)v, *y = in->P + 3 * (int64_t)w;
-            double *q = out->P + 3 * (int64_t)(in->n + e);
-            if (edge_faces[e] >= 2) {
-                const double *c = in->P + 3 * edge_opp[2 * e], *d = in->P + 3 * edge_opp[2 * e + 1];
-                for (int a = 0; a < 3; ++a) q[a] = 0.375 * (x[a] + y[a]) + 0.125 * (c[a] + d[a]);
-            } else {
-                const int rv = valence[v] == 4, rw = valence[w] == 4;
-                const double wv = rv == rw ? 0.5 : rv ? 0.625 : 0.375;
-                for (int a = 0; a < 3; ++a) q[a] = wv * x[a] + (1.0 - wv) * y[a];
-            }
-        }
-    for (int32_t f = 0; f < in->f; ++f) {
-        const int32_t a = in->F[3 * f], b = in->F[3 * f + 1], c = in->F[3 * f + 2];
-        const int32_t ab = in->n + (int32_t)edge_of_corner[3 * (int64_t)f], bc = in->n + (int32_t)edge_of_corner[3 * (int64_t)f + 1],
-                      ca = in->n + (int32_t)edge_of_corner[3 * (int64_t)f + 2];
-        const int32_t tris[12] = {a, ab, ca, b, bc, ab, c, ca, bc, ab, bc, ca};
-        memcpy(out->F + 12 * (int64_t)f, tris, sizeof tris);
-    }
+    if (vertex_points(in, out, &m, &adj, valence, bnd, nb, cnt, cap, clock)) goto cancelled;
+    edge_points(in, out, first_edge, edge_other, edge_opp, edge_faces, valence);
+    split_faces(in, out, edge_of_corner);
     r = SPIA_OK;
     goto done;
 cancelled:
