@@ -78,6 +78,43 @@ static int32_t fan_count(const spia_mesh *m, const spia_adjacency *a, int32_t v,
     return fans;
 }
 
+/* Vertex v's limit row written into s from entry pos on (nb, fe: room for
+ * cap neighbours); returns the entry after it. */
+static int64_t hoppe_row(const spia_mesh *m, const spia_adjacency *a, int32_t v, const int32_t *valence,
+                         const unsigned char *boundary, int32_t *nb, int32_t *fe, int32_t cap, spia_stencils *s,
+                         int64_t pos) {
+    if (a->first[v + 1] == a->first[v]) { /* used by no face: stays put */
+        s->indices[pos] = v;
+        s->weights[pos++] = 1.0;
+        return pos;
+    }
+    int32_t k = spia__vertex_neighbours(m, a, v, nb, fe, cap);
+    if (!boundary[v]) {
+        const double beta = loop_beta(k);
+        s->indices[pos] = v;
+        s->weights[pos++] = beta;
+        for (int32_t i = 0; i < k; ++i) {
+            s->indices[pos] = nb[i];
+            s->weights[pos++] = (1.0 - beta) / k;
+        }
+        return pos;
+    }
+    const int regular = valence[v] == 4;
+    const double denominator = regular ? 48.0 : 40.0;
+    double centre = regular ? 24.0 : 18.0;
+    const int64_t centre_at = pos++;
+    for (int32_t i = 0; i < k; ++i) {
+        if (fe[i] != 1) continue;
+        const int side_regular = valence[nb[i]] == 4;
+        centre += regular ? (side_regular ? 4.0 : 5.0) : (side_regular ? 3.0 : 4.0);
+        s->indices[pos] = nb[i];
+        s->weights[pos++] = (side_regular ? 8.0 : 7.0) / denominator;
+    }
+    s->indices[centre_at] = v;
+    s->weights[centre_at] = centre / denominator;
+    return pos;
+}
+
 spia_result spia__loop_hoppe_limit_stencils(const spia_mesh *m, spia_adjacency *a, const spia_options *opt,
                                             spia__refine_clock *clock, spia_stencils **out, spia_status *status) {
     (void)opt;
@@ -149,35 +186,7 @@ spia_result spia__loop_hoppe_limit_stencils(const spia_mesh *m, spia_adjacency *
             return spia__refine_cancelled(status, clock);
         }
         s->offsets[v] = pos;
-        if (a->first[v + 1] == a->first[v]) { /* used by no face: stays put */
-            s->indices[pos] = v;
-            s->weights[pos++] = 1.0;
-            continue;
-        }
-        int32_t k = spia__vertex_neighbours(m, a, v, nb, fe, cap);
-        if (!boundary[v]) {
-            const double beta = loop_beta(k);
-            s->indices[pos] = v;
-            s->weights[pos++] = beta;
-            for (int32_t i = 0; i < k; ++i) {
-                s->indices[pos] = nb[i];
-                s->weights[pos++] = (1.0 - beta) / k;
-            }
-            continue;
-        }
-        const int regular = valence[v] == 4;
-        const double denominator = regular ? 48.0 : 40.0;
-        double centre = regular ? 24.0 : 18.0;
-        const int64_t centre_at = pos++;
-        for (int32_t i = 0; i < k; ++i) {
-            if (fe[i] != 1) continue;
-            const int side_regular = valence[nb[i]] == 4;
-            centre += regular ? (side_regular ? 4.0 : 5.0) : (side_regular ? 3.0 : 4.0);
-            s->indices[pos] = nb[i];
-            s->weights[pos++] = (side_regular ? 8.0 : 7.0) / denominator;
-        }
-        s->indices[centre_at] = v;
-        s->weights[centre_at] = centre / denominator;
+        pos = hoppe_row(m, a, v, valence, boundary, nb, fe, cap, s, pos);
     }
     s->offsets[n] = pos;
     free(nb);
