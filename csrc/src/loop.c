@@ -360,6 +360,19 @@ done:
     return r;
 }
 
+/* The mesh's edges counted into *edges; 0 when out of memory. */
+static int count_edges(const spia_mesh *m, const spia_adjacency *adj, int64_t *edges) {
+    const int32_t cap = 2 * spia__max_corners_per_vertex(adj) + 2;
+    int32_t *nb = (int32_t *)malloc(sizeof(int32_t) * 2 * (size_t)cap);
+    if (!nb) return 0;
+    for (int32_t v = 0; v < m->vertex_count; ++v) {
+        int32_t k = spia__vertex_neighbours(m, adj, v, nb, nb + cap, cap);
+        for (int32_t i = 0; i < k; ++i) *edges += nb[i] > v;
+    }
+    free(nb);
+    return 1;
+}
+
 spia_result spia__loop_hoppe_refine_limit(const spia_mesh *m, const spia_options *opt, int32_t levels,
                                           int32_t *vertex_count, int32_t *face_count, float *positions,
                                           int32_t *faces, spia__refine_clock *clock, spia_status *status) {
@@ -376,18 +389,9 @@ spia_result spia__loop_hoppe_refine_limit(const spia_mesh *m, const spia_options
     }
     /* Sizes: V' = V + E, E' = 2 E + 3 F, F' = 4 F (closed form, no refinement). */
     int64_t edges = 0;
-    {
-        const int32_t cap = 2 * spia__max_corners_per_vertex(&adj) + 2;
-        int32_t *nb = (int32_t *)malloc(sizeof(int32_t) * 2 * (size_t)cap);
-        if (!nb) {
-            spia__adjacency_free(&adj);
-            return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory refining the surface");
-        }
-        for (int32_t v = 0; v < m->vertex_count; ++v) {
-            int32_t k = spia__vertex_neighbours(m, &adj, v, nb, nb + cap, cap);
-            for (int32_t i = 0; i < k; ++i) edges += nb[i] > v;
-        }
-        free(nb);
+    if (!count_edges(m, &adj, &edges)) {
+        spia__adjacency_free(&adj);
+        return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory refining the surface");
     }
     spia__adjacency_free(&adj);
     int64_t nv = m->vertex_count, ne = edges, nf = m->face_count;
