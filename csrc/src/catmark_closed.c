@@ -4,7 +4,7 @@
  *
  * Blender's modifier evaluates a control vertex on adaptive patches, which at
  * most vertices reproduce the exact limit point.  Where that point has a
- * closed form, the row is written here; OpenSubdiv (catmark_osd.cpp) is
+ * closed form, the row is written here; OpenSubdiv (osd_*.cpp) is
  * built only around the other vertices.  The closed forms, with sharpness as
  * OpenSubdiv takes it (boundary edges and sharpness >= 10 infinitely sharp):
  *
@@ -89,18 +89,13 @@ static int32_t finish_row(spia_row_entry *e, int32_t count) {
     return out;
 }
 
-int32_t spia__catmark_closed_row(const spia_mesh *m, const spia_adjacency *adj, const spia_catmark_sharpness *sh,
-                                 int32_t v, spia_row_scratch *scratch) {
-    const int64_t first = adj->first[v], k64 = adj->first[v + 1] - first;
-    scratch->on_boundary = -1;
-    if (k64 <= 0) return SPIA__ROW_NOT_CLOSED;
-    const int32_t k = (int32_t)k64;
-    const float vs = sh->vertex[v];
-    if (!grow(scratch, (int64_t)k + 1)) return SPIA__ROW_OUT_OF_MEMORY;
-    /* The faces around v, read once: for the i-th, the neighbours after and
-     * before v in it and where its corners are. */
-    spia_fan_corner *fan = scratch->fan;
-    int64_t total = 1; /* 1 + sum (|f| - 2): the smooth row's length bound */
+/* The faces around v, read once into fan: for the i-th, the neighbours
+ * after and before v in it and where its corners are; total grows by
+ * |f| - 2 a face.  0 where v is used twice by a face or a
+ * face's next and prev are one vertex. */
+static int read_fan(const spia_mesh *m, const spia_adjacency *adj, int32_t v, spia_fan_corner *fan, int64_t *total) {
+    const int64_t first = adj->first[v];
+    const int32_t k = (int32_t)(adj->first[v + 1] - first);
     for (int32_t i = 0; i < k; ++i) {
         const int64_t c = adj->corner_of[first + i];
         const int32_t f = adj->face_of_corner[c];
@@ -113,42 +108,64 @@ int32_t spia__catmark_closed_row(const spia_mesh *m, const spia_adjacency *adj, 
         fan[i].size = (int32_t)(c1 - c0);
         fan[i].next = fv[c + 1 == c1 ? c0 : c + 1];
         fan[i].prev = fv[c == c0 ? c1 - 1 : c - 1];
-        total += c1 - c0 - 2;
-        if (uses != 1 || fan[i].next == fan[i].prev) return SPIA__ROW_NOT_CLOSED;
+        *total += c1 - c0 - 2;
+        if (uses != 1 || fan[i].next == fan[i].prev) return 0;
     }
-    /* One fan, consistently oriented: every neighbour follows v in at most
-     * one face and precedes it in at most one; around an interior vertex
-     * each face's next is another face's prev, around a boundary vertex all
-     * but one (end), and walking from face to face visits every face.
-     * succ[i]: the face after face i (its prev is face i's next). */
-    int32_t start = -1, end = -1;
+    return 1;
+}
+
+/* One fan, consistently oriented: every neighbour follows v in at most
+ * one face and precedes it in at most one; around an interior vertex
+ * each face's next is another face's prev, around a boundary vertex all
+ * but one (end), and walking from face to face visits every face.
+ * succ[i]: the face after face i (its prev is face i's next).
+ * start and end: the boundary's first and last faces, -1 inside.  0 where
+ * the faces are not one such fan. */
+static int one_fan(spia_fan_corner *fan, int32_t k, int32_t *start, int32_t *end) {
     for (int32_t i = 0; i < k; ++i) {
         int32_t succ = -1, pred = -1;
         for (int32_t j = 0; j < k; ++j) {
-            if (j != i && (fan[j].next == fan[i].next || fan[j].prev == fan[i].prev)) return SPIA__ROW_NOT_CLOSED;
+            if (j != i && (fan[j].next == fan[i].next || fan[j].prev == fan[i].prev)) return 0;
             if (fan[j].prev == fan[i].next) succ = j;
             if (fan[j].next == fan[i].prev) pred = j;
         }
         fan[i].succ = succ;
         if (succ < 0) {
-            if (end >= 0) return SPIA__ROW_NOT_CLOSED;
-            end = i;
+            if (*end >= 0) return 0;
+            *end = i;
         }
         if (pred < 0) {
-            if (start >= 0) return SPIA__ROW_NOT_CLOSED;
-            start = i;
+            if (*start >= 0) return 0;
+            *start = i;
         }
     }
-    const int boundary = start >= 0;
-    if ((start >= 0) != (end >= 0)) return SPIA__ROW_NOT_CLOSED;
+    const int boundary = *start >= 0;
+    if ((*start >= 0) != (*end >= 0)) return 0;
     {
-        int32_t i = boundary ? start : 0, steps = 1;
+        int32_t i = boundary ? *start : 0, steps = 1;
         while (fan[i].succ >= 0 && fan[i].succ != (boundary ? -1 : 0)) {
             i = fan[i].succ;
-            if (++steps > k) return SPIA__ROW_NOT_CLOSED;
+            if (++steps > k) return 0;
         }
-        if (steps != k) return SPIA__ROW_NOT_CLOSED;
+        if (steps != k) return 0;
     }
+    return 1;
+}
+
+int32_t spia__catmark_closed_row(const spia_mesh *m, const spia_adjacency *adj, const spia_catmark_sharpness *sh,
+                                 int32_t v, spia_row_scratch *scratch) {
+    const int64_t first = adj->first[v], k64 = adj->first[v + 1] - first;
+    scratch->on_boundary = -1;
+    if (k64 <= 0) return SPIA__ROW_NOT_CLOSED;
+    const int32_t k = (int32_t)k64;
+    const float vs = sh->vertex[v];
+    if (!grow(scratch, (int64_t)k + 1)) return SPIA__ROW_OUT_OF_MEMORY;
+    spia_fan_corner *fan = scratch->fan;
+    int64_t total = 1; /* 1 + sum (|f| - 2): the smooth row's length bound */
+    if (!read_fan(m, adj, v, fan, &total)) return SPIA__ROW_NOT_CLOSED;
+    int32_t start = -1, end = -1;
+    if (!one_fan(fan, k, &start, &end)) return SPIA__ROW_NOT_CLOSED;
+    const int boundary = start >= 0;
     /* One fan: v is on the boundary exactly when it has two ends (an edge
      * of one face each), as spia__boundary_vertices would find. */
     scratch->on_boundary = boundary;

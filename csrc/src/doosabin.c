@@ -131,6 +131,44 @@ static int64_t next_around(const spia_mesh *m, const spia_adjacency *a, int64_t 
     return -1;
 }
 
+/* The new points at face f's corners (from corner s0 on): eq. (1) in
+ * phase one, else the regular Doo-Sabin rule (see ds_step). */
+static void face_points(const poly_level *in, const spia_options *o, int phase_one, int32_t f, int64_t s0,
+                        poly_level *out) {
+    const int32_t size = in->sizes[f];
+    double centroid[3] = {0.0, 0.0, 0.0};
+    for (int32_t i = 0; i < size; ++i)
+        for (int d = 0; d < 3; ++d) centroid[d] += in->P[3 * (int64_t)in->fv[s0 + i] + d] / size;
+    for (int32_t i = 0; i < size; ++i) {
+        double *q = out->P + 3 * (s0 + i);
+        if (phase_one) {
+            const double w = face_parameter(o, f);
+            for (int d = 0; d < 3; ++d) q[d] = w * in->P[3 * (int64_t)in->fv[s0 + i] + d] + (1.0 - w) * centroid[d];
+        } else {
+            for (int d = 0; d < 3; ++d) q[d] = 0.0;
+            for (int32_t j = 0; j < size; ++j) {
+                const double alpha = i == j ? (size + 5.0) / (4.0 * size)
+                                            : (3.0 + 2.0 * cos(2.0 * M_PI * (i - j) / size)) / (4.0 * size);
+                for (int d = 0; d < 3; ++d) q[d] += alpha * in->P[3 * (int64_t)in->fv[s0 + j] + d];
+            }
+        }
+    }
+}
+
+/* The twin of edge v -> w: its corner at w (*twin_w) and the next one, at v
+ * (*twin_v); the last found where there are several. */
+static void twin_corners(const spia_mesh *m, const spia_adjacency *a, int32_t v, int32_t w, int64_t *twin_w,
+                         int64_t *twin_v) {
+    for (int64_t i = a->first[w]; i < a->first[w + 1]; ++i) {
+        const int64_t d = a->corner_of[i];
+        if (spia__corner_next(m, a, d) == v) {
+            *twin_w = d;
+            const int32_t g = a->face_of_corner[d];
+            *twin_v = d + 1 == a->corner_start[g + 1] ? a->corner_start[g] : d + 1;
+        }
+    }
+}
+
 /* One step.  New vertex i is corner i of the old mesh.  phase_one: eq. (1)
  * with options' parameters; else the regular Doo-Sabin rule
  * W_i = sum_j alpha_ij V_j, alpha_ii = (k + 5) / (4k),
@@ -179,24 +217,8 @@ static spia_result ds_step(const poly_level *in, const spia_options *o, int phas
         if (spia__refine_tick(clock, f)) goto cancelled;
         const int64_t s0 = a.corner_start[f];
         const int32_t size = in->sizes[f];
-        double centroid[3] = {0.0, 0.0, 0.0};
-        for (int32_t i = 0; i < size; ++i)
-            for (int d = 0; d < 3; ++d) centroid[d] += in->P[3 * (int64_t)in->fv[s0 + i] + d] / size;
-        for (int32_t i = 0; i < size; ++i) {
-            double *q = out->P + 3 * (s0 + i);
-            if (phase_one) {
-                const double w = face_parameter(o, f);
-                for (int d = 0; d < 3; ++d) q[d] = w * in->P[3 * (int64_t)in->fv[s0 + i] + d] + (1.0 - w) * centroid[d];
-            } else {
-                for (int d = 0; d < 3; ++d) q[d] = 0.0;
-                for (int32_t j = 0; j < size; ++j) {
-                    const double alpha = i == j ? (size + 5.0) / (4.0 * size)
-                                                : (3.0 + 2.0 * cos(2.0 * M_PI * (i - j) / size)) / (4.0 * size);
-                    for (int d = 0; d < 3; ++d) q[d] += alpha * in->P[3 * (int64_t)in->fv[s0 + j] + d];
-                }
-            }
-            out->fv[k++] = (int32_t)(s0 + i);
-        }
+        face_points(in, o, phase_one, f, s0, out);
+        for (int32_t i = 0; i < size; ++i) out->fv[k++] = (int32_t)(s0 + i);
         out->sizes[nf++] = size;
     }
     /* E-faces: edge v -> w in corner c's face, w -> v in its twin's. */
@@ -207,14 +229,7 @@ static spia_result ds_step(const poly_level *in, const spia_options *o, int phas
         int64_t cw = -1, twin_w = -1, twin_v = -1;
         const int32_t f = a.face_of_corner[c];
         cw = c + 1 == a.corner_start[f + 1] ? a.corner_start[f] : c + 1;
-        for (int64_t i = a.first[w]; i < a.first[w + 1]; ++i) {
-            const int64_t d = a.corner_of[i];
-            if (spia__corner_next(&m, &a, d) == v) {
-                twin_w = d;
-                const int32_t g = a.face_of_corner[d];
-                twin_v = d + 1 == a.corner_start[g + 1] ? a.corner_start[g] : d + 1;
-            }
-        }
+        twin_corners(&m, &a, v, w, &twin_w, &twin_v);
         out->fv[k++] = (int32_t)cw;
         out->fv[k++] = (int32_t)c;
         out->fv[k++] = (int32_t)twin_v;

@@ -1030,6 +1030,100 @@ static void gather_rows(void *context, int64_t i0, int64_t i1, int thread) {
     }
 }
 
+/* The solver's arrays (f->p, n, wide and blocks set); 0 when out of
+ * memory (fast_free frees what was allocated). */
+static int fast_alloc(fast *f, const spia_options *opt, size_t lane) {
+    /* P and S with a float to spare: rows are read four lanes at a time. */
+    f->P = (float *)spia__alloc_large(sizeof(float) * (3 * (size_t)f->n + 1));
+    f->S = opt->initial_cage ? (float *)spia__alloc_large(sizeof(float) * (3 * (size_t)f->n + 1)) : f->P;
+    f->Y = spia__alloc_large(4 * (size_t)f->n * lane); /* zeroed by gather_rows, on the threads */
+    f->B = spia__alloc_large(4 * (size_t)f->n * lane);
+    f->flags = (unsigned char *)calloc((size_t)f->n, 1);
+    f->partial = (double *)malloc(sizeof(double) * 4 * (size_t)f->blocks);
+    f->block_entry = (int64_t *)malloc(sizeof(int64_t) * ((size_t)f->blocks + 1));
+    if (f->wide) f->inverse = (double *)malloc(sizeof(double) * (size_t)(f->p->words > 0 ? f->p->words : 1));
+    f->weight4 = (f4 *)malloc(sizeof(f4) * (size_t)(f->p->words > 0 ? f->p->words : 1));
+    f->inverse4 = (f4 *)malloc(sizeof(f4) * (size_t)(f->p->words > 0 ? f->p->words : 1));
+    f->signed4 = (f4 *)malloc(sizeof(f4) * (size_t)(f->p->words > 0 ? f->p->words : 1));
+    return f->P && f->S && f->Y && f->B && f->flags && f->partial && f->block_entry && (!f->wide || f->inverse) &&
+           f->weight4 && f->inverse4 && f->signed4;
+}
+
+static void fast_free(fast *f) {
+    free(f->P);
+    if (f->S != f->P) free(f->S);
+    free(f->Y);
+    free(f->B);
+    free(f->flags);
+    free(f->partial);
+    free(f->block_entry);
+    free(f->inverse);
+    free(f->weight4);
+    free(f->inverse4);
+    free(f->signed4);
+}
+
+/* The plan's weights as the sweeps read them, and each block's first entry. */
+static void fast_weights(fast *f) {
+    if (f->wide)
+        for (int32_t c = 0; c < f->p->words; ++c) f->inverse[c] = 1.0 / f->p->weight[c];
+    for (int32_t c = 0; c < f->p->words; ++c) {
+        f->weight4[c] = V4_SPLAT(f4, f->p->weight_f[c]);
+        f->inverse4[c] = V4_SPLAT(f4, f->p->inverse_f[c]);
+        f->signed4[c] = V4_SPLAT(f4, f->p->signed_f[c]);
+    }
+    {
+        int64_t e = 0;
+        for (int64_t b = 0; b < f->blocks; ++b) {
+            f->block_entry[b] = e;
+            const int32_t i1 = (b + 1) * FAST_BLOCK < f->n ? (int32_t)((b + 1) * FAST_BLOCK) : f->n;
+            int32_t sum = 0;
+            for (int32_t i = (int32_t)(b * FAST_BLOCK); i < i1; ++i) sum += f->p->length[i];
+            e += sum;
+        }
+        f->block_entry[f->blocks] = e;
+    }
+}
+
+/* The sweeps done (res >= 0, no hand-over): the cage written out, the
+ * result's status and the report's errors; returns the result. */
+static spia_result fast_finish(fast *f, const kernels *k, const spia_options *opt, spia_result res, int32_t it,
+                               int32_t stuck_count, stage_result *sr, double scale, float *cage, spia_report *report,
+                               spia_status *status) {
+    const int32_t n = f->n;
+    if (!sr->current) sr->err_all = residual_pass(f, k, 0, &sr->mean, &sr->err);
+    write_task w = {f, cage};
+    spia__parallel_for(f->threads, n, PIECE_BLOCKS * FAST_BLOCK, write_rows, &w);
+    if (stuck_count > 0 && res == SPIA_OK) res = SPIA_STAGNATED;
+    if (res == SPIA_OK)
+        spia__ok(status);
+    else if (res == SPIA_MAX_ITERATIONS)
+        spia__fail(status, res, -1,
+                   "stopped at max_iterations (%d) with max error %.3g of the diagonal, above the tolerance %.3g",
+                   (int)it, sr->err_all / scale, opt->tolerance);
+    else if (stuck_count > 0)
+        spia__fail(status, res, -1,
+                   "%d vertices cannot reach their targets (their limit points are tied to other vertices'), "
+                   "with max error %.3g of the diagonal. The other vertices reach %.3g",
+                   (int)stuck_count, sr->err_all / scale, sr->err / scale);
+    else
+        spia__fail(status, res, -1,
+                   "the error stopped falling after %d iterations at %.3g of the diagonal, above the tolerance %.3g",
+                   (int)it, sr->err_all / scale, opt->tolerance);
+    if (report) {
+        report->max_error = sr->err_all;
+        report->mean_error = sr->mean;
+        report->max_error_relative = sr->err_all / scale;
+        report->mean_error_relative = sr->mean / scale;
+        report->reachable_max_error_relative = sr->err / scale;
+        report->unreachable_count = stuck_count;
+        if (report->unreachable)
+            for (int32_t i = 0; i < n; ++i)
+                report->unreachable[f->p->order ? f->p->order[i] : i] = (uint8_t)((f->flags[i] & STUCK) != 0);
+    }
+    return res;
+}
+
 spia_result spia__solve_fast(const spia_stencils *L, const float *targets, const spia_options *opt, double diagonal,
                              int automatic, float *cage, float **handover, int32_t *handover_iterations,
                              spia_report *report, spia_status *status) {
@@ -1048,45 +1142,15 @@ spia_result spia__solve_fast(const spia_stencils *L, const float *targets, const
     f.wide = (opt->solve_flags & SPIA_SOLVE_DOUBLE_SWEEPS) != 0;
     const size_t lane = f.wide ? sizeof(double) : sizeof(float);
     f.blocks = ((int64_t)n + FAST_BLOCK - 1) / FAST_BLOCK;
-    /* P and S with a float to spare: rows are read four lanes at a time. */
-    f.P = (float *)spia__alloc_large(sizeof(float) * (3 * (size_t)n + 1));
-    f.S = opt->initial_cage ? (float *)spia__alloc_large(sizeof(float) * (3 * (size_t)n + 1)) : f.P;
-    f.Y = spia__alloc_large(4 * (size_t)n * lane); /* zeroed by gather_rows, on the threads */
-    f.B = spia__alloc_large(4 * (size_t)n * lane);
-    f.flags = (unsigned char *)calloc((size_t)n, 1);
-    f.partial = (double *)malloc(sizeof(double) * 4 * (size_t)f.blocks);
-    f.block_entry = (int64_t *)malloc(sizeof(int64_t) * ((size_t)f.blocks + 1));
-    if (f.wide) f.inverse = (double *)malloc(sizeof(double) * (size_t)(p->words > 0 ? p->words : 1));
-    f.weight4 = (f4 *)malloc(sizeof(f4) * (size_t)(p->words > 0 ? p->words : 1));
-    f.inverse4 = (f4 *)malloc(sizeof(f4) * (size_t)(p->words > 0 ? p->words : 1));
-    f.signed4 = (f4 *)malloc(sizeof(f4) * (size_t)(p->words > 0 ? p->words : 1));
     spia_result res;
     int32_t it = 0, stuck_count = 0;
     stage_result sr;
     memset(&sr, 0, sizeof sr);
-    if (!f.P || !f.S || !f.Y || !f.B || !f.flags || !f.partial || !f.block_entry || (f.wide && !f.inverse) ||
-        !f.weight4 || !f.inverse4 || !f.signed4) {
+    if (!fast_alloc(&f, opt, lane)) {
         res = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the solver (%d vertices)", (int)n);
         goto done;
     }
-    if (f.wide)
-        for (int32_t c = 0; c < p->words; ++c) f.inverse[c] = 1.0 / p->weight[c];
-    for (int32_t c = 0; c < p->words; ++c) {
-        f.weight4[c] = V4_SPLAT(f4, p->weight_f[c]);
-        f.inverse4[c] = V4_SPLAT(f4, p->inverse_f[c]);
-        f.signed4[c] = V4_SPLAT(f4, p->signed_f[c]);
-    }
-    {
-        int64_t e = 0;
-        for (int64_t b = 0; b < f.blocks; ++b) {
-            f.block_entry[b] = e;
-            const int32_t i1 = (b + 1) * FAST_BLOCK < n ? (int32_t)((b + 1) * FAST_BLOCK) : n;
-            int32_t sum = 0;
-            for (int32_t i = (int32_t)(b * FAST_BLOCK); i < i1; ++i) sum += p->length[i];
-            e += sum;
-        }
-        f.block_entry[f.blocks] = e;
-    }
+    fast_weights(&f);
     {
         gather_task g = {&f, targets, opt->initial_cage ? opt->initial_cage : targets};
         spia__parallel_for(f.threads, n, PIECE_BLOCKS * FAST_BLOCK, gather_rows, &g);
@@ -1137,51 +1201,10 @@ spia_result spia__solve_fast(const spia_stencils *L, const float *targets, const
         res = SPIA__HAND_OVER;
         goto done;
     }
-    if (res >= 0) {
-        if (!sr.current) sr.err_all = residual_pass(&f, &k, 0, &sr.mean, &sr.err);
-        write_task w = {&f, cage};
-        spia__parallel_for(f.threads, n, PIECE_BLOCKS * FAST_BLOCK, write_rows, &w);
-        if (stuck_count > 0 && res == SPIA_OK) res = SPIA_STAGNATED;
-        if (res == SPIA_OK)
-            spia__ok(status);
-        else if (res == SPIA_MAX_ITERATIONS)
-            spia__fail(status, res, -1,
-                       "stopped at max_iterations (%d) with max error %.3g of the diagonal, above the tolerance %.3g",
-                       (int)it, sr.err_all / scale, opt->tolerance);
-        else if (stuck_count > 0)
-            spia__fail(status, res, -1,
-                       "%d vertices cannot reach their targets (their limit points are tied to other vertices'), "
-                       "with max error %.3g of the diagonal. The other vertices reach %.3g",
-                       (int)stuck_count, sr.err_all / scale, sr.err / scale);
-        else
-            spia__fail(status, res, -1,
-                       "the error stopped falling after %d iterations at %.3g of the diagonal, above the tolerance %.3g",
-                       (int)it, sr.err_all / scale, opt->tolerance);
-        if (report) {
-            report->max_error = sr.err_all;
-            report->mean_error = sr.mean;
-            report->max_error_relative = sr.err_all / scale;
-            report->mean_error_relative = sr.mean / scale;
-            report->reachable_max_error_relative = sr.err / scale;
-            report->unreachable_count = stuck_count;
-            if (report->unreachable)
-                for (int32_t i = 0; i < n; ++i)
-                    report->unreachable[p->order ? p->order[i] : i] = (uint8_t)((f.flags[i] & STUCK) != 0);
-        }
-    }
+    if (res >= 0) res = fast_finish(&f, &k, opt, res, it, stuck_count, &sr, scale, cage, report, status);
     if (report) report->iterations = it;
     if (res == SPIA_STAGNATED || res == SPIA_ERROR_DIVERGED) *handover_iterations = it;
 done:
-    free(f.P);
-    if (f.S != f.P) free(f.S);
-    free(f.Y);
-    free(f.B);
-    free(f.flags);
-    free(f.partial);
-    free(f.block_entry);
-    free(f.inverse);
-    free(f.weight4);
-    free(f.inverse4);
-    free(f.signed4);
+    fast_free(&f);
     return res;
 }

@@ -258,7 +258,7 @@ spia_result spia__least_squares(const spia_stencils *L, const float *targets, do
  * (spia__boundary_vertices). */
 void spia__stencils_mark_boundary(spia_stencils *s, const unsigned char *on_boundary);
 
-/* Limit stencils through OpenSubdiv (catmark_osd.cpp): Catmull-Clark exactly
+/* Limit stencils through OpenSubdiv (osd_limit_stencils.cpp): Catmull-Clark exactly
  * as Blender's modifier, and Loop with OpenSubdiv's boundary rules.  Frees
  * the adjacency's vertex lists once it no longer needs them.  on_boundary
  * (vertex_count entries, SPIA__BOUNDARY_UNKNOWN) receives the boundary
@@ -338,7 +338,7 @@ int spia__refine_level_done(spia__refine_clock *clock, int32_t level);
 spia_result spia__refine_cancelled(spia_status *status, const spia__refine_clock *clock);
 
 /* Loop refinement with every vertex at its limit (OpenSubdiv's rules, in
- * catmark_osd.cpp; Hoppe's, in loop.c).  Counts only when positions is
+ * osd_refine.cpp; Hoppe's, in loop.c).  Counts only when positions is
  * NULL, without refining; otherwise the refinement's progress goes to
  * clock. */
 spia_result spia__osd_refine_limit(const spia_mesh *mesh, const spia_adjacency *adj, const spia_options *options,
@@ -349,8 +349,8 @@ spia_result spia__loop_hoppe_refine_limit(const spia_mesh *mesh, const spia_opti
                                           int32_t *faces, spia__refine_clock *clock, spia_status *status);
 
 /* Catmull-Clark refinement of the control mesh (spia_subdivide), in
- * catmark_osd.cpp.  Counts only when positions is NULL. */
-/* spia_sharpness's work (catmark_osd.cpp): the sharpness handed to
+ * osd_refine.cpp.  Counts only when positions is NULL. */
+/* spia_sharpness's work (osd_sharpness.cpp): the sharpness handed to
  * OpenSubdiv, in the mesh's numbering; two_edge_rule 0 leaves Blender's
  * two-edge rule out. */
 spia_result spia__osd_sharpness(const spia_mesh *mesh, const spia_adjacency *adj, const spia_options *options,
@@ -384,7 +384,7 @@ spia_result spia__require_triangles(const spia_mesh *mesh, spia_status *status);
 /* Ptex faces of a face: 1 for a quad, else one per corner. */
 static inline int32_t spia__ptex_of_face(int32_t size) { return size == 4 ? 1 : size; }
 
-/* Catmull-Clark limit stencils at samples inside faces (catmark_osd.cpp). */
+/* Catmull-Clark limit stencils at samples inside faces (osd_samples.cpp). */
 spia_result spia__osd_surface_stencils(const spia_mesh *mesh, const spia_adjacency *adj, const spia_options *options,
                                        int32_t samples_per_edge, spia_stencils **out, spia_status *status);
 /* The same rows face by face: for each ptex face in order, emit gets its

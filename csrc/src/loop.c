@@ -78,6 +78,43 @@ static int32_t fan_count(const spia_mesh *m, const spia_adjacency *a, int32_t v,
     return fans;
 }
 
+/* Vertex v's limit row written into s from entry pos on (nb, fe: room for
+ * cap neighbours); returns the entry after it. */
+static int64_t hoppe_row(const spia_mesh *m, const spia_adjacency *a, int32_t v, const int32_t *valence,
+                         const unsigned char *boundary, int32_t *nb, int32_t *fe, int32_t cap, spia_stencils *s,
+                         int64_t pos) {
+    if (a->first[v + 1] == a->first[v]) { /* used by no face: stays put */
+        s->indices[pos] = v;
+        s->weights[pos++] = 1.0;
+        return pos;
+    }
+    int32_t k = spia__vertex_neighbours(m, a, v, nb, fe, cap);
+    if (!boundary[v]) {
+        const double beta = loop_beta(k);
+        s->indices[pos] = v;
+        s->weights[pos++] = beta;
+        for (int32_t i = 0; i < k; ++i) {
+            s->indices[pos] = nb[i];
+            s->weights[pos++] = (1.0 - beta) / k;
+        }
+        return pos;
+    }
+    const int regular = valence[v] == 4;
+    const double denominator = regular ? 48.0 : 40.0;
+    double centre = regular ? 24.0 : 18.0;
+    const int64_t centre_at = pos++;
+    for (int32_t i = 0; i < k; ++i) {
+        if (fe[i] != 1) continue;
+        const int side_regular = valence[nb[i]] == 4;
+        centre += regular ? (side_regular ? 4.0 : 5.0) : (side_regular ? 3.0 : 4.0);
+        s->indices[pos] = nb[i];
+        s->weights[pos++] = (side_regular ? 8.0 : 7.0) / denominator;
+    }
+    s->indices[centre_at] = v;
+    s->weights[centre_at] = centre / denominator;
+    return pos;
+}
+
 spia_result spia__loop_hoppe_limit_stencils(const spia_mesh *m, spia_adjacency *a, const spia_options *opt,
                                             spia__refine_clock *clock, spia_stencils **out, spia_status *status) {
     (void)opt;
@@ -149,35 +186,7 @@ spia_result spia__loop_hoppe_limit_stencils(const spia_mesh *m, spia_adjacency *
             return spia__refine_cancelled(status, clock);
         }
         s->offsets[v] = pos;
-        if (a->first[v + 1] == a->first[v]) { /* used by no face: stays put */
-            s->indices[pos] = v;
-            s->weights[pos++] = 1.0;
-            continue;
-        }
-        int32_t k = spia__vertex_neighbours(m, a, v, nb, fe, cap);
-        if (!boundary[v]) {
-            const double beta = loop_beta(k);
-            s->indices[pos] = v;
-            s->weights[pos++] = beta;
-            for (int32_t i = 0; i < k; ++i) {
-                s->indices[pos] = nb[i];
-                s->weights[pos++] = (1.0 - beta) / k;
-            }
-            continue;
-        }
-        const int regular = valence[v] == 4;
-        const double denominator = regular ? 48.0 : 40.0;
-        double centre = regular ? 24.0 : 18.0;
-        const int64_t centre_at = pos++;
-        for (int32_t i = 0; i < k; ++i) {
-            if (fe[i] != 1) continue;
-            const int side_regular = valence[nb[i]] == 4;
-            centre += regular ? (side_regular ? 4.0 : 5.0) : (side_regular ? 3.0 : 4.0);
-            s->indices[pos] = nb[i];
-            s->weights[pos++] = (side_regular ? 8.0 : 7.0) / denominator;
-        }
-        s->indices[centre_at] = v;
-        s->weights[centre_at] = centre / denominator;
+        pos = hoppe_row(m, a, v, valence, boundary, nb, fe, cap, s, pos);
     }
     s->offsets[n] = pos;
     free(nb);
@@ -204,6 +213,61 @@ typedef struct tri_level {
     double *P;   /* n * 3 */
     int32_t *F;  /* f * 3 */
 } tri_level;
+
+/* A step's new points at the old vertices (Hoppe's boundary rule, Loop's
+ * beta inside); nonzero when cancelled. */
+static int vertex_points(const tri_level *in, tri_level *out, const spia_mesh *m, const spia_adjacency *adj,
+                         const int32_t *valence, const int32_t *bnd, int32_t *nb, int32_t *cnt, int32_t cap,
+                         spia__refine_clock *clock) {
+    for (int32_t v = 0; v < in->n; ++v) {
+        if (spia__refine_tick(clock, v)) return 1;
+        double *q = out->P + 3 * (int64_t)v;
+        const double *p = in->P + 3 * (int64_t)v;
+        if (valence[v] == 0) {
+            for (int a = 0; a < 3; ++a) q[a] = p[a];
+        } else if (bnd[2 * v] >= 0) {
+            const double *x = in->P + 3 * (int64_t)bnd[2 * v], *y = in->P + 3 * (int64_t)bnd[2 * v + 1];
+            for (int a = 0; a < 3; ++a) q[a] = 0.75 * p[a] + 0.125 * (x[a] + y[a]);
+        } else {
+            int32_t k = spia__vertex_neighbours(m, adj, v, nb, cnt, cap);
+            const double beta = loop_refine_beta(k);
+            for (int a = 0; a < 3; ++a) q[a] = (1.0 - k * beta) * p[a];
+            for (int32_t i = 0; i < k; ++i)
+                for (int a = 0; a < 3; ++a) q[a] += beta * in->P[3 * (int64_t)nb[i] + a];
+        }
+    }
+    return 0;
+}
+
+/* A step's edge points, numbered after the old vertices. */
+static void edge_points(const tri_level *in, tri_level *out, const int64_t *first_edge, const int64_t *edge_other,
+                        const int64_t *edge_opp, const int64_t *edge_faces, const int32_t *valence) {
+    for (int32_t v = 0; v < in->n; ++v)
+        for (int64_t e = first_edge[v]; e < first_edge[v + 1]; ++e) {
+            const int32_t w = (int32_t)edge_other[e];
+            const double *x = in->P + 3 * (int64_t)v, *y = in->P + 3 * (int64_t)w;
+            double *q = out->P + 3 * (int64_t)(in->n + e);
+            if (edge_faces[e] >= 2) {
+                const double *c = in->P + 3 * edge_opp[2 * e], *d = in->P + 3 * edge_opp[2 * e + 1];
+                for (int a = 0; a < 3; ++a) q[a] = 0.375 * (x[a] + y[a]) + 0.125 * (c[a] + d[a]);
+            } else {
+                const int rv = valence[v] == 4, rw = valence[w] == 4;
+                const double wv = rv == rw ? 0.5 : rv ? 0.625 : 0.375;
+                for (int a = 0; a < 3; ++a) q[a] = wv * x[a] + (1.0 - wv) * y[a];
+            }
+        }
+}
+
+/* Each triangle split in four. */
+static void split_faces(const tri_level *in, tri_level *out, const int64_t *edge_of_corner) {
+    for (int32_t f = 0; f < in->f; ++f) {
+        const int32_t a = in->F[3 * f], b = in->F[3 * f + 1], c = in->F[3 * f + 2];
+        const int32_t ab = in->n + (int32_t)edge_of_corner[3 * (int64_t)f], bc = in->n + (int32_t)edge_of_corner[3 * (int64_t)f + 1],
+                      ca = in->n + (int32_t)edge_of_corner[3 * (int64_t)f + 2];
+        const int32_t tris[12] = {a, ab, ca, b, bc, ab, c, ca, bc, ab, bc, ca};
+        memcpy(out->F + 12 * (int64_t)f, tris, sizeof tris);
+    }
+}
 
 /* One subdivision step: old vertices keep their indices, edge points follow. */
 static spia_result hoppe_step(const tri_level *in, tri_level *out, spia__refine_clock *clock) {
@@ -268,44 +332,9 @@ static spia_result hoppe_step(const tri_level *in, tri_level *out, spia__refine_
     out->P = (double *)malloc(sizeof(double) * 3 * (size_t)out->n);
     out->F = (int32_t *)malloc(sizeof(int32_t) * 3 * (size_t)out->f);
     if (!out->P || !out->F) goto done;
-    for (int32_t v = 0; v < in->n; ++v) {
-        if (spia__refine_tick(clock, v)) goto cancelled;
-        double *q = out->P + 3 * (int64_t)v;
-        const double *p = in->P + 3 * (int64_t)v;
-        if (valence[v] == 0) {
-            for (int a = 0; a < 3; ++a) q[a] = p[a];
-        } else if (bnd[2 * v] >= 0) {
-            const double *x = in->P + 3 * (int64_t)bnd[2 * v], *y = in->P + 3 * (int64_t)bnd[2 * v + 1];
-            for (int a = 0; a < 3; ++a) q[a] = 0.75 * p[a] + 0.125 * (x[a] + y[a]);
-        } else {
-            int32_t k = spia__vertex_neighbours(&m, &adj, v, nb, cnt, cap);
-            const double beta = loop_refine_beta(k);
-            for (int a = 0; a < 3; ++a) q[a] = (1.0 - k * beta) * p[a];
-            for (int32_t i = 0; i < k; ++i)
-                for (int a = 0; a < 3; ++a) q[a] += beta * in->P[3 * (int64_t)nb[i] + a];
-        }
-    }
-    for (int32_t v = 0; v < in->n; ++v)
-        for (int64_t e = first_edge[v]; e < first_edge[v + 1]; ++e) {
-            const int32_t w = (int32_t)edge_other[e];
-            const double *x = in->P + 3 * (int64_t)v, *y = in->P + 3 * (int64_t)w;
-            double *q = out->P + 3 * (int64_t)(in->n + e);
-            if (edge_faces[e] >= 2) {
-                const double *c = in->P + 3 * edge_opp[2 * e], *d = in->P + 3 * edge_opp[2 * e + 1];
-                for (int a = 0; a < 3; ++a) q[a] = 0.375 * (x[a] + y[a]) + 0.125 * (c[a] + d[a]);
-            } else {
-                const int rv = valence[v] == 4, rw = valence[w] == 4;
-                const double wv = rv == rw ? 0.5 : rv ? 0.625 : 0.375;
-                for (int a = 0; a < 3; ++a) q[a] = wv * x[a] + (1.0 - wv) * y[a];
-            }
-        }
-    for (int32_t f = 0; f < in->f; ++f) {
-        const int32_t a = in->F[3 * f], b = in->F[3 * f + 1], c = in->F[3 * f + 2];
-        const int32_t ab = in->n + (int32_t)edge_of_corner[3 * (int64_t)f], bc = in->n + (int32_t)edge_of_corner[3 * (int64_t)f + 1],
-                      ca = in->n + (int32_t)edge_of_corner[3 * (int64_t)f + 2];
-        const int32_t tris[12] = {a, ab, ca, b, bc, ab, c, ca, bc, ab, bc, ca};
-        memcpy(out->F + 12 * (int64_t)f, tris, sizeof tris);
-    }
+    if (vertex_points(in, out, &m, &adj, valence, bnd, nb, cnt, cap, clock)) goto cancelled;
+    edge_points(in, out, first_edge, edge_other, edge_opp, edge_faces, valence);
+    split_faces(in, out, edge_of_corner);
     r = SPIA_OK;
     goto done;
 cancelled:
@@ -331,6 +360,19 @@ done:
     return r;
 }
 
+/* The mesh's edges counted into *edges; 0 when out of memory. */
+static int count_edges(const spia_mesh *m, const spia_adjacency *adj, int64_t *edges) {
+    const int32_t cap = 2 * spia__max_corners_per_vertex(adj) + 2;
+    int32_t *nb = (int32_t *)malloc(sizeof(int32_t) * 2 * (size_t)cap);
+    if (!nb) return 0;
+    for (int32_t v = 0; v < m->vertex_count; ++v) {
+        int32_t k = spia__vertex_neighbours(m, adj, v, nb, nb + cap, cap);
+        for (int32_t i = 0; i < k; ++i) *edges += nb[i] > v;
+    }
+    free(nb);
+    return 1;
+}
+
 spia_result spia__loop_hoppe_refine_limit(const spia_mesh *m, const spia_options *opt, int32_t levels,
                                           int32_t *vertex_count, int32_t *face_count, float *positions,
                                           int32_t *faces, spia__refine_clock *clock, spia_status *status) {
@@ -347,18 +389,9 @@ spia_result spia__loop_hoppe_refine_limit(const spia_mesh *m, const spia_options
     }
     /* Sizes: V' = V + E, E' = 2 E + 3 F, F' = 4 F (closed form, no refinement). */
     int64_t edges = 0;
-    {
-        const int32_t cap = 2 * spia__max_corners_per_vertex(&adj) + 2;
-        int32_t *nb = (int32_t *)malloc(sizeof(int32_t) * 2 * (size_t)cap);
-        if (!nb) {
-            spia__adjacency_free(&adj);
-            return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory refining the surface");
-        }
-        for (int32_t v = 0; v < m->vertex_count; ++v) {
-            int32_t k = spia__vertex_neighbours(m, &adj, v, nb, nb + cap, cap);
-            for (int32_t i = 0; i < k; ++i) edges += nb[i] > v;
-        }
-        free(nb);
+    if (!count_edges(m, &adj, &edges)) {
+        spia__adjacency_free(&adj);
+        return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory refining the surface");
     }
     spia__adjacency_free(&adj);
     int64_t nv = m->vertex_count, ne = edges, nf = m->face_count;

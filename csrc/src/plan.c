@@ -557,6 +557,109 @@ static void order_and_code(void *context, int64_t i0, int64_t i1, int thread) {
     }
 }
 
+/* The rows' order in chunks: the order searched along the rows' own
+ * columns is searched again both ways (the transposed pattern built) where
+ * it leaves rows referring to chunks more than two away; without levels,
+ * one chunk.  0 when out of memory. */
+static int chunk_order(const spia_stencils *s, spia_plan *p, scratch *x, int threads, int levels) {
+    const int32_t n = s->rows;
+    if (levels) {
+        placing reach;
+        memset(&reach, 0, sizeof reach);
+        reach.s = s;
+        reach.chunk_of = x->chunk_of;
+        spia__parallel_for(threads, n, 0, reach_rows, &reach);
+        int32_t apart = 0;
+        for (int t = 0; t < threads; ++t)
+            if (reach.reach[t] > apart) apart = reach.reach[t];
+        if (apart > 2 && !level_order(s, p, x, 1)) return 0;
+    } else {
+        p->chunks = 1;
+        p->chunk_start = (int32_t *)malloc(sizeof(int32_t) * 2);
+        if (!p->chunk_start) return 0;
+        p->chunk_start[0] = 0;
+        p->chunk_start[1] = n;
+    }
+    return 1;
+}
+
+/* Lengths and where each position's entries start (the search's room is
+ * the filling's now).  0 when out of memory. */
+static int entry_starts(const spia_stencils *s, spia_plan *p, scratch *x, int threads) {
+    const int32_t n = s->rows;
+    int64_t *entry = x->entry;
+    p->length = (uint16_t *)malloc(sizeof(uint16_t) * (size_t)(n > 0 ? n : 1));
+    p->chunk_entry = (int64_t *)malloc(sizeof(int64_t) * ((size_t)p->chunks + 1));
+    if (!p->length || !p->chunk_entry) return 0;
+    {
+        placing pl;
+        memset(&pl, 0, sizeof pl);
+        pl.s = s;
+        pl.p = p;
+        spia__parallel_for(threads, n, 0, length_rows, &pl);
+    }
+    entry[0] = 0;
+    for (int32_t i = 0; i < n; ++i) entry[i + 1] = entry[i] + p->length[i];
+    for (int32_t c = 0; c <= p->chunks; ++c) p->chunk_entry[c] = entry[p->chunk_start[c]];
+    return 1;
+}
+
+/* Codes and offsets, at their widths: each of the `count` weights has two
+ * codes, as itself and where it is one of the larger off-diagonal weights
+ * of its row (the first step's edges).  0 when out of memory. */
+static int codes_and_offsets(const spia_stencils *s, spia_plan *p, const scratch *x, uint16_t *codes, int32_t count,
+                             int threads, size_t entries) {
+    const int32_t n = s->rows;
+    int64_t *entry = x->entry;
+    p->words = 2 * count;
+    placing pl;
+    memset(&pl, 0, sizeof pl);
+    pl.s = s;
+    pl.p = p;
+    pl.position = x->position;
+    pl.chunk_of = x->chunk_of;
+    pl.codes = codes;
+    pl.entry = entry;
+    spia__parallel_for(threads, n, 0, measure_rows, &pl);
+    int64_t widest = 0;
+    p->holds_table = 1;
+    for (int t = 0; t < threads; ++t) {
+        if (pl.widest[t] > widest) widest = pl.widest[t];
+        if (pl.reach[t] > p->reach) p->reach = pl.reach[t];
+        if (pl.unsorted[t]) p->holds_table = 0;
+    }
+    if (widest <= 32767)
+        p->delta16 = (int16_t *)malloc(sizeof(int16_t) * entries);
+    else
+        p->delta32 = (int32_t *)malloc(sizeof(int32_t) * entries);
+    if (p->words <= 256)
+        p->code8 = (uint8_t *)malloc(entries);
+    else
+        p->code16 = (uint16_t *)malloc(sizeof(uint16_t) * entries);
+    if ((!p->delta16 && !p->delta32) || (!p->code8 && !p->code16)) return 0;
+    spia__parallel_for(threads, n, 0, place_rows, &pl);
+    return 1;
+}
+
+/* The weights of the codes, in double and in float, their inverses and
+ * their signed copies.  0 when out of memory. */
+static int weight_tables(spia_plan *p, const dictionary *d) {
+    const size_t words = (size_t)(p->words > 0 ? p->words : 1);
+    p->weight = (double *)malloc(sizeof(double) * words);
+    p->weight_f = (float *)malloc(sizeof(float) * words);
+    p->inverse_f = (float *)malloc(sizeof(float) * words);
+    p->signed_f = (float *)malloc(sizeof(float) * words);
+    if (!p->weight || !p->weight_f || !p->inverse_f || !p->signed_f) return 0;
+    for (int32_t c = 0; c < p->words; ++c) {
+        const double w = d->weight[c % d->count];
+        p->weight[c] = w;
+        p->weight_f[c] = (float)w;
+        p->inverse_f[c] = (float)(1.0 / w);
+        p->signed_f[c] = c < d->count ? (float)w : -(float)w;
+    }
+    return 1;
+}
+
 spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status) {
     const int32_t n = s->rows;
     s->plan = NULL;
@@ -610,90 +713,14 @@ spia_result spia__plan_build(spia_stencils *s, int threads, spia_status *status)
     d.keys = NULL;
     d.codes = NULL;
 
-    /* The order, searched along the rows' own columns, is searched again
-     * both ways (the transposed pattern built) where it leaves rows
-     * referring to chunks more than two away. */
-    if (levels) {
-        placing reach;
-        memset(&reach, 0, sizeof reach);
-        reach.s = s;
-        reach.chunk_of = x.chunk_of;
-        spia__parallel_for(threads, n, 0, reach_rows, &reach);
-        int32_t apart = 0;
-        for (int t = 0; t < threads; ++t)
-            if (reach.reach[t] > apart) apart = reach.reach[t];
-        if (apart > 2 && !level_order(s, p, &x, 1)) goto out_of_memory;
-    } else {
-        p->chunks = 1;
-        p->chunk_start = (int32_t *)malloc(sizeof(int32_t) * 2);
-        if (!p->chunk_start) goto out_of_memory;
-        p->chunk_start[0] = 0;
-        p->chunk_start[1] = n;
-    }
+    if (!chunk_order(s, p, &x, threads, levels)) goto out_of_memory;
 
-    /* Lengths and where each position's entries start (the search's room
-     * is the filling's now). */
-    int64_t *entry = x.entry;
-    p->length = (uint16_t *)malloc(sizeof(uint16_t) * (size_t)(n > 0 ? n : 1));
-    p->chunk_entry = (int64_t *)malloc(sizeof(int64_t) * ((size_t)p->chunks + 1));
-    if (!p->length || !p->chunk_entry) goto out_of_memory;
-    {
-        placing pl;
-        memset(&pl, 0, sizeof pl);
-        pl.s = s;
-        pl.p = p;
-        spia__parallel_for(threads, n, 0, length_rows, &pl);
-    }
-    entry[0] = 0;
-    for (int32_t i = 0; i < n; ++i) entry[i + 1] = entry[i] + p->length[i];
-    for (int32_t c = 0; c <= p->chunks; ++c) p->chunk_entry[c] = entry[p->chunk_start[c]];
-
-    /* Codes and offsets, at their widths: each weight has two codes, as
-     * itself and where it is one of the larger off-diagonal weights of its
-     * row (the first step's edges). */
-    p->words = 2 * d.count;
-    placing pl;
-    memset(&pl, 0, sizeof pl);
-    pl.s = s;
-    pl.p = p;
-    pl.position = x.position;
-    pl.chunk_of = x.chunk_of;
-    pl.codes = codes;
-    pl.entry = entry;
-    spia__parallel_for(threads, n, 0, measure_rows, &pl);
-    int64_t widest = 0;
-    p->holds_table = 1;
-    for (int t = 0; t < threads; ++t) {
-        if (pl.widest[t] > widest) widest = pl.widest[t];
-        if (pl.reach[t] > p->reach) p->reach = pl.reach[t];
-        if (pl.unsorted[t]) p->holds_table = 0;
-    }
-    if (widest <= 32767)
-        p->delta16 = (int16_t *)malloc(sizeof(int16_t) * entries);
-    else
-        p->delta32 = (int32_t *)malloc(sizeof(int32_t) * entries);
-    if (p->words <= 256)
-        p->code8 = (uint8_t *)malloc(entries);
-    else
-        p->code16 = (uint16_t *)malloc(sizeof(uint16_t) * entries);
-    if ((!p->delta16 && !p->delta32) || (!p->code8 && !p->code16)) goto out_of_memory;
-    spia__parallel_for(threads, n, 0, place_rows, &pl);
+    if (!entry_starts(s, p, &x, threads)) goto out_of_memory;
+    if (!codes_and_offsets(s, p, &x, codes, d.count, threads, entries)) goto out_of_memory;
     free(block);
     block = NULL;
 
-    const size_t words = (size_t)(p->words > 0 ? p->words : 1);
-    p->weight = (double *)malloc(sizeof(double) * words);
-    p->weight_f = (float *)malloc(sizeof(float) * words);
-    p->inverse_f = (float *)malloc(sizeof(float) * words);
-    p->signed_f = (float *)malloc(sizeof(float) * words);
-    if (!p->weight || !p->weight_f || !p->inverse_f || !p->signed_f) goto out_of_memory;
-    for (int32_t c = 0; c < p->words; ++c) {
-        const double w = d.weight[c % d.count];
-        p->weight[c] = w;
-        p->weight_f[c] = (float)w;
-        p->inverse_f[c] = (float)(1.0 / w);
-        p->signed_f[c] = c < d.count ? (float)w : -(float)w;
-    }
+    if (!weight_tables(p, &d)) goto out_of_memory;
     free(d.weight);
     s->plan = p;
     return SPIA_OK;

@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
 /* The refinement's progress clock (spia__refine_clock in internal.h), shared
- * by the refining schemes (loop.c, doosabin.c, catmark_osd.cpp). */
+ * by the refining schemes (loop.c, doosabin.c, osd_refine.cpp). */
 #include "internal.h"
 
 #define REFINE_INTERVAL 0.1

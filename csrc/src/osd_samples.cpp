@@ -1,0 +1,355 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
+// Limit stencils at samples inside the faces (for fitting and detail): Bfr
+// face by face, and OpenSubdiv's adaptive patch table around the corners
+// Bfr does not reproduce.
+
+#include "osd.h"
+
+namespace spia_osd {
+
+// Limit stencils at samples inside the faces: per ptex face (a quad, or each
+// corner's sub-quad of another polygon), samples_per_edge^2 points at the
+// centres of a regular grid over (s, t), in t, then s order, on Blender's
+// patches at quality.  Each face's rows come as one dense block over the
+// face's control vertices.
+//
+// Most faces: Bfr, each face's surface from its own neighbourhood, with its
+// approximation levels (sharp and smooth) at quality; irregular patches are
+// shared among faces of the same topology, so this costs little more than
+// evaluating the basis.  Bfr builds the same patches as Blender's adaptive
+// refinement except at faces with a corner that is non-manifold, a smooth
+// boundary vertex of one face, sharpened itself or meets three or more
+// creased edges (there its sharpness decays within the isolation level;
+// the differences measured up to 1e-3 at quality 1, 1e-8 at quality 3).
+// Those faces go through OpenSubdiv's adaptive patch table as
+// LimitStencilTableFactory builds it (Gregory end caps, the refined and
+// local points' stencils), on the part of the mesh within two rings of
+// them.  The factory's sums are reproduced term by term (the same order,
+// so the same rows) without its search for each entry's place.
+
+namespace {
+struct FaceBlocks {
+    std::vector<int32_t> columns;
+    std::vector<double> weights;
+};
+
+struct SampleGrid {
+    int per_face = 0;
+    std::vector<double> s, t;
+    // The centres of per_edge^2 cells, or with `corners` per_edge points on
+    // each edge from 0 to 1 (at least 2).
+    SampleGrid(int per_edge, bool corners) : per_face(per_edge * per_edge), s((size_t)per_face), t((size_t)per_face) {
+        for (int j = 0; j < per_edge; ++j)
+            for (int i = 0; i < per_edge; ++i) {
+                s[(size_t)(j * per_edge + i)] = corners ? (double)i / (per_edge - 1) : (i + 0.5) / per_edge;
+                t[(size_t)(j * per_edge + i)] = corners ? (double)j / (per_edge - 1) : (j + 0.5) / per_edge;
+            }
+    }
+};
+}  // namespace
+
+// OpenSubdiv's adaptive patches on `refiner` (refined here) for the faces
+// marked in `wanted`: per ptex face of each, its block, columns in the
+// refiner's numbering.
+static spia_result far_blocks(Far::TopologyRefiner &refiner, const spia_options *opt, const SampleGrid &grid,
+                              const std::vector<char> &wanted, std::vector<std::vector<FaceBlocks>> &out,
+                              spia_status *status) {
+    Far::TopologyRefiner::AdaptiveOptions adaptive(opt->quality);
+    adaptive.useInfSharpPatch = true;
+    adaptive.considerFVarChannels = false;
+    refiner.RefineAdaptive(adaptive);
+    Far::PtexIndices ptex(refiner);
+    typedef Far::StencilTableReal<double> Table;
+    typedef Far::StencilTableFactoryReal<double> TableFactory;
+    TableFactory::Options table_options;
+    table_options.generateIntermediateLevels = true;
+    table_options.generateControlVerts = true;
+    table_options.generateOffsets = true;
+    std::unique_ptr<const Table> refined(TableFactory::Create(refiner, table_options));
+    Far::PatchTableFactory::Options patch_options;
+    patch_options.SetPatchPrecision<double>();
+    patch_options.includeBaseLevelIndices = true;
+    patch_options.SetEndCapType(Far::PatchTableFactory::Options::ENDCAP_GREGORY_BASIS);
+    patch_options.useInfSharpPatch = true;
+    std::unique_ptr<const Far::PatchTable> patches(Far::PatchTableFactory::Create(refiner, patch_options));
+    if (!refined || !patches)
+        return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "OpenSubdiv built no patches for the samples");
+    const Table *points = refined.get();
+    std::unique_ptr<const Table> appended;
+    const Table *local = patches->GetLocalPointStencilTable<double>();
+    if (local && refined->GetNumStencils() == refiner.GetNumVerticesTotal()) {
+        appended.reset(TableFactory::AppendLocalPointStencilTable(refiner, refined.get(), local));
+        if (!appended) return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "OpenSubdiv built no local point stencils");
+        points = appended.get();
+        refined.reset();
+    }
+    Far::PatchMap map(*patches);
+    const int per_face = grid.per_face;
+    const Far::TopologyLevel &base = refiner.GetLevel(0);
+    const int32_t n = base.GetNumVertices(), faces = base.GetNumFaces();
+    std::vector<Far::ConstIndexArray> cvs((size_t)per_face);
+    std::vector<double> basis((size_t)per_face * 20);
+    std::vector<int32_t> stamp((size_t)n, -1), slot((size_t)n, 0);
+    out.assign((size_t)faces, std::vector<FaceBlocks>());
+    int32_t stamp_id = 0;
+    for (int32_t face = 0; face < faces; ++face) {
+        if (!wanted[(size_t)face]) continue;
+        const int size = base.GetFaceVertices(face).size();
+        const int subs = size == 4 ? 1 : size;
+        out[(size_t)face].resize((size_t)subs);
+        for (int sub = 0; sub < subs; ++sub, ++stamp_id) {
+            const int f = ptex.GetFaceId(face) + sub;
+            FaceBlocks &fb = out[(size_t)face][(size_t)sub];
+            for (int j = 0; j < per_face; ++j) {
+                const Far::PatchMap::Handle *handle = map.FindPatch(f, grid.s[(size_t)j], grid.t[(size_t)j]);
+                if (!handle)
+                    return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "OpenSubdiv has no patch under a sample");
+                cvs[(size_t)j] = patches->GetPatchVertices(*handle);
+                if (cvs[(size_t)j].size() > 20)
+                    return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "a patch of %d points", cvs[(size_t)j].size());
+                patches->EvaluateBasis<double>(*handle, grid.s[(size_t)j], grid.t[(size_t)j], &basis[(size_t)j * 20]);
+                for (int k = 0; k < cvs[(size_t)j].size(); ++k) {
+                    const Far::StencilReal<double> point = points->GetStencil(cvs[(size_t)j][k]);
+                    const Far::Index *idx = point.GetVertexIndices();
+                    for (int e = 0; e < point.GetSize(); ++e) {
+                        const Far::Index c = idx[e];
+                        if (c < 0 || c >= n)
+                            return spia__fail(status, SPIA_ERROR_INTERNAL, -1,
+                                              "OpenSubdiv sample stencil refers to point %d, not a control vertex",
+                                              (int)c);
+                        if (stamp[(size_t)c] != stamp_id) {
+                            stamp[(size_t)c] = stamp_id;
+                            slot[(size_t)c] = (int32_t)fb.columns.size();
+                            fb.columns.push_back(c);
+                        }
+                    }
+                }
+            }
+            const size_t width = fb.columns.size();
+            fb.weights.assign(width * (size_t)per_face, 0.0);
+            for (int j = 0; j < per_face; ++j) {
+                double *row = &fb.weights[(size_t)j * width];
+                for (int k = 0; k < cvs[(size_t)j].size(); ++k) {
+                    const double b = basis[(size_t)j * 20 + (size_t)k];
+                    if (b == 0.0) continue;
+                    const Far::StencilReal<double> point = points->GetStencil(cvs[(size_t)j][k]);
+                    const Far::Index *idx = point.GetVertexIndices();
+                    const double *w = point.GetWeights();
+                    for (int e = 0; e < point.GetSize(); ++e)
+                        if (w[e] != 0.0) row[slot[(size_t)idx[e]]] += b * w[e];
+                }
+            }
+        }
+    }
+    return SPIA_OK;
+}
+
+// The faces Bfr does not reproduce (see above), as a mark per mesh face.
+static std::vector<char> faces_for_far(const spia_mesh *m, const spia_adjacency *adj, const Prepared &p, bool &any) {
+    const Far::TopologyLevel &base = p.refiner->GetLevel(0);
+    std::vector<char> special((size_t)p.osd_n, 0), face((size_t)m->face_count, 0);
+    for (int32_t o = 0; o < p.osd_n; ++o) {
+        bool s = base.IsVertexNonManifold(o) || base.GetVertexSharpness(o) > 0.0f ||
+                 (base.IsVertexBoundary(o) && base.GetVertexFaces(o).size() == 1);
+        if (!s) {
+            Far::ConstIndexArray ve = base.GetVertexEdges(o);
+            int creased = 0;
+            for (int k = 0; k < ve.size(); ++k) creased += base.GetEdgeSharpness(ve[k]) > 0.0f;
+            s = creased >= 3;
+        }
+        special[(size_t)o] = s;
+    }
+    any = false;
+    for (int32_t f = 0; f < m->face_count; ++f)
+        for (int64_t c = adj->corner_start[f]; c < adj->corner_start[f + 1]; ++c)
+            if (special[(size_t)p.osd_of[m->face_vertices[c]]]) {
+                face[(size_t)f] = 1;
+                any = true;
+                break;
+            }
+    return face;
+}
+
+// What a sample block consumer's nonzero return stops the blocks with.
+static spia_result emit_stopped(int stop, spia_status *status) {
+    if (stop == SPIA_ERROR_CANCELLED)
+        return spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled computing the sample stencils");
+    if (stop == SPIA_ERROR_INTERNAL)
+        return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "the sample stencils do not match the cage's faces");
+    return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the sample stencils");
+}
+
+static spia_result surface_blocks(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, int32_t per_edge,
+                                  bool corners, spia__sample_block_fn emit, void *user, spia_status *status) {
+    Prepared p;
+    spia_result r = prepare(m, adj, opt, p, status);
+    if (r != SPIA_OK) return r;
+    const SampleGrid grid(per_edge, corners);
+    const int per_face = grid.per_face;
+
+    // The faces for OpenSubdiv's patch table, on their part of the mesh.
+    bool any_far = false;
+    const std::vector<char> far_face = faces_for_far(m, adj, p, any_far);
+    std::vector<std::vector<FaceBlocks>> far_out;  // per face of the part
+    std::vector<int32_t> local_face_of;            // mesh face -> face of the part
+    Part part;
+    if (any_far) {
+        std::vector<int32_t> marked;
+        for (int32_t f = 0; f < m->face_count; ++f)
+            if (far_face[(size_t)f])
+                for (int64_t c = adj->corner_start[f]; c < adj->corner_start[f + 1]; ++c)
+                    marked.push_back(p.osd_of[m->face_vertices[c]]);
+        std::sort(marked.begin(), marked.end());
+        marked.erase(std::unique(marked.begin(), marked.end()), marked.end());
+        if ((r = make_part(m, adj, opt, p, two_ring_faces(m, adj, p, marked), false, nullptr, part, status)) != SPIA_OK)
+            return r;
+        const int32_t local_faces = part.refiner->GetLevel(0).GetNumFaces();
+        std::vector<char> wanted((size_t)local_faces, 0);
+        for (int32_t i = 0; i < local_faces; ++i) wanted[(size_t)i] = far_face[(size_t)part.mesh_face(i)];
+        if ((r = far_blocks(*part.refiner, opt, grid, wanted, far_out, status)) != SPIA_OK) return r;
+        local_face_of.assign((size_t)m->face_count, -1);
+        for (int32_t i = 0; i < local_faces; ++i) local_face_of[(size_t)part.mesh_face(i)] = i;
+    }
+
+    const Far::TopologyRefiner &refiner = *p.refiner;
+    Bfr::SurfaceFactory::Options qopt;
+    qopt.SetApproxLevelSharp(opt->quality).SetApproxLevelSmooth(opt->quality);
+    Bfr::RefinerSurfaceFactory<> factory(refiner, qopt);
+    Bfr::Surface<double> srf;
+    std::vector<Far::Index> cv;
+    std::vector<double> w;
+    std::vector<int32_t> stamp((size_t)p.osd_n, -1), slot((size_t)p.osd_n, 0), columns;
+    std::vector<double> block;
+    int64_t ptex = 0;
+    for (int32_t f = 0; f < m->face_count; ++f) {
+        if (any_far && far_face[(size_t)f]) {
+            const std::vector<FaceBlocks> &subs = far_out[(size_t)local_face_of[(size_t)f]];
+            for (const FaceBlocks &fb : subs) {
+                columns.resize(fb.columns.size());
+                for (size_t i = 0; i < columns.size(); ++i) columns[i] = p.vertex_of[(size_t)part.osd(fb.columns[i])];
+                if (int stop = emit(user, ptex++, (int32_t)columns.size(), columns.data(), fb.weights.data()))
+                    return emit_stopped(stop, status);
+            }
+            continue;
+        }
+        if (!factory.InitVertexSurface(f, &srf) || !srf.IsValid())
+            return spia__fail(status, SPIA_ERROR_INTERNAL, f, "OpenSubdiv built no limit surface for face %d", (int)f);
+        cv.resize((size_t)srf.GetNumControlPoints());
+        w.resize(cv.size());
+        srf.GetControlPointIndices(cv.data());
+        columns.clear();
+        for (size_t k = 0; k < cv.size(); ++k) {
+            const Far::Index c = cv[k];
+            if (stamp[(size_t)c] != f) {
+                stamp[(size_t)c] = f;
+                slot[(size_t)c] = (int32_t)columns.size();
+                columns.push_back(c);
+            }
+        }
+        const Bfr::Parameterization param = srf.GetParameterization();
+        const int sub_faces = param.HasSubFaces() ? param.GetFaceSize() : 1;
+        const size_t width = columns.size();
+        for (size_t i = 0; i < width; ++i) columns[i] = p.vertex_of[(size_t)columns[i]];
+        for (int sub = 0; sub < sub_faces; ++sub, ++ptex) {
+            block.assign(width * (size_t)per_face, 0.0);
+            for (int j = 0; j < per_face; ++j) {
+                double uv[2], st[2] = {grid.s[(size_t)j], grid.t[(size_t)j]};
+                if (param.HasSubFaces())
+                    param.ConvertNormalizedSubFaceToCoord(sub, st, uv);
+                else
+                    uv[0] = st[0], uv[1] = st[1];
+                srf.EvaluateStencil(uv, w.data());
+                double *row = &block[(size_t)j * width];
+                for (size_t k = 0; k < cv.size(); ++k) row[slot[(size_t)cv[k]]] += w[k];
+            }
+            if (int stop = emit(user, ptex, (int32_t)width, columns.data(), block.data()))
+                return emit_stopped(stop, status);
+        }
+    }
+    spia__ok(status);
+    return SPIA_OK;
+}
+
+namespace {
+// The blocks as a stencil table: rows in ptex order, exact zeros dropped,
+// columns sorted.
+struct RowsOut {
+    std::vector<int64_t> offsets{0};
+    std::vector<int32_t> indices;
+    std::vector<double> weights;
+    int32_t per = 0;
+    static int add(void *user, int64_t, int32_t width, const int32_t *columns, const double *w) {
+        RowsOut &o = *static_cast<RowsOut *>(user);
+        try {
+            for (int32_t j = 0; j < o.per; ++j) {
+                for (int32_t i = 0; i < width; ++i)
+                    if (w[(size_t)j * width + i] != 0.0) {
+                        o.indices.push_back(columns[i]);
+                        o.weights.push_back(w[(size_t)j * width + i]);
+                    }
+                o.offsets.push_back((int64_t)o.indices.size());
+            }
+        } catch (const std::bad_alloc &) {
+            return SPIA_ERROR_OUT_OF_MEMORY;
+        }
+        return 0;
+    }
+};
+}  // namespace
+
+static spia_result surface(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, int32_t per_edge,
+                           spia_stencils **out, spia_status *status) {
+    const int64_t rows = spia_surface_sample_count(m, per_edge);
+    if (rows > INT32_MAX / 64)
+        return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1,
+                          "%lld samples are too many (at most %d): lower samples_per_edge", (long long)rows,
+                          INT32_MAX / 64);
+    RowsOut o;
+    o.per = per_edge * per_edge;
+    o.offsets.reserve((size_t)rows + 1);
+    spia_result r = surface_blocks(m, adj, opt, per_edge, false, RowsOut::add, &o, status);
+    if (r != SPIA_OK) return r;
+    if ((int64_t)o.offsets.size() != rows + 1)
+        return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "OpenSubdiv made %lld sample stencils for %lld samples",
+                          (long long)o.offsets.size() - 1, (long long)rows);
+    spia_stencils *s = spia__stencils_alloc((int32_t)rows, (int64_t)o.weights.size());
+    if (!s) return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the sample stencils");
+    std::copy(o.offsets.begin(), o.offsets.end(), s->offsets);
+    std::copy(o.indices.begin(), o.indices.end(), s->indices);
+    std::copy(o.weights.begin(), o.weights.end(), s->weights);
+    s->nnz = (int64_t)o.weights.size();
+    spia__stencils_canonicalize(s);
+    *out = s;
+    spia__ok(status);
+    return SPIA_OK;
+}
+
+}  // namespace spia_osd
+
+extern "C" spia_result spia__osd_surface_stencils(const spia_mesh *mesh, const spia_adjacency *adj,
+                                                  const spia_options *options, int32_t samples_per_edge,
+                                                  spia_stencils **out, spia_status *status) {
+    *out = nullptr;
+    try {
+        return spia_osd::surface(mesh, adj, options, samples_per_edge, out, status);
+    } catch (const std::bad_alloc &) {
+        return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory computing sample stencils");
+    } catch (...) {
+        return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "unexpected failure computing sample stencils");
+    }
+}
+
+extern "C" spia_result spia__osd_surface_blocks(const spia_mesh *mesh, const spia_adjacency *adj,
+                                                const spia_options *options, int32_t samples_per_edge,
+                                                int32_t corners, spia__sample_block_fn emit, void *user,
+                                                spia_status *status) {
+    if (corners && samples_per_edge < 2)
+        return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "a grid with corners needs two points an edge");
+    try {
+        return spia_osd::surface_blocks(mesh, adj, options, samples_per_edge, corners != 0, emit, user, status);
+    } catch (const std::bad_alloc &) {
+        return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory computing sample stencils");
+    } catch (...) {
+        return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "unexpected failure computing sample stencils");
+    }
+}
