@@ -68,7 +68,7 @@ static spia_result scan_points_prepare(const spia_scan *scan, fit_buffers *b) {
  * SCAN_GRID_FACES (a detail level's millions of faces) gets no hierarchy
  * of its own: the search runs over the ptex faces' corners, one quad a
  * face, and each scan vertex then takes its distance to the grid's quads
- * of the face it found (coarse_measure). */
+ * of the face it found (coarse_range). */
 #define SCAN_GRID_FACES (2 << 20)
 spia_result spia__fit_scan_side_prepare(const spia_mesh *cage, const spia_adjacency *adj, const spia_options *opt,
                                         int32_t per_edge, const spia_scan *scan, fit_buffers *b, fit_clock *clock,
