@@ -14,7 +14,12 @@ The Blenders:
 - official builds as Python modules: PyPI's `bpy` wheels, the newest patch
   of every release PyPI serves for a Python this machine has (bpy 4.2 to 5.0
   need Python 3.11, 5.1 and newer 3.13), each in a virtual environment
-  under build/bpy/<release>, with the numpy that release's Blender bundles.
+  under build/bpy/<release>, with the numpy that release's Blender bundles;
+- official Windows builds under Wine (tools/windows.py): PyPI's win_amd64
+  bpy wheels of 4.2 and 4.5 (LTS, Python 3.11) and 5.3 (3.13), each in
+  python.org's embeddable Windows CPython under build/windows/bpy-<version>,
+  tested with the Windows extension (the Linux one's name with
+  windows_x64) on WINDOWS_SUITE, part of the suite.
 
 Each suite runs with SUBDIV_PIA_PACKAGE=EXTENSION.zip and
 SUBDIV_PIA_LEGACY_PACKAGE=LEGACY.zip: tests/blender/run.py installs the
@@ -166,9 +171,6 @@ def discover():
             blenders.append(Blender("Blender %s" % version, "PyPI `bpy==%s`, Python %s venv" % (version, minor),
                                     [os.path.join(venv, "bin", "python"), RUN_PY],
                                     prepare=(python, venv, version, numpy_for(release))))
-    if not shutil.which("wine"):
-        notes.append("no `wine` here: the official Windows Blenders are not tested")
-        return blenders, notes
     for version, minor, numpy in windows.BLENDERS:
         env = windows.blender(version, minor, numpy)
         blenders.append(Blender("Blender %s (Windows)" % version,
@@ -340,6 +342,8 @@ def test(package, jobs, only, extra, discard, legacy=None):
                     slots.acquire()
                 prepare_venv(*b.prepare)
             if b.windows:
+                if not shutil.which("wine"):
+                    raise RuntimeError("no `wine` here (Debian's wine64)")
                 if not os.path.isfile(windows_package(package)):
                     raise RuntimeError("no Windows extension %s" % windows_package(package))
                 b.windows.prepare()
