@@ -320,9 +320,10 @@ def package_kind(blender, legacy):
 
 
 def test(package, jobs, only, extra, discard, legacy=None):
-    """The suite in every Blender; with `discard`, each bpy venv is removed
-    once its suite has run and at most jobs + 1 of them exist at a time (each
-    is about 1 GB: all of them together can fill a small disk)."""
+    """The suite in every Blender; with `discard`, each bpy venv (or Windows
+    bpy environment) is removed once its suite has run and at most jobs + 1
+    of them exist at a time (each is about 1 GB: all of them together can
+    fill a small disk)."""
     blenders, notes = discover()
     if only:
         blenders = [b for b in blenders if any(o in b.name or o in b.how for o in only)]
@@ -330,8 +331,8 @@ def test(package, jobs, only, extra, discard, legacy=None):
     slots = threading.BoundedSemaphore(jobs + 1)
 
     def discard_venv(b):
-        if discard and b.prepare:
-            shutil.rmtree(b.prepare[1], ignore_errors=True)
+        if discard and (b.prepare or b.windows):
+            shutil.rmtree(b.prepare[1] if b.prepare else b.windows.folder, ignore_errors=True)
             slots.release()
 
     def prepare(b):
@@ -342,6 +343,8 @@ def test(package, jobs, only, extra, discard, legacy=None):
                     slots.acquire()
                 prepare_venv(*b.prepare)
             if b.windows:
+                if discard:
+                    slots.acquire()
                 if not shutil.which("wine"):
                     raise RuntimeError("no `wine` here (Debian's wine64)")
                 if not os.path.isfile(windows_package(package)):
