@@ -118,15 +118,20 @@ test-python: build
 # (tests/package/run.py); the wheels, sdist and extensions: twine,
 # auditwheel, their contents and licences, Blender's validator, pip into
 # clean venvs of Python 3.9 to 3.13 with numpy 1.x and 2.x and Debian 11's,
-# a trimesh client (tests/package/dist.py).
+# a trimesh client (tests/package/dist.py); the Windows wheel in official
+# Windows CPython 3.11 and 3.13 under Wine, its cages the Linux wheel's
+# (tests/package/windows_python.py).
 test-package: package
 	$(SUDO) $(PYTHON) tests/package/run.py $(LEGACY) $(WINDOWS_LEGACY)
 	$(SUDO) $(PYTHON) tests/package/dist.py
+	$(SUDO) $(PYTHON) tests/package/windows_python.py
 
 # The Blender suite against the installed package, in every Blender here:
 # Debian's, the other Debian release's (chroot), PyPI's bpy builds; the
 # extension (through Blender's installer, which installs its wheel) from
-# 4.2 on, the legacy add-on before.
+# 4.2 on, the legacy add-on before.  Besides, part of the suite in PyPI's
+# official Windows bpy 4.2, 4.5 and 5.3 under Wine, with the Windows
+# extension (tools/blenders.py's WINDOWS_SUITE).
 # BLENDER_SUITE_FLAGS=--discard-venvs keeps one or two bpy venvs (1 GB each)
 # on disk at a time instead of all of them.
 BLENDER_SUITE_FLAGS ?=

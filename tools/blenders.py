@@ -14,7 +14,12 @@ The Blenders:
 - official builds as Python modules: PyPI's `bpy` wheels, the newest patch
   of every release PyPI serves for a Python this machine has (bpy 4.2 to 5.0
   need Python 3.11, 5.1 and newer 3.13), each in a virtual environment
-  under build/bpy/<release>, with the numpy that release's Blender bundles.
+  under build/bpy/<release>, with the numpy that release's Blender bundles;
+- official Windows builds under Wine (tools/windows.py): PyPI's win_amd64
+  bpy wheels of 4.2 and 4.5 (LTS, Python 3.11) and 5.3 (3.13), each in
+  python.org's embeddable Windows CPython under build/windows/bpy-<version>,
+  tested with the Windows extension (the Linux one's name with
+  windows_x64) on WINDOWS_SUITE, part of the suite.
 
 Each suite runs with SUBDIV_PIA_PACKAGE=EXTENSION.zip and
 SUBDIV_PIA_LEGACY_PACKAGE=LEGACY.zip: tests/blender/run.py installs the
@@ -46,6 +51,7 @@ import zipfile
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import debian  # noqa: E402
+import windows  # noqa: E402
 
 ROOT = debian.ROOT
 BUILD = debian.BUILD
@@ -109,9 +115,24 @@ def served_releases(python):
     return newest
 
 
+# What runs in the official Windows Blenders under Wine (the whole suite
+# would take hours there): the package as installed, the window-free
+# operator path, the script API and cli.py, scan fits and live updates, on
+# meshes made in Blender.  Not there: the progress cli.py shows on a
+# terminal (the tests make one with `pty`, which is POSIX's), and the tests
+# that read tests/data's OBJ files (Blender's OBJ importer cannot map a
+# file into memory under Wine 8, on any drive: "Cannot mmap file").
+WINDOWS_SUITE = ["tests/blender/test_package.py", "tests/blender/test_operator.py",
+                 "tests/blender/test_api_cli.py", "tests/blender/test_fit.py", "tests/blender/test_live.py"]
+WINDOWS_DESELECT = " and ".join("not " + name for name in (
+    "on_a_terminal", "test_cli_writes_blend", "test_cli_bad_opensubdiv_version", "test_bunny_scan_surface_fit",
+    "test_scan_to_surface_distances_are_blenders", "test_paint_scan_writes_blenders_distances"))
+
+
 class Blender:
-    def __init__(self, name, how, command, cwd=ROOT, root=None, prepare=None):
+    def __init__(self, name, how, command, cwd=ROOT, root=None, prepare=None, windows=None):
         self.name, self.how, self.command, self.cwd, self.root, self.prepare = name, how, command, cwd, root, prepare
+        self.windows = windows  # tools/windows.py's Environment: an official Windows build, under Wine
 
 
 def debian_blender_version(command_prefix=()):
@@ -150,6 +171,11 @@ def discover():
             blenders.append(Blender("Blender %s" % version, "PyPI `bpy==%s`, Python %s venv" % (version, minor),
                                     [os.path.join(venv, "bin", "python"), RUN_PY],
                                     prepare=(python, venv, version, numpy_for(release))))
+    for version, minor, numpy in windows.BLENDERS:
+        env = windows.blender(version, minor, numpy)
+        blenders.append(Blender("Blender %s (Windows)" % version,
+                                "PyPI `bpy==%s` win_amd64 wheel, %s, %s" % (version, env.description(), numpy),
+                                env.command([RUN_PY]), windows=env))
     return blenders, notes
 
 
@@ -201,12 +227,14 @@ def counts(xml_paths):
     return total
 
 
-def test_files(extra):
+def test_files(extra, blender=None):
     """The suite's files, one Blender process each (a process that ran them
     all grew to 8 GB in the bpy module); pytest arguments naming files or
-    tests choose among them."""
+    tests choose among them.  The Windows Blenders run WINDOWS_SUITE."""
     named = [a for a in extra if not a.startswith("-") and a.split("::")[0].endswith(".py")]
     options = [a for a in extra if a not in named]
+    if blender is not None and blender.windows and not named:
+        return list(WINDOWS_SUITE), options + ["-k", WINDOWS_DESELECT]
     files = named or sorted(os.path.relpath(p, ROOT) for p in glob.glob(os.path.join(ROOT, "tests", "blender",
                                                                                         "test_*.py")))
     return files, options
@@ -235,6 +263,12 @@ def command_for(blender, package, selection, junit, legacy=None):
                 '/bin/sh -c "$C"']
         os.makedirs(os.path.join(blender.chroot_path, "src"), exist_ok=True)
         return argv, dict(clean_environment(), R=blender.chroot_path, S=ROOT, C=script)
+    if blender.windows:
+        # Windows paths (drive Z: is /) for everything the suite reads.
+        env = windows.wine_environment(dict(clean_environment(), SUBDIV_PIA_PACKAGE=windows.windows_path(package)))
+        env.pop("SUBDIV_PIA_LEGACY_PACKAGE", None)
+        env.pop("SUBDIV_PIA_ADDON_DIR", None)
+        return blender.command + ["--", "--junitxml=" + windows.windows_path(junit)] + selection, env
     env = dict(clean_environment(), SUBDIV_PIA_PACKAGE=package)
     env.pop("SUBDIV_PIA_LEGACY_PACKAGE", None)
     if legacy:
@@ -244,13 +278,15 @@ def command_for(blender, package, selection, junit, legacy=None):
 
 
 def run_suite(index, blender, package, extra, legacy=None):
+    if blender.windows:
+        package = windows_package(package)
     """The suite in one Blender, file by file; returns (counts, problems, seconds, log)."""
     os.makedirs(RESULTS, exist_ok=True)
     slug = re.sub(r"[^A-Za-z0-9.]+", "-", "%02d-%s-%s" % (index, blender.name, blender.how)).strip("-")
     log = os.path.join(RESULTS, slug + ".log")
     for old in glob.glob(os.path.join(RESULTS, slug + "-*.xml")):
         os.remove(old)
-    files, options = test_files(extra)
+    files, options = test_files(extra, blender)
     problems, junits, t0 = [], [], time.time()
     with open(log, "w") as out:
         for k, name in enumerate(files):
@@ -258,13 +294,21 @@ def run_suite(index, blender, package, extra, legacy=None):
             argv, env = command_for(blender, package, [name] + options, junit, legacy)
             out.write("$ %s\n" % " ".join(argv))
             out.flush()
-            code = subprocess.call(argv, cwd=ROOT, env=env, stdout=out, stderr=subprocess.STDOUT)
+            if blender.windows:  # a pipe, not the log file, for Windows Python under Wine to start
+                code = windows.run_piped(argv, lambda data: out.write(data.decode("utf-8", "replace")), env=env)
+            else:
+                code = subprocess.call(argv, cwd=ROOT, env=env, stdout=out, stderr=subprocess.STDOUT)
             junits.append(junit)
             if code != 0:
                 problems.append("%s: exit %d" % (os.path.basename(name), code))
             if not os.path.exists(junit):
                 problems.append("%s: no results" % os.path.basename(name))
     return counts(junits), problems, time.time() - t0, log
+
+
+def windows_package(package):
+    """The Windows extension beside the Linux one given."""
+    return package.replace("-linux_x64.zip", "-windows_x64.zip")
 
 
 def package_kind(blender, legacy):
@@ -276,9 +320,10 @@ def package_kind(blender, legacy):
 
 
 def test(package, jobs, only, extra, discard, legacy=None):
-    """The suite in every Blender; with `discard`, each bpy venv is removed
-    once its suite has run and at most jobs + 1 of them exist at a time (each
-    is about 1 GB: all of them together can fill a small disk)."""
+    """The suite in every Blender; with `discard`, each bpy venv (or Windows
+    bpy environment) is removed once its suite has run and at most jobs + 1
+    of them exist at a time (each is about 1 GB: all of them together can
+    fill a small disk)."""
     blenders, notes = discover()
     if only:
         blenders = [b for b in blenders if any(o in b.name or o in b.how for o in only)]
@@ -286,8 +331,8 @@ def test(package, jobs, only, extra, discard, legacy=None):
     slots = threading.BoundedSemaphore(jobs + 1)
 
     def discard_venv(b):
-        if discard and b.prepare:
-            shutil.rmtree(b.prepare[1], ignore_errors=True)
+        if discard and (b.prepare or b.windows):
+            shutil.rmtree(b.prepare[1] if b.prepare else b.windows.folder, ignore_errors=True)
             slots.release()
 
     def prepare(b):
@@ -297,10 +342,18 @@ def test(package, jobs, only, extra, discard, legacy=None):
                 if discard:
                     slots.acquire()
                 prepare_venv(*b.prepare)
+            if b.windows:
+                if discard:
+                    slots.acquire()
+                if not shutil.which("wine"):
+                    raise RuntimeError("no `wine` here (Debian's wine64)")
+                if not os.path.isfile(windows_package(package)):
+                    raise RuntimeError("no Windows extension %s" % windows_package(package))
+                b.windows.prepare()
             if b.root:
                 enter_chroot(b)
             return None
-        except (subprocess.CalledProcessError, RuntimeError, OSError) as exc:
+        except (subprocess.CalledProcessError, RuntimeError, OSError, StopIteration) as exc:
             return "could not be installed: %s" % exc
 
     def one(i, b):
@@ -362,7 +415,7 @@ def window(package):
         addon_folder = WINDOW_ADDON
     results = []
     for b in blenders:
-        if b.prepare:
+        if b.prepare or b.windows:
             continue  # the bpy module: no window
         if b.root:
             enter_chroot(b)

@@ -615,13 +615,17 @@ def test_panel_passes_the_target():
     assert cage.name + "_pia" in bpy.data.objects
 
 
-def test_cli_fits_to_a_target(tmp_path):
-    from test_api_cli import run_cli, run_cli_on_terminal
+def _scan_and_cage_file(tmp_path):
     fine_sphere("Scan", segments=64, rings=32)
     quad_sphere("Cage", cuts=2)
     path = str(tmp_path / "scene.blend")
     bpy.ops.wm.save_as_mainfile(filepath=path, copy=True)
-    output = str(tmp_path / "out.blend")
+    return path, str(tmp_path / "out.blend")
+
+
+def test_cli_fits_to_a_target(tmp_path):
+    from test_api_cli import run_cli
+    path, output = _scan_and_cage_file(tmp_path)
     result = run_cli(path, output, "--object", "Cage", "--target", "Scan", "--fit", "SURFACE",
                      "--fit-cutoff", "0.05", "--fit-samples", "3", "--fit-paint-scan")
     assert result.returncode == 0, result.stdout + result.stderr
@@ -639,7 +643,12 @@ def test_cli_fits_to_a_target(tmp_path):
     assert new_obj["pia_fit_cutoff"] == pytest.approx(0.05)
     result = run_cli(path, output, "--object", "Cage", "--target", "NoSuchScan")
     assert result.returncode == 1 and "NoSuchScan" in result.stderr
-    # On a terminal it shows each round and its mean distance.
+
+
+def test_cli_fit_progress_on_a_terminal(tmp_path):
+    """On a terminal the fit shows each round and its mean distance."""
+    from test_api_cli import run_cli_on_terminal
+    path, output = _scan_and_cage_file(tmp_path)
     status, text = run_cli_on_terminal(path, output, "--object", "Cage", "--target", "Scan", "--fit-cutoff", "0.05")
     assert status == 0, text
     rounds = re.findall(r"\rround (\d+): mean distance ([0-9.e+-]+) of the scan's diagonal", text)

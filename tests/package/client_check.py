@@ -54,6 +54,11 @@ c. A fit (spia.fit, mode 'SURFACE') of a 54-quad cage to a denser bumpy
    the samples next to those corners lie on end caps, up to 6e-4 of the
    cage's radius off the limit surface, so the check uses quality 3.
 
+With --save-cages FILE, the inputs and cages of (a), (b) and (c) are
+written to FILE (.npz); with --compare-cages FILE, spia is run again on the
+inputs saved there (another platform's run) with the same settings, and
+every cage must equal the one saved, bit for bit.
+
 Prints one line of figures and exits 0, or prints what failed and exits 1.
 Runs in a few seconds.
 """
@@ -76,6 +81,9 @@ sys.path.insert(0, HERE if os.path.isfile(os.path.join(HERE, "spheres.py")) else
 from spheres import cube_sphere, icosphere  # noqa: E402
 
 failures = []
+# name -> {"points", "faces", "cage"[, "scan_points", "scan_faces"]}: what
+# --save-cages writes and --compare-cages replays.
+cages = {}
 
 
 def check(ok, what):
@@ -303,6 +311,7 @@ def check_catmull_clark(spia):
         diagonal = diagonal_of(points)
         for quality in (1, 3, 10):
             cage, report = spia.interpolate(mesh, quality=quality)
+            cages["catmull-clark %s quality %d" % (name, quality)] = {"points": points, "faces": quads, "cage": cage}
             limit, n = catmull_clark_quad_limit(cage, quads)
             error = float(np.linalg.norm(limit - points, axis=1).max()) / diagonal
             shift = float(np.linalg.norm(cage.astype(np.float64) - points, axis=1).max()) / diagonal
@@ -327,6 +336,7 @@ def check_loop(spia):
     mesh = spia.Mesh.from_faces(points, triangles)
     diagonal = diagonal_of(points)
     cage, report = spia.interpolate(mesh, scheme="LOOP")
+    cages["loop"] = {"points": points, "faces": triangles, "cage": cage}
     limit, n = loop_limit(cage, triangles)
     error = float(np.linalg.norm(limit - points, axis=1).max()) / diagonal
     warren, _ = loop_limit(cage, triangles, beta=warren_beta)
@@ -353,6 +363,7 @@ def check_fit(spia):
     cage = spia.Mesh.from_faces(cage_p, cage_f)
     cutoff, per_edge = 0.05, 4
     fitted, report = spia.fit(cage, scan, cutoff=cutoff, samples_per_edge=per_edge)
+    cages["fit"] = {"points": cage_p, "faces": cage_f, "scan_points": scan_p, "scan_faces": scan_t, "cage": fitted}
     diagonal = diagonal_of(scan_p)
     check(abs(scan.diagonal - diagonal) <= 1e-9 * diagonal and abs(report.diagonal - diagonal) <= 1e-9 * diagonal,
           "fit: the scan's diagonal %.9g (report %.9g), computed here %.9g" % (scan.diagonal, report.diagonal,
@@ -395,6 +406,52 @@ def check_fit(spia):
             "force" % (before[0], after[0], before[2], after[2], scan_before[0], scan_after[0], worst))
 
 
+def replay(spia, name, case):
+    """The cage spia makes of a saved case's inputs, with its settings."""
+    mesh = spia.Mesh.from_faces(case["points"], case["faces"])
+    if name == "fit":
+        scan = spia.Scan(spia.Mesh.from_faces(case["scan_points"], case["scan_faces"]))
+        return spia.fit(mesh, scan, cutoff=0.05, samples_per_edge=4)[0]
+    if name == "loop":
+        return spia.interpolate(mesh, scheme="LOOP")[0]
+    return spia.interpolate(mesh, quality=int(name.rsplit(" ", 1)[1]))[0]
+
+
+def save_cages(path):
+    np.savez(path, **{"%s/%s" % (name, key): np.asarray(value) for name, case in cages.items()
+                      for key, value in case.items()})
+
+
+def compare_cages(spia, path):
+    """Every saved case run again here: the cages must be the saved ones'
+    bytes.  Returns a summary."""
+    saved = {}
+    with np.load(path) as data:
+        for key in data.files:
+            name, field = key.split("/")
+            saved.setdefault(name, {})[field] = data[key]
+    check(sorted(saved) == sorted(cages), "compare: %s holds %s, this run made %s" % (path, sorted(saved),
+                                                                                   sorted(cages)))
+    same_inputs, equal = 0, 0
+    for name, case in sorted(saved.items()):
+        ours = cages.get(name, {})
+        if all(k in ours and np.array_equal(ours[k], case[k]) for k in case if k != "cage"):
+            same_inputs += 1
+        cage = np.asarray(replay(spia, name, case))
+        theirs = case["cage"]
+        if cage.dtype == theirs.dtype and cage.shape == theirs.shape and cage.tobytes() == theirs.tobytes():
+            equal += 1
+        else:
+            off = (float(np.abs(cage.astype(np.float64) - theirs).max()) if cage.shape == theirs.shape
+                   else float("inf"))
+            check(False, "compare: %s: the cage differs from %s's (%s %s here, %s %s there; largest difference "
+                  "%.3g of the input's diagonal)" % (name, os.path.basename(path), cage.dtype, cage.shape,
+                                                     theirs.dtype, theirs.shape,
+                                                     off / diagonal_of(case["points"])))
+    return "%d of %d cages equal to %s's bit for bit (%d inputs made the same here)" % (
+        equal, len(saved), os.path.basename(path), same_inputs)
+
+
 # --------------------------------------------------------------------------
 
 def site_directories():
@@ -420,6 +477,9 @@ def main(argv):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--from-path", metavar="DIR", help="import spia from DIR (put first on sys.path)")
     parser.add_argument("--expect-prefix", metavar="PREFIX", help="spia's file must lie under PREFIX")
+    parser.add_argument("--save-cages", metavar="FILE", help="write the inputs and cages to FILE (.npz)")
+    parser.add_argument("--compare-cages", metavar="FILE",
+                        help="run spia again on the inputs in FILE: the cages must equal FILE's bit for bit")
     args = parser.parse_args(argv[1:])
     start = time.time()
     if args.from_path:
@@ -454,6 +514,13 @@ def main(argv):
                 parts.append(step(spia))
             except Exception:  # noqa: BLE001 (a failure to report, not to stop at)
                 check(False, "%s raised:\n%s" % (step.__name__, traceback.format_exc().rstrip()))
+        if args.save_cages:
+            save_cages(args.save_cages)
+        if args.compare_cages:
+            try:
+                parts.append(compare_cages(spia, args.compare_cages))
+            except Exception:  # noqa: BLE001
+                check(False, "compare_cages raised:\n%s" % traceback.format_exc().rstrip())
     head = "spia %s from %s%s (Python %s, numpy %s, %s)" % (library_version, location, library,
                                                            platform.python_version(), np.__version__,
                                                            platform.machine())
