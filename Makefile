@@ -73,14 +73,14 @@ macos: deps
 # The C tests, and no circle among the library's source files (which file
 # calls which, read from the build's objects).
 test-c: build
-	ctest --test-dir build/cmake --output-on-failure
+	ctest --test-dir build/cmake --output-on-failure --parallel 2
 	$(PYTHON) tools/file_deps.py build/cmake
 
 test-asan: deps
 	cmake -S . -B build/asan $(OSD_ARGS) -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSPIA_SANITIZE=ON
 	cmake --build build/asan --parallel 2
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
-	  ctest --test-dir build/asan --output-on-failure
+	  ctest --test-dir build/asan --output-on-failure --parallel 2
 
 # ThreadSanitizer: interpolations, fits and closest-point queries from
 # several threads at once; only the library and that test are built.

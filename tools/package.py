@@ -178,7 +178,7 @@ def build_linux(run_tests=True):
         "ldd --version | head -n 1 > {o}/glibc.txt",
     ]
     if run_tests:
-        steps.append("cd {o}/cmake && ctest --output-on-failure")
+        steps.append("cd {o}/cmake && ctest --output-on-failure --parallel 2")
     script = "\n".join(steps).format(o=inner, s=osd_src, opts=" ".join(OPENSUBDIV_OPTIONS))
     debian.in_chroot(root, script, binds=[(ROOT, "/src")])
     return os.path.join(out, "libsubdiv_pia.so")
@@ -236,7 +236,8 @@ def build_windows(run_tests=True):
         # test program at all (no output, 0.00 s) once in many runs, and a
         # real failure fails twice.
         env = wine_environment()
-        debian.run(["ctest", "--output-on-failure", "--repeat", "until-pass:2"], cwd=cmake, env=env)
+        debian.run(["ctest", "--output-on-failure", "--parallel", "2", "--repeat", "until-pass:2"], cwd=cmake,
+                   env=env)
     return dll
 
 

@@ -40,7 +40,17 @@ typedef struct tmesh {
     int32_t *edges;
     float *edge_creases;
     float *vertex_creases;
+    /* What tmesh_grow allocated last, for each array (in the order of
+     * TMESH_POS ...): the block and its room, so that building a mesh a
+     * vertex at a time reallocates log n times, not n times (a sanitizer's
+     * realloc copies every time). */
+    struct {
+        void *block;
+        size_t room;
+    } grown[6];
 } tmesh;
+
+enum { TMESH_POS, TMESH_VERTEX_CREASES, TMESH_SIZES, TMESH_FV, TMESH_EDGES, TMESH_EDGE_CREASES };
 
 static void *tgrow(void *p, size_t n, size_t size) {
     void *q = realloc(p, (n ? n : 1) * size);
@@ -48,21 +58,35 @@ static void *tgrow(void *p, size_t n, size_t size) {
     return q;
 }
 
+/* Array `which` of m, p, with room for at least n items of `size` bytes;
+ * an array not grown here (set by a test itself) is reallocated the first
+ * time. */
+static void *tmesh_grow(tmesh *m, int which, void *p, size_t n, size_t size) {
+    if (p && p == m->grown[which].block && n <= m->grown[which].room) return p;
+    size_t room = p && p == m->grown[which].block ? 2 * m->grown[which].room : 16;
+    while (room < n) room *= 2;
+    void *q = tgrow(p, room, size);
+    m->grown[which].block = q;
+    m->grown[which].room = room;
+    return q;
+}
+
 static int32_t tmesh_vertex(tmesh *m, double x, double y, double z) {
-    m->pos = (float *)tgrow(m->pos, 3 * (size_t)(m->nv + 1), sizeof(float));
+    m->pos = (float *)tmesh_grow(m, TMESH_POS, m->pos, 3 * (size_t)(m->nv + 1), sizeof(float));
     m->pos[3 * m->nv] = (float)x;
     m->pos[3 * m->nv + 1] = (float)y;
     m->pos[3 * m->nv + 2] = (float)z;
     if (m->vertex_creases) {
-        m->vertex_creases = (float *)tgrow(m->vertex_creases, (size_t)m->nv + 1, sizeof(float));
+        m->vertex_creases =
+            (float *)tmesh_grow(m, TMESH_VERTEX_CREASES, m->vertex_creases, (size_t)m->nv + 1, sizeof(float));
         m->vertex_creases[m->nv] = 0.0f;
     }
     return m->nv++;
 }
 
 static void tmesh_face(tmesh *m, int n, const int32_t *v) {
-    m->sizes = (int32_t *)tgrow(m->sizes, (size_t)m->nf + 1, sizeof(int32_t));
-    m->fv = (int32_t *)tgrow(m->fv, (size_t)(m->nfv + n), sizeof(int32_t));
+    m->sizes = (int32_t *)tmesh_grow(m, TMESH_SIZES, m->sizes, (size_t)m->nf + 1, sizeof(int32_t));
+    m->fv = (int32_t *)tmesh_grow(m, TMESH_FV, m->fv, (size_t)(m->nfv + n), sizeof(int32_t));
     m->sizes[m->nf++] = n;
     for (int i = 0; i < n; ++i) m->fv[m->nfv++] = v[i];
 }
@@ -79,8 +103,8 @@ static void tmesh_tri(tmesh *m, int32_t a, int32_t b, int32_t c) {
 
 /* An edge with a crease (the edge may or may not be a face edge). */
 static void tmesh_edge(tmesh *m, int32_t a, int32_t b, float crease) {
-    m->edges = (int32_t *)tgrow(m->edges, 2 * (size_t)(m->ne + 1), sizeof(int32_t));
-    m->edge_creases = (float *)tgrow(m->edge_creases, (size_t)m->ne + 1, sizeof(float));
+    m->edges = (int32_t *)tmesh_grow(m, TMESH_EDGES, m->edges, 2 * (size_t)(m->ne + 1), sizeof(int32_t));
+    m->edge_creases = (float *)tmesh_grow(m, TMESH_EDGE_CREASES, m->edge_creases, (size_t)m->ne + 1, sizeof(float));
     m->edges[2 * m->ne] = a;
     m->edges[2 * m->ne + 1] = b;
     m->edge_creases[m->ne++] = crease;

@@ -79,8 +79,14 @@ static spia_options options_for(int quality, bool preserve, bool creases, int os
     return o;
 }
 
+// This run's share of the comparisons (--part K/N): the K-th of every N
+// in the order they come, so that N processes can share them out.
+static int part_index = 0, part_count = 1, comparison_number = 0;
+static bool in_this_part() { return comparison_number++ % part_count == part_index; }
+
 static void compare(const tmesh &m, const std::string &name, int quality, bool preserve, bool creases,
                     int osd_version = 0) {
+    if (!in_this_part()) return;
     Rows ref = reference_rows(m, quality, preserve, creases, osd_version);
     spia_mesh mesh = tmesh_view(&m);
     spia_options o = options_for(quality, preserve, creases, osd_version);
@@ -117,6 +123,7 @@ static void compare(const tmesh &m, const std::string &name, int quality, bool p
 // against the factory's rows at the same places.
 static void compare_surface(const tmesh &m, const std::string &name, int quality, bool preserve, bool creases,
                             int osd_version) {
+    if (!in_this_part()) return;
     const int per_edge = 2;
     Rows ref = reference_rows(m, quality, preserve, creases, osd_version, per_edge);
     spia_mesh mesh = tmesh_view(&m);
@@ -156,7 +163,8 @@ static void compare_all(const tmesh &m, const std::string &name, std::initialize
                     // (the factory over every face is slow: larger meshes at quality 3 only)
                     if (m.nv <= 1700 || q == 3) compare_surface(m, name, q, preserve != 0, creases != 0, osd);
                 }
-    printf("%-40s matches OpenSubdiv's full adaptive stencils, at the vertices and inside the faces\n", name.c_str());
+    printf("%-40s matches OpenSubdiv's full adaptive stencils, at the vertices and inside the faces%s\n", name.c_str(),
+           part_count > 1 ? " (this part's share)" : "");
 }
 
 int main(int argc, char **argv) {
@@ -165,7 +173,18 @@ int main(int argc, char **argv) {
     // (not the triangulated bunny, not the dragon cut), random creases at
     // qualities 1 and 3.  The plain build and the package's build run
     // everything.
-    const bool sanitized = argc > 1 && std::string(argv[1]) == "--sanitized";
+    // --part K/N: the K-th (from 0) of N shares of the comparisons.
+    bool sanitized = false;
+    for (int a = 1; a < argc; ++a) {
+        const std::string arg = argv[a];
+        if (arg == "--sanitized") sanitized = true;
+        else if (arg == "--part" && a + 1 < argc && sscanf(argv[a + 1], "%d/%d", &part_index, &part_count) == 2 &&
+                 part_count > 0 && part_index >= 0 && part_index < part_count) ++a;
+        else {
+            fprintf(stderr, "usage: test_reference [--sanitized] [--part K/N]\n");
+            return 2;
+        }
+    }
     const int32_t largest = sanitized ? 1700 : INT32_MAX;
     // Semi-sharp edge creases 0.3, 0.5, 0.9, 1.0 along a line, a dart, a
     // vertex crease, and a corner crease through the two-edge rule.
