@@ -81,6 +81,9 @@ class Clocks:
             self.seconds[group] = 0.0
 
     def wrap(self, group, owner, *names):
+        """Times owner.name for each name, in owner and in every module of
+        the add-on that imported the same function (a module calls what it
+        imported, not owner's attribute)."""
         self.seconds.setdefault(group, 0.0)
         self.depth.setdefault(group, 0)
         for name in names:
@@ -97,7 +100,14 @@ class Clocks:
                     self.depth[group] -= 1
                     if self.depth[group] == 0:
                         self.seconds[group] += time.perf_counter() - t0
-            setattr(owner, name, self._method(timed) if isinstance(owner, type) else timed)
+            if isinstance(owner, type):
+                setattr(owner, name, self._method(timed))
+                continue
+            package = owner.__name__.split(".")[0]
+            for module in list(sys.modules.values()):
+                if (getattr(module, "__name__", "").split(".")[0] == package and
+                        getattr(module, name, None) is function):
+                    setattr(module, name, timed)
 
     @staticmethod
     def _method(timed):
