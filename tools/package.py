@@ -236,8 +236,18 @@ def build_windows(run_tests=True):
         # test program at all (no output, 0.00 s) once in many runs, and a
         # real failure fails twice.
         env = wine_environment()
-        debian.run(["ctest", "--output-on-failure", "--parallel", "2", "--repeat", "until-pass:2"], cwd=cmake,
-                   env=env)
+        # One Wine server for the whole run, started before it: else the
+        # first test starts it, two tests starting at once can race to (one
+        # fails at once), and the server and Wine's services keep the first
+        # test's output pipe open, so that ctest sees it end only with the
+        # last test, one of its two slots taken throughout.
+        debian.run(["wineserver", "-p"], env=env)
+        try:
+            debian.run(["wine", "wineboot", "--init"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            debian.run(["ctest", "--output-on-failure", "--parallel", "2", "--repeat", "until-pass:2"], cwd=cmake,
+                       env=env)
+        finally:
+            subprocess.run(["wineserver", "-k"], env=env)
     return dll
 
 
