@@ -13,7 +13,7 @@ BLENDER_RUN = $(BLENDER) -b --factory-startup --python-exit-code 1
 # OpenSubdiv built from that source package.
 DEBIAN_PACKAGES = blender cmake g++ clang make binutils python3-numpy python3-scipy python3-pytest \
                   python3-matplotlib python3-venv libsuitesparse-dev debootstrap dpkg-dev xz-utils \
-                  g++-mingw-w64-x86-64 wine64 xvfb xauth libgl1-mesa-dri
+                  g++-mingw-w64-x86-64 wine wine64 xvfb xauth libgl1-mesa-dri
 # Installed where the release has them: the closest-point benchmark compares
 # the library with Embree (3 on Debian 12, 4 on 13).
 OPTIONAL_PACKAGES = libembree-dev
