@@ -352,7 +352,7 @@ def test(package, jobs, only, extra, discard, legacy=None):
                 if discard:
                     slots.acquire()
                 if not shutil.which("wine"):
-                    raise RuntimeError("no `wine` here (Debian's wine64)")
+                    raise RuntimeError("no `wine` here (Debian's wine and wine64)")
                 if not os.path.isfile(windows_package(package)):
                     raise RuntimeError("no Windows extension %s" % windows_package(package))
                 b.windows.prepare()
