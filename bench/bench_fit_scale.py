@@ -54,7 +54,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import fit_cases  # noqa: E402
 # (bench_detail_scale.py takes these from here too.)
-from harness import OUT, ROOT, ensure_addon, finish, proc_status, reset_peak, script_args  # noqa: E402
+from harness import OUT, ROOT, ensure_addon, finish, proc_status, replace_everywhere, reset_peak, script_args  # noqa: E402
 
 # Per Blender version: a .blend written by one cannot always be read by an
 # older one (5.0 changed the file header).
@@ -237,7 +237,7 @@ def run_case(cage_size, scan_name):
                 seconds[key] = seconds.get(key, 0.0) + time.perf_counter() - t0
         return wrapper
 
-    api.scan_arrays = timed("read_scan", api.scan_arrays)
+    replace_everywhere(api, "scan_arrays", timed("read_scan", api.scan_arrays))
     native.Scan = timed("scan_create", native.Scan)
     # interpolate() reads the cage (prepare_cage) and then runs the library
     # (the run it returns): both count as compute_cage.
@@ -246,7 +246,7 @@ def run_case(cage_size, scan_name):
     def timed_prepare(*a, **k):
         run, explain = timed("compute_cage", prepare_cage)(*a, **k)
         return timed("compute_cage", run), explain
-    api.prepare_cage = timed_prepare
+    replace_everywhere(api, "prepare_cage", timed_prepare)
     bpy.context.view_layer.update()
     rss = proc_status("VmRSS")
     peak_reset = reset_peak()

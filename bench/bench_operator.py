@@ -40,7 +40,7 @@ import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
-from harness import addon_on_path, script_args  # noqa: E402
+from harness import addon_on_path, replace_everywhere, script_args  # noqa: E402
 
 
 def build_sphere(k):
@@ -103,11 +103,7 @@ class Clocks:
             if isinstance(owner, type):
                 setattr(owner, name, self._method(timed))
                 continue
-            package = owner.__name__.split(".")[0]
-            for module in list(sys.modules.values()):
-                if (getattr(module, "__name__", "").split(".")[0] == package and
-                        getattr(module, name, None) is function):
-                    setattr(module, name, timed)
+            replace_everywhere(owner, name, timed)
 
     @staticmethod
     def _method(timed):

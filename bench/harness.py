@@ -59,6 +59,19 @@ def ensure_addon():
     return subdiv_pia
 
 
+def replace_everywhere(owner, name, replacement):
+    """Sets owner.name to replacement, in owner and in every module of the
+    same package that imported the same function (a module calls what it
+    imported, not owner's attribute); returns the function replaced."""
+    function = getattr(owner, name)
+    package = owner.__name__.split(".")[0]
+    for module in list(sys.modules.values()):
+        if (getattr(module, "__name__", "").split(".")[0] == package and
+                getattr(module, name, None) is function):
+            setattr(module, name, replacement)
+    return function
+
+
 def finish(code=0):
     """Exit; the bpy module at once (Blender 4.2 and 4.3 crash on exit after
     an add-on registered classes, 4.5 does not exit while they are)."""
