@@ -31,6 +31,9 @@ class DetailResult:
     mesh: Mesh                  # the finest level's control mesh, fitted (mesh.positions)
     points: np.ndarray = field(repr=False)   # (N, 3) float32: the finest level's vertices, drawn flat
     reports: list = field(default_factory=list)  # a FitReport per level, coarse to fine
+    # (vertex count, face_sizes, face_vertices) of the cage and each level,
+    # 0 to levels, as subdivide numbered them
+    level_topology: list = field(default_factory=list, repr=False)
 
     @property
     def report(self):
@@ -197,7 +200,7 @@ def fit_detail(cage, scan, levels, samples_per_edge=4, progress=None, boundary_s
                    opensubdiv_version=opensubdiv_version, memory_budget=memory_budget)
     subdivide, fit, flat_positions = _stages()
     current = cage
-    reports = []
+    reports, topology = [], [(cage.vertex_count, cage.face_sizes, cage.face_vertices)]
     for level in range(1, levels + 1):
         tick = None if progress is None else (lambda _l, _s, level=level: progress(level, 0, 0.0))
         refined = subdivide(current, 1, progress=tick, **surface)
@@ -208,7 +211,8 @@ def fit_detail(cage, scan, levels, samples_per_edge=4, progress=None, boundary_s
                                 free_rims=free_rims, max_rounds=max_rounds, solver_iterations=solver_iterations,
                                 robust_scale=robust_scale, **surface, **fit_options)
         reports.append(report)
+        topology.append((refined.vertex_count, refined.face_sizes, refined.face_vertices))
         current = Mesh(positions, refined.face_sizes, refined.face_vertices, edges=refined.edges,
                        edge_creases=refined.edge_creases, vertex_creases=refined.vertex_creases)
     points = flat_positions(current, threads=threads, **surface)
-    return DetailResult(levels=levels, mesh=current, points=points, reports=reports)
+    return DetailResult(levels=levels, mesh=current, points=points, reports=reports, level_topology=topology)
