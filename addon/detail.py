@@ -4,14 +4,16 @@ to the scan (settings fit_detail_levels).
 
 The library fits the levels (native.fit_detail) and gives the finest
 level's vertices in its own order; Blender numbers the vertices of a
-Multires level its own way.  The order is read from Blender: a
-Subdivision Surface modifier with Use Limit Surface off, on a copy of the
-cage, gives the finest level's topology in Blender's order with each vertex
-at its control position, which is the library's subdivided cage
-(native.subdivide) in another order; each of Blender's vertices is matched
-to the library's vertex at the same place.  Then a Multires modifier is
-subdivided to the same level and reshaped (Blender's Reshape, from a copy
-of its finest level with the fitted positions).
+Multires level its own way, which multires_order computes from the
+library's levels.  Then a Multires modifier is subdivided to the same
+level and reshaped (Blender's Reshape, from a mesh of the finest level's
+fitted positions in Blender's order).  Where the levels do not fit the
+computed numbering (a cage with loose edges, say), the order is read from
+Blender instead: a Subdivision Surface modifier with Use Limit Surface
+off, on a copy of the cage, gives the finest level in Blender's order
+with each vertex at its control position, which is the library's
+subdivided cage (native.subdivide) in another order; each of Blender's
+vertices is matched to the library's vertex at the same place.
 
 Reads and writes Blender's data; the library's share (fit_detail_work) is
 a function that touches nothing of Blender's.
@@ -20,8 +22,8 @@ a function that touches nothing of Blender's.
 import numpy as np
 import bpy
 
-from . import native
-from .mesh_io import read_positions, write_positions
+from . import multires_order, native
+from .mesh_io import mesh_arrays, native_mesh, read_positions, write_positions
 
 MODIFIER_NAME = "Multires"
 # A vertex of Blender's finest level matches the library's vertex at the
@@ -32,6 +34,9 @@ MATCH_TOLERANCE = 1e-5
 APART_TOLERANCE = 1e-2
 # At most this many vertices are looked for among all (each a pass over them).
 MAX_SEARCHED = 1000
+# The Multires modifier's quality while its levels are subdivided, before
+# Reshape sets them (None: the settings' quality throughout).
+SUBDIVIDE_QUALITY = 1
 
 
 def surface_options(settings):
@@ -42,28 +47,38 @@ def surface_options(settings):
 
 def fit_detail_work(cage_mesh, cage_positions, scan, settings, progress=None):
     """The library's share, as a function that touches nothing of
-    Blender's: it fits the levels on the fitted cage (native.DetailResult)
-    and subdivides the cage as many times (the control positions that tell
-    Blender's order), and returns both.  progress(round, mean) as the
-    fit's; True cancels."""
+    Blender's: it fits the levels on the fitted cage and returns the
+    native.DetailResult.  progress(round, mean) as the fit's; True
+    cancels."""
     levels = int(settings["fit_detail_levels"])
     base = native.Mesh(cage_positions, cage_mesh.face_sizes, cage_mesh.face_vertices, edges=cage_mesh.edges,
                        edge_creases=cage_mesh.edge_creases, vertex_creases=cage_mesh.vertex_creases)
     options = surface_options(settings)
     follow = None if progress is None else (lambda _level, iteration, value: progress(iteration, value))
-    tick = None if progress is None else (lambda _level, _share: progress(0, 0.0))
 
     def run():
-        detail = native.fit_detail(base, scan, levels, samples_per_edge=settings["fit_samples"],
-                                   cutoff=settings["fit_cutoff"], progress=follow, **options)
-        # One level at a time, as fit_detail subdivides: each level's edge
-        # vertices come in the order of that level's own edges, which a
-        # subdivision of several levels at once numbers otherwise.
-        subdivided = base
-        for _ in range(levels):
-            subdivided = native.subdivide(subdivided, 1, progress=tick, **options)
-        return detail, subdivided.positions
+        return native.fit_detail(base, scan, levels, samples_per_edge=settings["fit_samples"],
+                                 cutoff=settings["fit_cutoff"], progress=follow, **options)
     return run
+
+
+def blender_order(obj, detail):
+    """Blender's numbering of obj's Multires finest level, as the library's
+    finest level's vertex numbers (multires_order), or None where the
+    library's levels do not fit it (match_order then pairs the vertices,
+    through Blender's own subdivision)."""
+    if len(detail.level_topology) != int(detail.levels) + 1:
+        return None
+    arrays = mesh_arrays(obj.data)
+    count, face_sizes, face_vertices = detail.level_topology[0]
+    if (count != len(arrays["positions"]) or not np.array_equal(face_sizes, arrays["face_sizes"]) or
+            not np.array_equal(face_vertices, arrays["face_vertices"])):
+        return None
+    try:
+        return multires_order.blender_order(face_sizes, face_vertices, arrays["edges"], count,
+                                            [(n, faces) for n, _sizes, faces in detail.level_topology[1:]])
+    except multires_order.OrderMismatch:
+        return None
 
 
 def _subsurf_topology(obj, levels, settings, context):
@@ -86,13 +101,69 @@ def _subsurf_topology(obj, levels, settings, context):
         bpy.data.objects.remove(copy)
 
 
+def _cell_pairs(ours, theirs, cell, offset):
+    """Pairs (i, j) of the library's point ours[i] and Blender's theirs[j]
+    alone together in a cube of side `cell` (the cubes shifted by
+    offset * cell): one sort of both sets' cubes."""
+    lo = np.minimum(ours.min(axis=0), theirs.min(axis=0)) - cell
+    q = np.floor((np.concatenate((ours, theirs)) - lo) / cell + offset).astype(np.int64)
+    keys = (q[:, 0] << 42) | (q[:, 1] << 21) | q[:, 2]
+    by_key = np.argsort(keys)
+    keys = keys[by_key]
+    # A pair: two neighbours in the sort with one cube, unlike the ones
+    # either side, one of each set.
+    same = keys[1:] == keys[:-1]
+    lone = np.ones(len(same), bool)
+    lone[1:] &= ~same[:-1]
+    lone[:-1] &= ~same[1:]
+    first = np.flatnonzero(same & lone)
+    a, b = by_key[first], by_key[first + 1]
+    n = len(ours)
+    a, b = np.minimum(a, b), np.maximum(a, b)
+    mixed = (a < n) & (b >= n)
+    return a[mixed], b[mixed] - n
+
+
 def match_order(blender_points, faces_mesh, diagonal):
     """For each of Blender's vertices, the library's vertex at the same
-    place: the closest face of the library's mesh (a native.Mesh of its
-    subdivided cage, by the library's closest-point search) and its closest
-    corner; where that corner is not at the same place (a face of a folded
-    cage passing nearer), a search over every vertex.  Raises RuntimeError
-    where a vertex has no match within MATCH_TOLERANCE or two share one."""
+    place.  The two agree to within rounding: a point and its match are
+    alone together in a cube of a grid 4 MATCH_TOLERANCE wide, or else of a
+    second grid shifted by half a cube (a pair the first grid splits lies
+    near one of its faces, so far from the second's); what is left goes as
+    _settle says, or, more than MAX_SEARCHED left, to match_order_searched.
+    Raises RuntimeError where a vertex has no match within MATCH_TOLERANCE
+    or two share one."""
+    ours = np.asarray(faces_mesh.positions, np.float64)
+    theirs = np.asarray(blender_points, np.float64)
+    scale = max(diagonal, 1e-30)
+    cell = 4.0 * MATCH_TOLERANCE * scale
+    # The cube's coordinates take 21 bits each.
+    if (len(ours) != len(theirs) or not len(ours) or
+            np.ptp(np.concatenate((ours, theirs)), axis=0).max() > cell * ((1 << 21) - 4)):
+        return match_order_searched(blender_points, faces_mesh, diagonal)
+    order = np.full(len(theirs), -1, np.int64)
+    i, j = _cell_pairs(ours, theirs, cell, 0.0)
+    order[j] = i
+    free = np.ones(len(ours), bool)
+    free[i] = False
+    ours_left, theirs_left = np.flatnonzero(free), np.flatnonzero(order < 0)
+    if len(theirs_left):
+        i, j = _cell_pairs(ours[ours_left], theirs[theirs_left], cell, 0.5)
+        order[theirs_left[j]] = ours_left[i]
+    gap = np.full(len(theirs), np.inf)
+    found = np.flatnonzero(order >= 0)
+    gap[found] = np.linalg.norm(ours[order[found]] - theirs[found], axis=1) / scale
+    if _settle(order, gap, ours, theirs, scale):
+        return order
+    return match_order_searched(blender_points, faces_mesh, diagonal)
+
+
+def match_order_searched(blender_points, faces_mesh, diagonal):
+    """match_order by search: for each of Blender's vertices, the closest
+    face of the library's mesh (a native.Mesh of its subdivided cage, by
+    the library's closest-point search) and its closest corner; where that
+    corner is not at the same place (a face of a folded cage passing
+    nearer), a search over every vertex."""
     scale = max(diagonal, 1e-30)
     scan = native.Scan(faces_mesh)
     faces = scan.closest_points(blender_points)[3]
@@ -107,22 +178,40 @@ def match_order(blender_points, faces_mesh, diagonal):
         distances = np.linalg.norm(faces_mesh.positions - blender_points[j], axis=1)
         order[j] = int(np.argmin(distances))
         gap[j] = distances[order[j]] / scale
-    # Where Blender's rules for a non-manifold vertex differ from the
-    # library's, a few vertices near it sit apart: each library vertex keeps
-    # the Blender vertex nearest it, and those left over are paired among
-    # themselves, nearest first.
-    by_gap = np.argsort(gap, kind="stable")
-    first = np.zeros(len(order), bool)
-    _values, keep = np.unique(order[by_gap], return_index=True)
-    first[by_gap[keep]] = True
+    if not _settle(order, gap, faces_mesh.positions, blender_points, scale):
+        raise RuntimeError("Blender's Multires levels do not match the library's subdivision (more than %d of "
+                           "%d vertices apart); the detail levels were not made" % (MAX_SEARCHED, len(order)))
+    return order
+
+
+def _settle(order, gap, ours, theirs, scale):
+    """Makes order (each of Blender's vertices' candidate among the
+    library's, -1 for none; gap: how far apart, a share of the diagonal)
+    one to one, in place.  Where Blender's rules for a non-manifold vertex
+    differ from the library's, a few vertices near it sit apart: each
+    library vertex keeps the Blender vertex nearest it, and those left over
+    are paired among themselves, nearest first.  False where more than
+    MAX_SEARCHED are left over; raises RuntimeError where a pair ends
+    further apart than APART_TOLERANCE or more than MAX_SEARCHED are apart."""
+    first = order >= 0
+    if np.bincount(order[first], minlength=len(ours)).max(initial=0) > 1:
+        by_gap = np.argsort(gap, kind="stable")
+        by_gap = by_gap[order[by_gap] >= 0]
+        values = order[by_gap]
+        by_value = np.argsort(values, kind="stable")
+        runs = np.ones(len(by_value), bool)
+        runs[1:] = values[by_value[1:]] != values[by_value[:-1]]
+        first[:] = False
+        first[by_gap[by_value[runs]]] = True
     left = np.flatnonzero(~first)
+    if len(left) > MAX_SEARCHED:
+        return False
     if len(left):
-        free = np.setdiff1d(np.arange(len(faces_mesh.positions)), order[first])
-        if len(left) > MAX_SEARCHED or len(free) != len(left):
-            raise RuntimeError("Blender's Multires levels do not match the library's subdivision (%d of %d "
-                               "vertices apart); the detail levels were not made" % (len(left), len(order)))
+        free = np.ones(len(ours), bool)
+        free[order[first]] = False
+        free = np.flatnonzero(free)
         for j in left:
-            distances = np.linalg.norm(faces_mesh.positions[free] - blender_points[j], axis=1)
+            distances = np.linalg.norm(ours[free] - theirs[j], axis=1)
             k = int(np.argmin(distances))
             order[j], gap[j] = free[k], distances[k] / scale
             free = np.delete(free, k)
@@ -132,61 +221,84 @@ def match_order(blender_points, faces_mesh, diagonal):
         raise RuntimeError("Blender's Multires levels do not match the library's subdivision (a vertex "
                            "%.3g of the diagonal away, %d apart); the detail levels were not made"
                            % (worst, apart))
-    return order
+    return True
 
 
 def _add_multires(obj, levels, settings, context):
     modifier = obj.modifiers.new(MODIFIER_NAME, 'MULTIRES')
-    if hasattr(modifier, "quality"):
-        modifier.quality = int(settings["quality"])
     modifier.use_creases = bool(settings["use_creases"])
     modifier.boundary_smooth = settings["boundary_smooth"]
     modifier.uv_smooth = 'NONE'
     # Reshape sets every level from the finest, so how the levels are made
     # first does not show: Linear gave the same levels to the bit as
     # Catmull-Clark (the bunny, 2 levels) in half the time (the 50k cage to
-    # 3 levels: 33 s against 66 s in Blender 5.3).
+    # 3 levels: 33 s against 66 s in Blender 5.3), and so did the lowest
+    # quality, which Reshape does not use (it runs at the modifier's own):
+    # each Subdivide builds Blender's evaluator of the cage again, at the
+    # modifier's quality (the 50k cage: 14 s at quality 1, 30 s at 3).
+    has_quality = hasattr(modifier, "quality")
+    if has_quality and SUBDIVIDE_QUALITY is not None:
+        modifier.quality = SUBDIVIDE_QUALITY
     with context.temp_override(object=obj, active_object=obj):
         for _ in range(levels):
             bpy.ops.object.multires_subdivide(modifier=modifier.name, mode='LINEAR')
+    if has_quality:
+        modifier.quality = int(settings["quality"])
     modifier.levels = modifier.sculpt_levels = modifier.render_levels = levels
     return modifier
 
 
-def apply_detail(obj, detail, subdivided_positions, settings, context=None):
+def apply_detail(obj, detail, settings, context=None):
     """obj (the new fitted cage, its mesh the fitted positions) gets a
     Multires modifier with the detail's levels, its finest level at the
-    detail's points.  The Subdivision Surface modifier build_object put on
-    it goes: Multires shows the levels.  Returns the modifier."""
+    detail's points, in Blender's order (blender_order, or where that
+    cannot say, match_order against Blender's own subdivision).  The
+    Subdivision Surface modifier build_object put on it goes: Multires
+    shows the levels.  Returns the modifier."""
     context = context or bpy.context
     levels = int(detail.levels)
-    top = _subsurf_topology(obj, levels, settings, context)
-    try:
-        ours = native.Mesh(subdivided_positions, detail.mesh.face_sizes, detail.mesh.face_vertices)
-        blender_points = read_positions(top)
-        if len(blender_points) != len(subdivided_positions):
-            raise RuntimeError("Blender's level %d has %d vertices, the library's %d: the detail levels were "
-                               "not made" % (levels, len(blender_points), len(subdivided_positions)))
-        diagonal = float(np.linalg.norm(np.ptp(subdivided_positions, axis=0)))
-        order = match_order(blender_points, ours, diagonal)
+    order = blender_order(obj, detail)
+    if order is not None:
+        # Reshape reads the other object's vertices only.
+        top = bpy.data.meshes.new(obj.name + "_pia_detail")
+        top.vertices.add(len(order))
         write_positions(top, detail.points[order])
+    else:
+        top = _subsurf_topology(obj, levels, settings, context)
+    try:
+        if order is None:
+            subdivided = native_mesh(obj.data)
+            for _ in range(levels):
+                subdivided = native.subdivide(subdivided, 1, **surface_options(settings))
+            blender_points = read_positions(top)
+            if len(blender_points) != len(subdivided.positions):
+                raise RuntimeError("Blender's level %d has %d vertices, the library's %d: the detail levels were "
+                                   "not made" % (levels, len(blender_points), len(subdivided.positions)))
+            diagonal = float(np.linalg.norm(np.ptp(subdivided.positions, axis=0)))
+            order = match_order(blender_points, subdivided, diagonal)
+            write_positions(top, detail.points[order])
         for modifier in [m for m in obj.modifiers if m.type == 'SUBSURF']:
             obj.modifiers.remove(modifier)
         modifier = _add_multires(obj, levels, settings, context)
-        shape = bpy.data.objects.new(obj.name + "_pia_detail", top)
-        context.scene.collection.objects.link(shape)
-        try:
-            shape.matrix_world = obj.matrix_world
-            with context.temp_override(object=obj, active_object=obj, selected_objects=[obj, shape],
-                                       selected_editable_objects=[obj, shape]):
-                result = bpy.ops.object.multires_reshape(modifier=modifier.name)
-            if 'FINISHED' not in result:
-                raise RuntimeError("Blender's Multires Reshape refused the detail levels")
-        finally:
-            bpy.data.objects.remove(shape)
+        _reshape(obj, modifier, top, context)
     finally:
         bpy.data.meshes.remove(top)
     return modifier
+
+
+def _reshape(obj, modifier, top, context):
+    """Blender's Reshape of obj's Multires from an object of mesh top."""
+    shape = bpy.data.objects.new(obj.name + "_pia_detail", top)
+    context.scene.collection.objects.link(shape)
+    try:
+        shape.matrix_world = obj.matrix_world
+        with context.temp_override(object=obj, active_object=obj, selected_objects=[obj, shape],
+                                   selected_editable_objects=[obj, shape]):
+            result = bpy.ops.object.multires_reshape(modifier=modifier.name)
+        if 'FINISHED' not in result:
+            raise RuntimeError("Blender's Multires Reshape refused the detail levels")
+    finally:
+        bpy.data.objects.remove(shape)
 
 
 def store_detail(obj, detail):

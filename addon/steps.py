@@ -189,17 +189,16 @@ def interpolate_steps(obj, *, context=None, name=None, progress=None, live=False
         if stats is not None:
             store_cleanup(new_obj, stats)
         if detail is not None:
-            detail_levels, subdivided = detail
-            apply_detail(new_obj, detail_levels, subdivided, s, context=context)
-            store_detail(new_obj, detail_levels)
+            apply_detail(new_obj, detail, s, context=context)
+            store_detail(new_obj, detail)
             # The heat map at the cage's vertices: the finest level's
             # distances there (vertex i of every level is vertex i's child).
-            near = detail_levels.report.vertex_distances[:len(new_obj.data.vertices)]
+            near = detail.report.vertex_distances[:len(new_obj.data.vertices)]
             write_heat_map(new_obj.data, DISTANCE_ATTRIBUTE, COLOR_ATTRIBUTE, near, heat_colors(near))
         if live:
             live_module.set_live(new_obj, True, source=obj)
         if target is not None and s["fit_paint_scan"]:  # last: the one step that writes to another object
-            why_not = paint_scan(target, report if detail is None else detail[0].report)
+            why_not = paint_scan(target, report if detail is None else detail.report)
             new_obj["pia_fit_scan_painted"] = why_not is None
             if why_not is not None:
                 new_obj["pia_fit_scan_not_painted"] = "The scan '%s' was not painted: %s" % (target.name, why_not)

@@ -11,10 +11,10 @@ under out/bench/fit_scale/).  subdiv_pia.api.interpolate(cage,
 target=scan, fit_detail_levels=levels) is timed from the call to the new
 object, split into: reading the scan and building its hierarchy, the fit
 of the cage, each detail level's subdivision and fit, the finest level's
-flat positions, the subdivision that tells Blender's order, and Blender's
-share (its Subdivision Surface for the order, the match, Multires
-subdivided, and the rest: Reshape).  Also the process's peak resident size.  Prints
-a Markdown table.
+flat positions, and Blender's share (Blender's order computed from the
+levels, or where it cannot be, its Subdivision Surface for the order and
+the match; Multires subdivided; Reshape).  Also the
+process's peak resident size.  Prints a Markdown table.
 
 Then, in the same process on the same cage, Blender's hand workflow
 (detail_workflow.blender_workflow: Multires subdivided `levels` times,
@@ -62,12 +62,14 @@ def main():
         return wrapper
 
     native.Scan = timed("scan: hierarchy", native.Scan)
-    native.subdivide = timed("subdivide (levels and order)", native.subdivide)
+    native.subdivide = timed("subdivide (levels)", native.subdivide)
     native.flat_positions = timed("finest level's flat positions", native.flat_positions)
     steps.apply_detail = timed("Blender's share, all", steps.apply_detail)
+    detail.blender_order = timed("  Blender's order, computed", detail.blender_order)
     detail._subsurf_topology = timed("  Blender: Subdivision Surface for the order", detail._subsurf_topology)
     detail.match_order = timed("  matching the order", detail.match_order)
     detail._add_multires = timed("  Blender: Multires subdivided", detail._add_multires)
+    detail._reshape = timed("  Blender: Reshape", detail._reshape)
     levels_seen = []
     fit = native.fit
 

@@ -14,7 +14,7 @@ from mathutils.kdtree import KDTree
 
 from subdiv_pia import api, native
 from subdiv_pia.settings import opensubdiv_version_of
-from conftest import DATA, assert_unchanged, import_obj, positions, run_operator, snapshot
+from conftest import DATA, assert_unchanged, diagonal, import_obj, object_from_pydata, positions, run_operator, snapshot
 from test_fit import bvh_distances, bvh_of, fine_sphere, quad_sphere, scan_in_cage_space, used_diagonal
 
 
@@ -72,10 +72,19 @@ def test_sphere_detail_lies_on_the_sphere():
     assert new_obj["pia_fit_detail_folded"] == 0.0
 
 
-def test_finest_level_is_the_librarys_detail():
+@pytest.mark.parametrize("order", ["computed", "matched"])
+def test_finest_level_is_the_librarys_detail(order, monkeypatch):
     """Reshape puts Blender's finest level where the library put it: every
     vertex Blender shows is one of the library's points (computed again
-    here, the library being deterministic), within float rounding."""
+    here, the library being deterministic), within float rounding, and
+    each face Blender shows is one of the library's.  Blender's numbering
+    computed (multires_order) or, where that cannot say, read from
+    Blender's own subdivision and matched."""
+    from subdiv_pia import detail as detail_module
+    if order == "computed":
+        monkeypatch.setattr(detail_module, "_subsurf_topology", lambda *a, **k: pytest.fail("Blender subdivided"))
+    else:
+        monkeypatch.setattr(detail_module, "blender_order", lambda *a, **k: None)
     scan = import_obj(DATA + "/bun_zipper.obj")
     cage = import_obj(DATA + "/bun_zipper_quadriflow_cage.obj")
     new_obj, report = api.interpolate(cage, target=scan.name, fit_detail_levels=1)
@@ -93,6 +102,144 @@ def test_finest_level_is_the_librarys_detail():
     diagonal = used_diagonal(scan_vertices, scan_polygons)
     assert gaps.max() < 1e-5 * diagonal
     assert len(np.unique(found)) == len(vertices) == len(detail.points)
+    # In Blender's order: each face Blender shows is one of the library's.
+    library_faces = {frozenset(face) for face in detail.mesh.face_vertices.reshape(-1, 4).tolist()}
+    assert all(frozenset(found[list(p)].tolist()) in library_faces for p in polygons)
+
+
+def _mixed_mesh():
+    """Quads around a hole, a triangle, a pentagon and a hexagon, with
+    open edges, and a loose vertex."""
+    vertices = [(x, y, 0.1 * x * y) for y in range(4) for x in range(4)]
+    faces = [(y * 4 + x, y * 4 + x + 1, (y + 1) * 4 + x + 1, (y + 1) * 4 + x) for y in range(3) for x in range(3)
+             if (x, y) != (1, 1)]
+    vertices += [(1.5, -1.0, 0.2), (4.0, 0.5, 0.1), (4.0, 2.5, 0.3), (-0.5, -0.5, 0.0), (-0.2, -1.5, 0.1),
+                 (0.8, -1.6, 0.2), (2.0, 2.0, 1.0)]
+    faces += [(2, 1, 16), (3, 17, 18, 11, 7), (0, 19, 20, 21, 16, 1)]
+    return vertices, faces
+
+
+def _untidy_meshes():
+    """A cage as scans leave them: a face turned the other way, an edge
+    with three faces, two fans meeting at one vertex."""
+    grid = [(x, y, 0.2 * np.sin(x + 2 * y)) for y in range(3) for x in range(3)]
+    quads = [(0, 1, 4, 3), (1, 2, 5, 4), (3, 4, 7, 6), (4, 5, 8, 7)]
+    return [("Turned", grid, [quads[0], quads[1][::-1], quads[2], quads[3]]),
+            ("ThreeFaces", grid + [(1.5, 0.5, 1.0), (1.0, 0.5, 1.0)], quads + [(4, 5, 9, 10)]),
+            ("Bowtie", grid + [(3.0, 3.0, 0.0), (3.0, 2.0, 0.0), (2.0, 3.0, 1.0)], quads + [(8, 10, 9, 11)])]
+
+
+@pytest.mark.parametrize("levels", [1, 2, 3])
+def test_computed_order_is_blenders(levels):
+    """multires_order's numbering of the library's levels against
+    Blender's: its Subdivision Surface (control points, one pass at the
+    finest level) puts each of its vertices where the library's levels put
+    the vertex the order names; on tidy cages and untidy ones."""
+    from subdiv_pia import detail, multires_order
+    from subdiv_pia.mesh_io import mesh_arrays
+    from conftest import object_from_pydata
+    bpy.ops.mesh.primitive_cylinder_add(vertices=24, depth=1.0, location=(8.0, 0.0, 0.0))
+    cylinder = bpy.context.active_object
+    untidy = [object_from_pydata(name, vertices, faces, validate=False) for name, vertices, faces in _untidy_meshes()]
+    for obj in [object_from_pydata("Mixed", *_mixed_mesh()), cylinder] + untidy:
+        arrays = mesh_arrays(obj.data)
+        assert obj.name != "Mixed" or len(arrays["positions"]) == 23  # the loose vertex kept
+        mesh = native.Mesh(arrays["positions"], arrays["face_sizes"], arrays["face_vertices"], edges=arrays["edges"])
+        settings = {"quality": 3, "use_creases": True, "boundary_smooth": 'ALL'}
+        meshes = [mesh]
+        for _ in range(levels):
+            meshes.append(native.subdivide(meshes[-1], 1, boundary_smooth='ALL'))
+        order = multires_order.blender_order(arrays["face_sizes"], arrays["face_vertices"], arrays["edges"],
+                                             len(arrays["positions"]),
+                                             [(m.vertex_count, m.face_vertices) for m in meshes[1:]])
+        top = detail._subsurf_topology(obj, levels, settings, bpy.context)
+        try:
+            theirs = positions(top).astype(np.float64)
+        finally:
+            bpy.data.meshes.remove(top)
+        ours = meshes[-1].positions.astype(np.float64)[order]
+        assert len(theirs) == len(ours)
+        np.testing.assert_allclose(ours, theirs, atol=1e-5 * diagonal(theirs))
+
+
+def test_computed_order_holds_where_positions_are_too_close_to_tell():
+    """The elephant's cage has faces so small that, 3 levels down, vertices
+    lie within 1e-5 of the diagonal of others: pairing by position mixes
+    some of them up; the computed order puts every one of Blender's
+    vertices within float rounding of its own."""
+    from subdiv_pia import detail, multires_order
+    from subdiv_pia.mesh_io import mesh_arrays
+    obj = import_obj(DATA + "/elephant-with-holes_quadriflow_cage.obj")
+    arrays = mesh_arrays(obj.data)
+    meshes = [native.Mesh(arrays["positions"], arrays["face_sizes"], arrays["face_vertices"], edges=arrays["edges"])]
+    for _ in range(3):
+        meshes.append(native.subdivide(meshes[-1], 1))
+    order = multires_order.blender_order(arrays["face_sizes"], arrays["face_vertices"], arrays["edges"],
+                                         len(arrays["positions"]),
+                                         [(m.vertex_count, m.face_vertices) for m in meshes[1:]])
+    top = detail._subsurf_topology(obj, 3, {"quality": 3, "use_creases": True, "boundary_smooth": 'ALL'},
+                                   bpy.context)
+    try:
+        theirs = positions(top).astype(np.float64)
+    finally:
+        bpy.data.meshes.remove(top)
+    ours = meshes[-1].positions.astype(np.float64)
+    unit = diagonal(theirs)
+    assert np.linalg.norm(ours[order] - theirs, axis=1).max() < 1e-6 * unit
+    # The premise: two of the library's vertices closer than the match's tolerance.
+    tree = KDTree(len(ours))
+    for i, p in enumerate(ours):
+        tree.insert(Vector(p), i)
+    tree.balance()
+    nearest = min(tree.find_n(Vector(p), 2)[1][2] for p in ours)
+    assert nearest < detail.MATCH_TOLERANCE * unit
+
+
+def test_computed_order_refuses_what_it_cannot_number():
+    """A loose edge (Blender puts points on it, the library does not), a
+    level whose faces turn the other way and one missing a face are
+    refused, for the match to take over."""
+    from subdiv_pia import multires_order
+    vertices = np.array([(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (2, 2, 0)], np.float32)
+    quad = native.Mesh(vertices, np.array([4], np.int32), np.array([0, 1, 2, 3], np.int32))
+    fine = native.subdivide(quad, 1)
+    edges = np.array([(0, 1), (1, 2), (2, 3), (3, 0), (2, 4)], np.int32)
+    with pytest.raises(multires_order.OrderMismatch):
+        multires_order.blender_order(quad.face_sizes, quad.face_vertices, edges, 5,
+                                     [(fine.vertex_count, fine.face_vertices)])
+    turned = np.ascontiguousarray(fine.face_vertices.reshape(-1, 4)[:, ::-1]).reshape(-1)
+    with pytest.raises(multires_order.OrderMismatch, match="different vertices"):
+        multires_order.blender_order(quad.face_sizes, quad.face_vertices, edges[:4], 5,
+                                     [(fine.vertex_count, turned)])
+    with pytest.raises(multires_order.OrderMismatch, match="a quad for each corner"):
+        multires_order.blender_order(quad.face_sizes, quad.face_vertices, edges[:4], 5,
+                                     [(fine.vertex_count, fine.face_vertices[:-4])])
+    order = multires_order.blender_order(quad.face_sizes, quad.face_vertices, edges[:4], 5,
+                                         [(fine.vertex_count, fine.face_vertices)])
+    assert sorted(order.tolist()) == list(range(fine.vertex_count))
+
+
+def test_levels_do_not_depend_on_the_quality_they_are_subdivided_at(monkeypatch):
+    """The Multires levels are subdivided at quality 1 and then reshaped at
+    the settings' quality: every level Blender shows is the one subdividing
+    at the settings' quality gives."""
+    from subdiv_pia import detail as detail_module
+    scan = import_obj(DATA + "/bun_zipper.obj")
+    cage = import_obj(DATA + "/bun_zipper_quadriflow_cage.obj")
+    shown = []
+    for quality in (1, None):
+        monkeypatch.setattr(detail_module, "SUBDIVIDE_QUALITY", quality)
+        new_obj, _report = api.interpolate(cage, target=scan.name, fit_detail_levels=2)
+        multires = new_obj.modifiers[0]
+        assert multires.quality == 3
+        levels = []
+        for level in range(3):
+            multires.levels = level
+            levels.append(finest_level(new_obj)[0])
+        shown.append(levels)
+    assert len(shown[0][0]) < len(shown[0][1]) < len(shown[0][2])
+    for fast, plain in zip(*shown):
+        np.testing.assert_allclose(fast, plain, rtol=0, atol=1e-6 * diagonal(plain))
 
 
 def _faces(mesh):
@@ -239,3 +386,33 @@ def test_the_order_match_pairs_every_vertex_with_its_own():
     theirs = ours[shuffle] + rng.normal(scale=0.1 * detail.MATCH_TOLERANCE * diagonal / 3 ** 0.5, size=ours.shape)
     order = detail.match_order(theirs.astype(np.float32), fine, diagonal)
     np.testing.assert_array_equal(order, shuffle)
+    np.testing.assert_array_equal(detail.match_order_searched(theirs.astype(np.float32), fine, diagonal), shuffle)
+
+
+def test_the_order_match_pairs_what_its_grids_leave_over():
+    """Points that no cube of match_order's grids pairs (moved apart, as
+    Blender's rules at a non-manifold vertex put them, or two of the
+    library's at one place) are paired nearest first; too far apart, the
+    match refuses."""
+    from subdiv_pia import detail
+    rng = np.random.default_rng(7)
+    ours = rng.random((4000, 3))
+    diagonal = float(np.linalg.norm(np.ptp(ours, axis=0)))
+    shuffle = rng.permutation(len(ours))
+    theirs = ours[shuffle].copy()
+    moved = rng.choice(len(ours), 6, replace=False)
+    theirs[moved] += 50 * detail.MATCH_TOLERANCE * diagonal * np.array([1.0, 0.0, 0.0])
+    mesh = native.Mesh.from_faces(ours.astype(np.float32), [(0, 1, 2, 3)])
+    order = detail.match_order(theirs.astype(np.float32), mesh, diagonal)
+    np.testing.assert_array_equal(order, shuffle)
+    # Two of the library's at one place: each of Blender's two takes one.
+    twins = ours.copy()
+    twins[11] = twins[10]
+    mesh = native.Mesh.from_faces(twins.astype(np.float32), [(0, 1, 2, 3)])
+    order = detail.match_order(twins[shuffle].astype(np.float32), mesh, diagonal)
+    assert sorted(order) == list(range(len(ours)))
+    np.testing.assert_array_equal(twins[order], twins[shuffle])
+    theirs[moved[0]] += 2 * detail.APART_TOLERANCE * diagonal
+    with pytest.raises(RuntimeError, match="do not match"):
+        detail.match_order(theirs.astype(np.float32), native.Mesh.from_faces(ours.astype(np.float32), [(0, 1, 2, 3)]),
+                           diagonal)
