@@ -10,11 +10,13 @@ The scan and the cage are bench_fit_scale.py's (made and cached by it
 under out/bench/fit_scale/).  subdiv_pia.api.interpolate(cage,
 target=scan, fit_detail_levels=levels) is timed from the call to the new
 object, split into: reading the scan and building its hierarchy, the fit
-of the cage, each detail level's subdivision and fit, the finest level's
-flat positions, and Blender's share (Blender's order computed from the
-levels, or where it cannot be, its Subdivision Surface for the order and
-the match; Multires subdivided; Reshape).  Also the
-process's peak resident size.  Prints a Markdown table.
+of the cage, each detail level's subdivision and fit (the finest level's
+flat positions within its fit, counted in its solves, where the fit gives
+them; on a line of their own where flat_positions computes them), and
+Blender's share (Blender's order computed from the levels, or where it
+cannot be, its Subdivision Surface for the order and the match; Multires
+subdivided; Reshape).  Also the process's peak resident size.  Prints a
+Markdown table.
 
 Then, in the same process on the same cage, Blender's hand workflow
 (detail_workflow.blender_workflow: Multires subdivided `levels` times,

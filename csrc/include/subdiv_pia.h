@@ -807,6 +807,16 @@ typedef struct spia_fit_report {
      * scan vertex's relative distance to the limit surface of the cage
      * written (-1 for vertices no scan face uses).  For a heat map. */
     float *scan_distances;
+    /* Optional caller-owned buffer of cage vertex_count * 3 floats: for a
+     * Catmull-Clark cage of quads (a subdivided cage, a detail level),
+     * spia_flat_positions of the cage written, computed from the grid of
+     * limit points that measured the scan's distances (so not with
+     * SPIA_FIT_NO_SCAN_DISTANCES) instead of stencils of its own: a fifth
+     * of spia_flat_positions' time, and less memory.  flat_positions_written
+     * is 1 when it was written; 0 otherwise (another cage, or too little
+     * memory left for it), and spia_flat_positions gives them. */
+    float *flat_positions;
+    int32_t flat_positions_written;
 } spia_fit_report;
 
 /*

@@ -238,6 +238,7 @@ static void report_start(spia_fit_report *report) {
     fresh.history = report->history;
     fresh.history_capacity = report->history_capacity;
     fresh.scan_distances = report->scan_distances;
+    fresh.flat_positions = report->flat_positions;
     *report = fresh;
 }
 
@@ -698,6 +699,39 @@ static spia_result measure_limit_points_written(fit_run *u) {
     return SPIA_OK;
 }
 
+/* report->flat_positions: the grid of limit points (the scan side's) of
+ * the cage written, taken from the buffers to outlive them, or NULL where
+ * there is none or the cage has a face that is not a quad. */
+static float *flat_grid_written(fit_run *u, const float *cage_out) {
+    fit_buffers *b = &u->b;
+    if (!u->report->flat_positions || !u->surface_samples || !b->grid.groups || !b->grid_pos) return NULL;
+    for (int32_t f = 0; f < u->cage->face_count; ++f)
+        if (u->cage->face_sizes[f] != 4) return NULL;
+    /* The cage as written, in float, as spia_flat_positions would read it
+     * (b->best is not used again). */
+    for (int64_t i = 0; i < u->N3; ++i) b->best[i] = cage_out[i];
+    spia__fit_blocks_apply_float(&b->grid, b->best, b->grid_pos);
+    float *grid = b->grid_pos;
+    b->grid_pos = NULL;
+    return grid;
+}
+
+/* The flat positions from the grid, once the fit's buffers are freed (their
+ * solve's time counts as the fit's solves').  Short of memory, they are left to spia_flat_positions (not written);
+ * cancelled, the fit is. */
+static spia_result flat_written(fit_run *u, const float *cage_out, const float *grid, spia_result r) {
+    spia_mesh written = *u->cage;
+    written.positions = (float *)cage_out;
+    spia_status flat_status;
+    const double t0 = spia__now();
+    const spia_result f = spia__flat_solve(&written, grid, u->b.grid_side, u->report->flat_positions, &u->clock,
+                                           &flat_status);
+    u->report->solve_seconds += spia__now() - t0;
+    if (f == SPIA_OK) u->report->flat_positions_written = 1;
+    if (f == SPIA_ERROR_CANCELLED) return spia__fail(u->status, f, -1, "cancelled computing the flat positions");
+    return f == SPIA_OK || f == SPIA_ERROR_OUT_OF_MEMORY ? r : spia__fail(u->status, f, -1, "%s", flat_status.message);
+}
+
 spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_options *options,
                      const spia_fit_options *fit_options, float *cage_out, spia_fit_report *report,
                      spia_status *status) {
@@ -710,6 +744,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
     report->result = SPIA_ERROR_INVALID_ARGUMENT;
     fit_run u;
     memset(&u, 0, sizeof u);
+    float *flat_grid = NULL;
     u.report = report;
     u.status = status;
     spia_result r = fit_arguments(cage, scan, options, fit_options, cage_out, &u);
@@ -746,10 +781,15 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
     }
     if (r < 0) goto done;
     for (int64_t i = 0; i < u.N3; ++i) cage_out[i] = (float)u.b.best[i];
+    flat_grid = flat_grid_written(&u, cage_out);
     if (r == SPIA_OK) spia__ok(status);
 done:
     buffers_free(&u.b);
     spia__adjacency_free(&u.adj);
+    if (flat_grid) {
+        r = flat_written(&u, cage_out, flat_grid, r);
+        free(flat_grid);
+    }
     report->result = r;
     return r;
 }

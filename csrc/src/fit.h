@@ -14,7 +14,7 @@
  *   fit_scan_side.c   the scan's distances to the surface, the scan's pull
  *   fit.c             spia_fit: the options and memory limits, the stages,
  *                     the rounds; spia_surface_stencils_create
- *   flat_positions.c  spia_flat_positions */
+ *   flat_positions.c  spia_flat_positions, and the fit's (spia__flat_solve) */
 #ifndef SPIA_FIT_H
 #define SPIA_FIT_H
 
@@ -258,6 +258,15 @@ spia_result spia__fit_scan_side_measure(fit_buffers *b, const double *V, double 
                                         int threads, int warm, fit_clock *clock, spia_fit_distances *out,
                                         spia_status *status);
 spia_result spia__fit_scan_pull(fit_run *u);
+
+/* ---- flat_positions.c --------------------------------------------------------- */
+
+/* The flat positions of quad mesh m (its positions: where vertices no face
+ * uses stay) from X, each face's side x side grid of limit points in the
+ * order of spia__fit_blocks_build's (side odd, 3 or more: the 3 x 3 grid
+ * taken is its corners, edge midpoints and centre). */
+spia_result spia__flat_solve(const spia_mesh *m, const float *X, int32_t side, float *out, fit_clock *clock,
+                             spia_status *status);
 
 /* ---- fit.c -------------------------------------------------------------------- */
 

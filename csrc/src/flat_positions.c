@@ -45,8 +45,11 @@ static spia_result flat_oom(spia_status *status) {
     return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the flat positions");
 }
 
-static spia_result flat_solve(const spia_mesh *m, const float *X, float *out, fit_clock *clock, spia_status *status) {
+spia_result spia__flat_solve(const spia_mesh *m, const float *X, int32_t side, float *out, fit_clock *clock,
+                             spia_status *status) {
     const int32_t n = m->vertex_count;
+    /* Grid point (i, j) of the 3 x 3 is point (step i, step j) of a face's side x side. */
+    const int64_t step = (side - 1) / 2, per_face = 3 * (int64_t)side * side;
     const int64_t N3 = 3 * (int64_t)n;
     double M[16] = {0}, w[4];
     for (int j = 0; j < 3; ++j)
@@ -68,22 +71,24 @@ static spia_result flat_solve(const spia_mesh *m, const float *X, float *out, fi
     memset(extra, 0, sizeof(double) * 2 * (size_t)n);
     /* The right-hand side, the preconditioner, and the start: each vertex at
      * its limit point (its corner point in its first quad's grid). */
-    static const int corner_point[4] = {0, 2, 8, 6};
+    static const int corner_i[4] = {0, 2, 2, 0}, corner_j[4] = {0, 0, 2, 2};
     for (int32_t f = 0; f < m->face_count; ++f) {
         const int32_t *q = m->face_vertices + 4 * (int64_t)f;
-        const float *G = X + 27 * (int64_t)f;
+        const float *G = X + per_face * f;
         for (int j = 0; j < 3; ++j)
             for (int i = 0; i < 3; ++i) {
                 const double k = ((i == 1) || (j == 1)) ? 1.0 : FLAT_CORNER_WEIGHT;
+                const float *g = G + 3 * (step * j * side + step * i);
                 flat_weights(i, j, w);
                 for (int c = 0; c < 4; ++c)
-                    for (int a = 0; a < 3; ++a) b[3 * (int64_t)q[c] + a] += k * w[c] * G[3 * (3 * j + i) + a];
+                    for (int a = 0; a < 3; ++a) b[3 * (int64_t)q[c] + a] += k * w[c] * g[a];
             }
         for (int c = 0; c < 4; ++c) {
             pre[q[c]] += M[5 * c];
             if (!seen[q[c]]) {
                 seen[q[c]] = 1;
-                for (int a = 0; a < 3; ++a) x[3 * (int64_t)q[c] + a] = G[3 * corner_point[c] + a];
+                const float *g = G + 3 * (step * corner_j[c] * side + step * corner_i[c]);
+                for (int a = 0; a < 3; ++a) x[3 * (int64_t)q[c] + a] = g[a];
             }
         }
     }
@@ -166,7 +171,7 @@ spia_result spia_flat_positions(const spia_mesh *mesh, const spia_options *optio
     free(V);
     spia__fit_blocks_free(&B);
     r = clock.cancelled ? spia__fail(status, SPIA_ERROR_CANCELLED, -1, "cancelled computing the flat positions")
-                        : flat_solve(mesh, X, out, &clock, status);
+                        : spia__flat_solve(mesh, X, 3, out, &clock, status);
     free(X);
     if (r == SPIA_OK) spia__ok(status);
     return r;

@@ -148,6 +148,8 @@ class FitReport:
     scan_before: FitDistances = None
     scan_after: FitDistances = None
     scan_distances: np.ndarray = field(default=None, repr=False)  # per scan vertex, relative, -1 unused
+    # flat_positions() of the cage written, where fit(flat=True) could give them
+    flat_positions: np.ndarray = field(default=None, repr=False)
 
     def summary(self):
         b, a = self.before, self.after
@@ -157,7 +159,7 @@ class FitReport:
 
 def fit(cage, scan, mode="SURFACE", samples_per_edge=4, cutoff=0.02, smoothing=1e-5, point_weight=1e-3,
         max_rounds=16, round_tolerance=0.01, solver_iterations=20, robust_scale=6.0, slide_weight=0.0, allow_folds=False,
-        hard_cutoff=False, measure_scan=True, scan_pull=False, free_rims=False, **options):
+        hard_cutoff=False, measure_scan=True, scan_pull=False, free_rims=False, flat=False, **options):
     """Moves the vertices of ``cage`` (a :class:`Mesh`) so that its limit
     surface lies on ``scan`` (a :class:`Scan`).  mode 'SURFACE' fits the
     whole surface (Catmull-Clark); 'VERTICES' interpolates the closest scan
@@ -170,7 +172,11 @@ def fit(cage, scan, mode="SURFACE", samples_per_edge=4, cutoff=0.02, smoothing=1
     scan's vertices against the surface (``report.scan_before/after``);
     ``scan_pull``: the scan's vertices pull the surface too (SPIA_FIT_SCAN_PULL);
     ``free_rims``: the cage's rims (faces with a boundary vertex) are not
-    held smoother than the rest (SPIA_FIT_FREE_RIMS).
+    held smoother than the rest (SPIA_FIT_FREE_RIMS); ``flat``: also
+    :func:`flat_positions` of the cage written, from the fit's own limit
+    points (``report.flat_positions``; None where the library could not:
+    a cage with a face that is not a quad, no ``measure_scan``, or too
+    little memory left).
     Returns ``(cage positions (N, 3) float32, FitReport)``."""
     lib = _library()
     opts, _keep = _options(**options)
@@ -205,9 +211,11 @@ def fit(cage, scan, mode="SURFACE", samples_per_edge=4, cutoff=0.02, smoothing=1
     vertex_distances = np.zeros(cage.vertex_count, np.float32)
     history = np.zeros(fo.max_rounds + 1, np.float64)
     per_scan = np.full(max(scan.vertex_count, 1), -1.0, np.float32)
+    flat_out = np.empty_like(cage.positions) if flat else None
     rep = _FitReport(vertex_distances=_ptr(vertex_distances, ctypes.c_float),
                      history=_ptr(history, ctypes.c_double), history_capacity=len(history),
-                     scan_distances=_ptr(per_scan, ctypes.c_float))
+                     scan_distances=_ptr(per_scan, ctypes.c_float),
+                     flat_positions=_ptr(flat_out, ctypes.c_float) if flat else None)
     status = _Status()
     cm = cage._c()
     code = lib.spia_fit(ctypes.byref(cm), scan._handle, ctypes.byref(opts), ctypes.byref(fo),
@@ -226,4 +234,5 @@ def fit(cage, scan, mode="SURFACE", samples_per_edge=4, cutoff=0.02, smoothing=1
         vertex_distances=vertex_distances, history=history[: rep.history_count].copy(),
         folded_before=rep.folded_before, folded_after=rep.folded_after, scan_point_count=rep.scan_point_count,
         scan_before=dist(rep.scan_before), scan_after=dist(rep.scan_after),
-        scan_distances=per_scan[: scan.vertex_count] if rep.scan_point_count else None)
+        scan_distances=per_scan[: scan.vertex_count] if rep.scan_point_count else None,
+        flat_positions=flat_out if rep.flat_positions_written else None)

@@ -79,7 +79,7 @@ class _FitReport(ctypes.Structure):
         ("history_count", ctypes.c_int32),
         ("folded_before", ctypes.c_int64), ("folded_after", ctypes.c_int64),
         ("scan_point_count", ctypes.c_int64), ("scan_before", _FitDistances), ("scan_after", _FitDistances),
-        ("scan_distances", _f32p),
+        ("scan_distances", _f32p), ("flat_positions", _f32p), ("flat_positions_written", ctypes.c_int32),
     ]
 
 

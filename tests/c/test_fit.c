@@ -164,6 +164,24 @@ int main(void) {
         double vmax = 0.0;
         for (int32_t v = 0; v < nv; ++v) vmax = vd[v] > vmax ? vd[v] : vmax;
         CHECK(fabs(vmax - rep.after.max) < 1e-6, "vertex distances max %g vs %g", vmax, rep.after.max);
+        /* The flat positions of the cage written, from the fit's own grid,
+         * are spia_flat_positions' to the bit; cancelled there, the fit is. */
+        float *flat = malloc(sizeof(float) * 3 * (size_t)nv), *theirs = malloc(sizeof(float) * 3 * (size_t)nv);
+        memset(&rep, 0, sizeof rep);
+        rep.flat_positions = flat;
+        r = spia_fit(&cm, scan, &o, &fo, out, &rep, &st);
+        CHECK(r == SPIA_OK && rep.flat_positions_written == 1, "fit with flat positions: %s", st.message);
+        spia_mesh written = cm;
+        written.positions = out;
+        CHECK(spia_flat_positions(&written, &o, theirs, &st) == SPIA_OK, "%s", st.message);
+        CHECK(memcmp(flat, theirs, sizeof(float) * 3 * (size_t)nv) == 0, "the fit's flat positions differ");
+        memset(&rep, 0, sizeof rep);
+        rep.flat_positions = flat;
+        fo.flags = SPIA_FIT_NO_SCAN_DISTANCES;
+        r = spia_fit(&cm, scan, &o, &fo, out, &rep, &st);
+        CHECK(r == SPIA_OK && rep.flat_positions_written == 0, "no grid, no flat positions: %s", st.message);
+        fo.flags = 0;
+        free(flat), free(theirs);
     }
     /* A low-poly target with flat facets (tests/data's Chinese dragon and
      * its QuadriFlow cage): without the fold guard the surface pleats along

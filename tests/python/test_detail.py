@@ -104,7 +104,8 @@ def test_detail_levels_lie_on_the_sphere(native):
 def test_detail_stages_go_through_the_package(native, monkeypatch):
     # A script that wraps spia.subdivide, spia.fit and spia.flat_positions
     # (bench/bench_detail_scale.py times each stage so) sees fit_detail's
-    # own calls: one subdivision and one fit a level, then the flat positions.
+    # own calls: one subdivision and one fit a level, the finest level's fit
+    # giving the flat positions.
     scan_positions, triangles = icosphere(3)
     scan = native.Scan(_mesh(native, scan_positions, triangles))
     positions, quads = cube_sphere(1, radius=0.95)
@@ -116,8 +117,39 @@ def test_detail_stages_go_through_the_package(native, monkeypatch):
             return _real(mesh, *args, **kwargs)
         monkeypatch.setattr(native, name, wrapper)
     detail = native.fit_detail(cage, scan, 2, cutoff=0.3)
-    assert calls == [("subdivide", 8), ("fit", 26), ("subdivide", 26), ("fit", 98), ("flat_positions", 98)]
+    assert calls == [("subdivide", 8), ("fit", 26), ("subdivide", 26), ("fit", 98)]
     assert len(detail.points) == 98
+    assert np.array_equal(detail.points, detail.report.flat_positions)
+    # Without the scan's measure (whose grid of limit points they come
+    # from), flat_positions gives them.
+    calls.clear()
+    detail = native.fit_detail(cage, scan, 1, cutoff=0.3, measure_scan=False)
+    assert calls == [("subdivide", 8), ("fit", 26), ("flat_positions", 26)]
+    assert detail.report.flat_positions is None
+
+
+@pytest.mark.parametrize("per_edge", [1, 2, 4])
+def test_fit_gives_the_flat_positions_of_the_cage_written(native, per_edge):
+    # From the grid that measured the scan: 3, 5 and 9 points along a
+    # face's edge, of which the corners, midpoints and centre are taken.
+    scan_positions, triangles = icosphere(4)
+    scan = native.Scan(_mesh(native, scan_positions, triangles))
+    positions, quads = cube_sphere(3, radius=0.9)
+    cage = native.subdivide(_mesh(native, positions * np.array([1.0, 0.8, 1.2]), quads), 1)
+    fitted, report = native.fit(cage, scan, cutoff=0.3, samples_per_edge=per_edge, flat=True, max_rounds=3)
+    assert report.flat_positions is not None
+    written = native.Mesh(fitted, cage.face_sizes, cage.face_vertices)
+    theirs = native.flat_positions(written)
+    assert np.abs(report.flat_positions - theirs).max() < 1e-6
+    # Not the limit points, which they are not.
+    limit = native.limit_stencils(written).apply(written.positions)
+    assert np.abs(report.flat_positions - limit).max() > 1e-4
+    # Not for a cage with a face that is not a quad, nor without the measure.
+    assert native.fit(cage, scan, cutoff=0.3, samples_per_edge=per_edge, max_rounds=1)[1].flat_positions is None
+    assert native.fit(cage, scan, cutoff=0.3, flat=True, measure_scan=False, max_rounds=1)[1].flat_positions is None
+    tri_positions, triangles = icosphere(1)
+    tri = _mesh(native, tri_positions * 0.95, triangles)
+    assert native.fit(tri, scan, cutoff=0.3, flat=True, max_rounds=1)[1].flat_positions is None
 
 
 def test_detail_samples_halve_down_to_two(native):
