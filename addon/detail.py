@@ -45,16 +45,25 @@ def surface_options(settings):
                 quality=int(settings["quality"]), opensubdiv_version=opensubdiv_version_of(settings))
 
 
-def fit_detail_work(cage_mesh, cage_positions, scan, settings, progress=None):
+def fit_detail_work(cage_mesh, cage_positions, scan, settings, progress=None, begin=None):
     """The library's share, as a function that touches nothing of
     Blender's: it fits the levels on the fitted cage and returns the
     native.DetailResult.  progress(round, mean) as the fit's; True
-    cancels."""
+    cancels.  begin(text, rounds=True), if given, names each level's
+    stage as it starts (on the library's thread)."""
     levels = int(settings["fit_detail_levels"])
     base = native.Mesh(cage_positions, cage_mesh.face_sizes, cage_mesh.face_vertices, edges=cage_mesh.edges,
                        edge_creases=cage_mesh.edge_creases, vertex_creases=cage_mesh.vertex_creases)
     options = surface_options(settings)
-    follow = None if progress is None else (lambda _level, iteration, value: progress(iteration, value))
+    follow = None
+    if progress is not None:
+        started = [0]
+
+        def follow(level, iteration, value):
+            if begin is not None and level != started[0]:
+                started[0] = level
+                begin("detail level %d of %d" % (level, levels), rounds=True)
+            return progress(iteration, value)
 
     def run():
         return native.fit_detail(base, scan, levels, samples_per_edge=settings["fit_samples"],
@@ -67,18 +76,34 @@ def blender_order(obj, detail):
     finest level's vertex numbers (multires_order), or None where the
     library's levels do not fit it (match_order then pairs the vertices,
     through Blender's own subdivision)."""
+    return order_work(obj, detail)()
+
+
+def order_work(obj, detail):
+    """blender_order as a function that touches nothing of Blender's: obj's
+    mesh is read here, the numbering computed when it is called."""
     if len(detail.level_topology) != int(detail.levels) + 1:
-        return None
+        return _nothing
     arrays = mesh_arrays(obj.data)
     count, face_sizes, face_vertices = detail.level_topology[0]
     if (count != len(arrays["positions"]) or not np.array_equal(face_sizes, arrays["face_sizes"]) or
             not np.array_equal(face_vertices, arrays["face_vertices"])):
-        return None
-    try:
-        return multires_order.blender_order(face_sizes, face_vertices, arrays["edges"], count,
-                                            [(n, faces) for n, _sizes, faces in detail.level_topology[1:]])
-    except multires_order.OrderMismatch:
-        return None
+        return _nothing
+
+    def work():
+        try:
+            return multires_order.blender_order(face_sizes, face_vertices, arrays["edges"], count,
+                                                [(n, faces) for n, _sizes, faces in detail.level_topology[1:]])
+        except multires_order.OrderMismatch:
+            return None
+    return work
+
+
+def _nothing():
+    """Work that does nothing (and finds no order): yielded between
+    Blender's stages, where a job's caller (the operator's modal run)
+    redraws the window and hears Esc."""
+    return None
 
 
 def _subsurf_topology(obj, levels, settings, context):
@@ -224,7 +249,7 @@ def _settle(order, gap, ours, theirs, scale):
     return True
 
 
-def _add_multires(obj, levels, settings, context):
+def _new_multires(obj, settings):
     modifier = obj.modifiers.new(MODIFIER_NAME, 'MULTIRES')
     modifier.use_creases = bool(settings["use_creases"])
     modifier.boundary_smooth = settings["boundary_smooth"]
@@ -236,16 +261,34 @@ def _add_multires(obj, levels, settings, context):
     # quality, which Reshape does not use (it runs at the modifier's own):
     # each Subdivide builds Blender's evaluator of the cage again, at the
     # modifier's quality (the 50k cage: 14 s at quality 1, 30 s at 3).
-    has_quality = hasattr(modifier, "quality")
-    if has_quality and SUBDIVIDE_QUALITY is not None:
+    if hasattr(modifier, "quality") and SUBDIVIDE_QUALITY is not None:
         modifier.quality = SUBDIVIDE_QUALITY
+    return modifier
+
+
+def _subdivide_multires(obj, modifier, context):
+    """One more level on obj's Multires modifier (Blender's Subdivide)."""
     with context.temp_override(object=obj, active_object=obj):
-        for _ in range(levels):
-            bpy.ops.object.multires_subdivide(modifier=modifier.name, mode='LINEAR')
-    if has_quality:
+        bpy.ops.object.multires_subdivide(modifier=modifier.name, mode='LINEAR')
+
+
+def _show_multires(modifier, levels, settings):
+    if hasattr(modifier, "quality"):
         modifier.quality = int(settings["quality"])
     modifier.levels = modifier.sculpt_levels = modifier.render_levels = levels
-    return modifier
+
+
+def _matched_order(base, blender_points, levels, settings):
+    """match_order of Blender's finest level's points against the library's
+    subdivision of base (a native.Mesh of the cage) `levels` deep."""
+    subdivided = base
+    for _ in range(levels):
+        subdivided = native.subdivide(subdivided, 1, **surface_options(settings))
+    if len(blender_points) != len(subdivided.positions):
+        raise RuntimeError("Blender's level %d has %d vertices, the library's %d: the detail levels were "
+                           "not made" % (levels, len(blender_points), len(subdivided.positions)))
+    diagonal = float(np.linalg.norm(np.ptp(subdivided.positions, axis=0)))
+    return match_order(blender_points, subdivided, diagonal)
 
 
 def apply_detail(obj, detail, settings, context=None):
@@ -255,32 +298,55 @@ def apply_detail(obj, detail, settings, context=None):
     cannot say, match_order against Blender's own subdivision).  The
     Subdivision Surface modifier build_object put on it goes: Multires
     shows the levels.  Returns the modifier."""
-    context = context or bpy.context
+    steps = apply_detail_steps(obj, detail, settings, context)
+    try:
+        work = next(steps)
+        while True:
+            work = steps.send(work())
+    except StopIteration as stop:
+        return stop.value
+
+
+def apply_detail_steps(obj, detail, settings, context=None, stage=None):
+    """apply_detail as interpolate_steps' steps: what touches nothing of
+    Blender's (the order computed or matched) is yielded as work, and so,
+    between Blender's own stages (each level's Subdivide, Reshape), is
+    work that does nothing, at which a job's caller redraws and hears Esc.
+    stage(text), if given, names each stage as it begins.  Each stage reads
+    bpy.context as it runs where context is None (a job's steps outlive
+    the operator call's context)."""
+    def begin(text):
+        if stage is not None:
+            stage(text)
     levels = int(detail.levels)
-    order = blender_order(obj, detail)
+    begin("computing Blender's numbering of the finest level")
+    order = yield order_work(obj, detail)
     if order is not None:
         # Reshape reads the other object's vertices only.
         top = bpy.data.meshes.new(obj.name + "_pia_detail")
         top.vertices.add(len(order))
         write_positions(top, detail.points[order])
     else:
-        top = _subsurf_topology(obj, levels, settings, context)
+        begin("Blender: a Subdivision Surface to read its numbering from")
+        yield _nothing
+        top = _subsurf_topology(obj, levels, settings, context or bpy.context)
     try:
         if order is None:
-            subdivided = native_mesh(obj.data)
-            for _ in range(levels):
-                subdivided = native.subdivide(subdivided, 1, **surface_options(settings))
-            blender_points = read_positions(top)
-            if len(blender_points) != len(subdivided.positions):
-                raise RuntimeError("Blender's level %d has %d vertices, the library's %d: the detail levels were "
-                                   "not made" % (levels, len(blender_points), len(subdivided.positions)))
-            diagonal = float(np.linalg.norm(np.ptp(subdivided.positions, axis=0)))
-            order = match_order(blender_points, subdivided, diagonal)
+            begin("matching Blender's numbering by position")
+            base, blender_points = native_mesh(obj.data), read_positions(top)
+            order = yield lambda: _matched_order(base, blender_points, levels, settings)
             write_positions(top, detail.points[order])
         for modifier in [m for m in obj.modifiers if m.type == 'SUBSURF']:
             obj.modifiers.remove(modifier)
-        modifier = _add_multires(obj, levels, settings, context)
-        _reshape(obj, modifier, top, context)
+        modifier = _new_multires(obj, settings)
+        for level in range(1, levels + 1):
+            begin("Blender: Multires, subdividing level %d of %d" % (level, levels))
+            yield _nothing
+            _subdivide_multires(obj, modifier, context or bpy.context)
+        _show_multires(modifier, levels, settings)
+        begin("Blender: Multires Reshape to the fitted positions")
+        yield _nothing
+        _reshape(obj, modifier, top, context or bpy.context)
     finally:
         bpy.data.meshes.remove(top)
     return modifier

@@ -23,8 +23,15 @@ class _JobProgress:
         self.iteration = 0
         self.value = 0.0
         self.calls = 0
+        self.stage = None
         self.user_progress = user_progress
         self.cancel = threading.Event()
+
+    def begin(self, text, rounds=False):
+        """The steps name the stage they begin (detail levels: each
+        level's fit, whose rounds the progress calls count, and Blender's
+        stages after them); the operator shows it."""
+        self.stage = (text, bool(rounds))
 
     def __call__(self, iteration, value):
         self.iteration, self.value = iteration, value
@@ -74,6 +81,12 @@ class _StepsJob:
     @property
     def calls(self):
         return self._state.calls
+
+    @property
+    def stage(self):
+        """(text, rounds) of the stage the steps last began (None before
+        the first): rounds, whether the progress calls count its rounds."""
+        return self._state.stage
 
     def _advance(self, step):
         """Runs step() (a move of the steps, here) and starts the work it yields."""

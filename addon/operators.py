@@ -206,6 +206,11 @@ class OBJECT_OT_subdiv_pia_interpolate(_ModalJob, bpy.types.Operator):
         what = "Fitting" if self._fit else "Solving"
         if job.cancelled:
             return "%s '%s': cancelling" % (what, self._source_name)
+        if job.stage is not None:
+            text, rounds = job.stage
+            if rounds and job.iteration > 0:
+                text += ", round %d, mean distance %.3g of the scan's diagonal" % (job.iteration, job.value)
+            return "%s '%s': %s" % (what, self._source_name, text)
         if job.iteration <= 0:
             return "%s '%s': %s" % (what, self._source_name,
                                     "reading and preparing the scan" if self._fit else "preparing")

@@ -9,7 +9,7 @@ import bpy
 
 from . import live as live_module
 from . import native
-from .detail import apply_detail, fit_detail_work, store_detail
+from .detail import apply_detail_steps, fit_detail_work, store_detail
 from .compute import (check_source, cleanup_hint, find_target, limit_work, prepare_cage, require_library,
                       scan_work)
 from .mesh_io import cleaned_copy, native_mesh, non_triangle_count, triangulated_copy
@@ -127,6 +127,8 @@ def interpolate_steps(obj, *, context=None, name=None, progress=None, live=False
     if live and s["fit_detail_levels"]:
         raise ValueError("'%s': Live solves the cage again on each edit, which would leave its detail "
                          "levels behind: set the detail levels to 0 for a live cage" % obj.name)
+    # A job's progress takes the names of the stages (detail levels).
+    begin = getattr(progress, "begin", None)
     loop = s["scheme"] == 'LOOP'
     separate_limit = s["scheme"] in LIMIT_SCHEMES
     target = find_target(obj, s)
@@ -167,7 +169,7 @@ def interpolate_steps(obj, *, context=None, name=None, progress=None, live=False
             limit = (yield limit_work(data, s, cage, progress=refining)) if separate_limit else None
             detail = None
             if scan is not None and s["fit_detail_levels"]:
-                detail = yield fit_detail_work(native_mesh(data), cage, scan, s, progress=progress)
+                detail = yield fit_detail_work(native_mesh(data), cage, scan, s, progress=progress, begin=begin)
         except native.PiaError as error:
             hinted = cleanup_hint(error, data, s)
             if hinted is not None:
@@ -189,7 +191,7 @@ def interpolate_steps(obj, *, context=None, name=None, progress=None, live=False
         if stats is not None:
             store_cleanup(new_obj, stats)
         if detail is not None:
-            apply_detail(new_obj, detail, s, context=context)
+            yield from apply_detail_steps(new_obj, detail, s, context=context, stage=begin)
             store_detail(new_obj, detail)
             # The heat map at the cage's vertices: the finest level's
             # distances there (vertex i of every level is vertex i's child).

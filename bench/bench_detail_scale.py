@@ -66,11 +66,21 @@ def main():
     native.Scan = timed("scan: hierarchy", native.Scan)
     native.subdivide = timed("subdivide (levels)", native.subdivide)
     native.flat_positions = timed("finest level's flat positions", native.flat_positions)
-    steps.apply_detail = timed("Blender's share, all", steps.apply_detail)
-    detail.blender_order = timed("  Blender's order, computed", detail.blender_order)
+    def timed_steps(key, steps_fn):  # a generator's time from its first step to its return
+        def wrapper(*a, **k):
+            t0 = time.perf_counter()
+            try:
+                return (yield from steps_fn(*a, **k))
+            finally:
+                seconds[key] = seconds.get(key, 0.0) + time.perf_counter() - t0
+        return wrapper
+
+    steps.apply_detail_steps = timed_steps("Blender's share, all", steps.apply_detail_steps)
+    order_work = detail.order_work
+    detail.order_work = lambda *a, **k: timed("  Blender's order, computed", order_work(*a, **k))
     detail._subsurf_topology = timed("  Blender: Subdivision Surface for the order", detail._subsurf_topology)
     detail.match_order = timed("  matching the order", detail.match_order)
-    detail._add_multires = timed("  Blender: Multires subdivided", detail._add_multires)
+    detail._subdivide_multires = timed("  Blender: Multires subdivided", detail._subdivide_multires)
     detail._reshape = timed("  Blender: Reshape", detail._reshape)
     levels_seen = []
     fit = native.fit

@@ -84,7 +84,7 @@ def test_finest_level_is_the_librarys_detail(order, monkeypatch):
     if order == "computed":
         monkeypatch.setattr(detail_module, "_subsurf_topology", lambda *a, **k: pytest.fail("Blender subdivided"))
     else:
-        monkeypatch.setattr(detail_module, "blender_order", lambda *a, **k: None)
+        monkeypatch.setattr(detail_module, "order_work", lambda *a, **k: (lambda: None))
     scan = import_obj(DATA + "/bun_zipper.obj")
     cage = import_obj(DATA + "/bun_zipper_quadriflow_cage.obj")
     new_obj, report = api.interpolate(cage, target=scan.name, fit_detail_levels=1)
@@ -308,6 +308,61 @@ def test_detail_cancel_leaves_nothing():
         api.interpolate(cage, target="Scan", fit_cutoff=0.3, fit_detail_levels=2, progress=progress)
     assert len(bpy.data.objects) == count and len(bpy.data.meshes) == meshes
     assert len(calls) == len(base_calls) + 3
+
+
+BLENDER_STAGES = ["computing Blender's numbering of the finest level",
+                  "Blender: Multires, subdividing level 1 of 2", "Blender: Multires, subdividing level 2 of 2",
+                  "Blender: Multires Reshape to the fitted positions"]
+
+
+def _poll_through(job, stop_at=None):
+    """Polls job as the operator's modal run does, a turn at a time; returns
+    (result, the stages seen in order).  At stage text stop_at, cancels it
+    as Esc does."""
+    stages, result = [], None
+    while not job.done:
+        result = job.poll()
+        if job.stage is not None and (not stages or stages[-1] != job.stage):
+            stages.append(job.stage)
+            if job.stage[0] == stop_at:
+                job.cancel()
+        if job.working():
+            job._thread.join(0.01)
+    return result, stages
+
+
+def test_job_names_each_detail_stage_and_makes_what_interpolate_makes():
+    """The operator's job names each level's fit (whose progress counts its
+    rounds) and each of Blender's stages after them, each of which it
+    begins on a turn of its own, where the window redraws; the object is
+    interpolate's."""
+    fine_sphere("Scan", segments=64, rings=32)
+    cage = quad_sphere("Cage", cuts=2, radius=0.8)
+    plain, _report = api.interpolate(cage, target="Scan", fit_cutoff=0.3, fit_detail_levels=2, name="Plain")
+    job = api.InterpolateJob(cage, target="Scan", fit_cutoff=0.3, fit_detail_levels=2, name="Job",
+                             progress=lambda iteration, value: False)
+    (new_obj, report), stages = _poll_through(job)
+    assert [text for text, rounds in stages if not rounds] == BLENDER_STAGES
+    levels = [text for text, rounds in stages if rounds]
+    assert levels and set(levels) <= {"detail level 1 of 2", "detail level 2 of 2"} and levels[-1].endswith("2 of 2")
+    assert stages.index((levels[-1], True)) < stages.index((BLENDER_STAGES[0], False))
+    np.testing.assert_array_equal(finest_level(new_obj)[0], finest_level(plain)[0])
+    assert new_obj["pia_fit_detail_mean"] == plain["pia_fit_detail_mean"]
+
+
+@pytest.mark.parametrize("stage", [BLENDER_STAGES[0], BLENDER_STAGES[2], BLENDER_STAGES[3]])
+def test_job_cancelled_between_blenders_stages_leaves_nothing(stage):
+    fine_sphere("Scan", segments=64, rings=32)
+    cage = quad_sphere("Cage", cuts=2, radius=0.8)
+    before = snapshot(cage)
+    count, meshes = len(bpy.data.objects), len(bpy.data.meshes)
+    job = api.InterpolateJob(cage, target="Scan", fit_cutoff=0.3, fit_detail_levels=2,
+                             progress=lambda iteration, value: False)
+    with pytest.raises(native.PiaCancelled):
+        _poll_through(job, stop_at=stage)
+    assert job.cancelled and job.stage[0] == stage
+    assert len(bpy.data.objects) == count and len(bpy.data.meshes) == meshes
+    assert_unchanged(cage, before)
 
 
 def test_cli_detail_levels(tmp_path):
