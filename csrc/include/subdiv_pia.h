@@ -813,8 +813,10 @@ typedef struct spia_fit_report {
      * limit points that measured the scan's distances (so not with
      * SPIA_FIT_NO_SCAN_DISTANCES) instead of stencils of its own: a fifth
      * of spia_flat_positions' time, and less memory.  flat_positions_written
-     * is 1 when it was written; 0 otherwise (another cage, or too little
-     * memory left for it), and spia_flat_positions gives them. */
+     * is 1 when it was written; 0 otherwise (another cage, or they could
+     * not be made: too little memory left, say), and spia_flat_positions
+     * gives them, or says why not.  A cancel while they are made cancels
+     * the fit. */
     float *flat_positions;
     int32_t flat_positions_written;
 } spia_fit_report;

@@ -717,8 +717,9 @@ static float *flat_grid_written(fit_run *u, const float *cage_out) {
 }
 
 /* The flat positions from the grid, once the fit's buffers are freed (their
- * solve's time counts as the fit's solves').  Short of memory, they are left to spia_flat_positions (not written);
- * cancelled, the fit is. */
+ * solve's time counts as the fit's solves').  Where they cannot be made
+ * (short of memory, say) they are not written, and the fit's result
+ * stands: spia_flat_positions says why.  Cancelled, the fit is. */
 static spia_result flat_written(fit_run *u, const float *cage_out, const float *grid, spia_result r) {
     spia_mesh written = *u->cage;
     written.positions = (float *)cage_out;
@@ -728,8 +729,7 @@ static spia_result flat_written(fit_run *u, const float *cage_out, const float *
                                            &flat_status);
     u->report->solve_seconds += spia__now() - t0;
     if (f == SPIA_OK) u->report->flat_positions_written = 1;
-    if (f == SPIA_ERROR_CANCELLED) return spia__fail(u->status, f, -1, "cancelled computing the flat positions");
-    return f == SPIA_OK || f == SPIA_ERROR_OUT_OF_MEMORY ? r : spia__fail(u->status, f, -1, "%s", flat_status.message);
+    return f == SPIA_ERROR_CANCELLED ? spia__fail(u->status, f, -1, "cancelled computing the flat positions") : r;
 }
 
 spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_options *options,
