@@ -14,7 +14,9 @@
  *   fit_scan_side.c   the scan's distances to the surface, the scan's pull
  *   fit.c             spia_fit: the options and memory limits, the stages,
  *                     the rounds; spia_surface_stencils_create
- *   flat_positions.c  spia_flat_positions, and the fit's (spia__flat_solve) */
+ *   flat_solve.c      the flat positions' least squares (spia__flat_solve),
+ *                     spia_flat_positions' and the fit's
+ *   flat_positions.c  spia_flat_positions */
 #ifndef SPIA_FIT_H
 #define SPIA_FIT_H
 
@@ -259,7 +261,7 @@ spia_result spia__fit_scan_side_measure(fit_buffers *b, const double *V, double 
                                         spia_status *status);
 spia_result spia__fit_scan_pull(fit_run *u);
 
-/* ---- flat_positions.c --------------------------------------------------------- */
+/* ---- flat_solve.c ------------------------------------------------------------- */
 
 /* The flat positions of quad mesh m (its positions: where vertices no face
  * uses stay) from X, each face's side x side grid of limit points in the
