@@ -71,17 +71,13 @@ def fit_detail_work(cage_mesh, cage_positions, scan, settings, progress=None, be
     return run
 
 
-def blender_order(obj, detail):
-    """Blender's numbering of obj's Multires finest level, as the library's
-    finest level's vertex numbers (multires_order), or None where the
-    library's levels do not fit it (match_order then pairs the vertices,
-    through Blender's own subdivision)."""
-    return order_work(obj, detail)()
-
-
 def order_work(obj, detail):
-    """blender_order as a function that touches nothing of Blender's: obj's
-    mesh is read here, the numbering computed when it is called."""
+    """Blender's numbering of obj's Multires finest level, as the library's
+    finest level's vertex numbers (multires_order), as a function that
+    touches nothing of Blender's: obj's mesh is read here, the numbering
+    computed when the function is called.  It gives None where the
+    library's levels do not fit the numbering (match_order then pairs the
+    vertices, through Blender's own subdivision)."""
     if len(detail.level_topology) != int(detail.levels) + 1:
         return _nothing
     arrays = mesh_arrays(obj.data)
@@ -291,24 +287,14 @@ def _matched_order(base, blender_points, levels, settings):
     return match_order(blender_points, subdivided, diagonal)
 
 
-def apply_detail(obj, detail, settings, context=None):
+def apply_detail_steps(obj, detail, settings, context=None, stage=None):
     """obj (the new fitted cage, its mesh the fitted positions) gets a
     Multires modifier with the detail's levels, its finest level at the
-    detail's points, in Blender's order (blender_order, or where that
-    cannot say, match_order against Blender's own subdivision).  The
-    Subdivision Surface modifier build_object put on it goes: Multires
-    shows the levels.  Returns the modifier."""
-    steps = apply_detail_steps(obj, detail, settings, context)
-    try:
-        work = next(steps)
-        while True:
-            work = steps.send(work())
-    except StopIteration as stop:
-        return stop.value
-
-
-def apply_detail_steps(obj, detail, settings, context=None, stage=None):
-    """apply_detail as interpolate_steps' steps: what touches nothing of
+    detail's points, in Blender's order (order_work, or where that cannot
+    say, match_order against Blender's own subdivision).  The Subdivision
+    Surface modifier build_object put on it goes: Multires shows the
+    levels.  Returns the modifier.  As interpolate_steps' steps (run_steps
+    drives them at once): what touches nothing of
     Blender's (the order computed or matched) is yielded as work, and so,
     between Blender's own stages (each level's Subdivide, Reshape), is
     work that does nothing, at which a job's caller redraws and hears Esc.
