@@ -74,7 +74,8 @@ from .usd import (_USD_BOUNDARY, _USD_NAME, _USD_PER_LINE, _USD_SCHEMES, _USD_SH
                   write_usd)
 from .fitting import FIT_MODES, FitDistances, FitReport, Scan, _phase_callback, fit, surface_stencils
 from .detail_levels import (DETAIL_BYTES_FIXED, DETAIL_BYTES_PER_GRID_POINT, DETAIL_BYTES_PER_SAMPLE,
-                            DETAIL_BYTES_PER_SEARCHED_QUAD, DETAIL_ROBUST_SCALE, DETAIL_ROUNDS, MEASURE_GRID_QUADS,
+                            DETAIL_BYTES_PER_SEARCHED_QUAD, DETAIL_FINEST_FROM_LEVEL, DETAIL_FINEST_ROUNDS,
+                            DETAIL_ROBUST_SCALE, DETAIL_ROUNDS, MEASURE_GRID_QUADS,
                             DETAIL_SLIDE_WEIGHT, DETAIL_SMOOTHING, DETAIL_SOLVER_ITERATIONS, DetailResult,
                             check_detail_memory, detail_memory_estimate, detail_samples, fit_detail)
 

@@ -204,6 +204,28 @@ def test_detail_levels_short_of_their_rounds_say_so(native, measure_scan):
         assert rep.rounds < 50
 
 
+def test_the_finest_of_three_levels_takes_its_own_rounds(native):
+    """The finest level of DETAIL_FINEST_FROM_LEVEL levels or more is
+    bounded by finest_rounds (DETAIL_FINEST_ROUNDS), the others by
+    max_rounds; finest_rounds=None bounds it by max_rounds too, and with
+    fewer levels max_rounds bounds them all."""
+    assert native.DETAIL_FINEST_ROUNDS < native.DETAIL_ROUNDS and native.DETAIL_FINEST_FROM_LEVEL == 3
+    p, t = uv_sphere(120, 60)
+    scan = native.Scan(native.Mesh.from_faces(p, t))
+    cp, cf = quad_sphere(2)
+    base, _ = native.fit(native.Mesh.from_faces(cp, cf), scan, cutoff=0.3)
+    base = native.Mesh.from_faces(base, cf)
+    # One round never settles (settling takes two), so a bound of one is met.
+    three = native.fit_detail(base, scan, 3, cutoff=0.3, finest_rounds=1)
+    assert three.report.rounds == 1 and "max_rounds (1)" in three.report.message
+    assert all(2 <= rep.rounds <= native.DETAIL_ROUNDS for rep in three.reports[:-1])
+    alike = native.fit_detail(base, scan, 3, cutoff=0.3, max_rounds=1, finest_rounds=None)
+    assert [rep.rounds for rep in alike.reports] == [1, 1, 1]
+    two = native.fit_detail(base, scan, 2, cutoff=0.3, finest_rounds=1)
+    assert all(2 <= rep.rounds <= native.DETAIL_ROUNDS for rep in two.reports)
+    assert native.fit_detail(base, scan, 3, cutoff=0.3).report.rounds <= native.DETAIL_FINEST_ROUNDS
+
+
 @pytest.mark.parametrize("per_edge", [1, 2, 3, 5, 6])
 def test_sample_products_for_every_grid_size(native, sphere_scan, per_edge):
     """The sample products take eight, four and single samples at a time:
