@@ -753,7 +753,14 @@ typedef enum spia_fit_flags {
      * turned over against the cage given, 0.1% with the rims held).  For
      * fits that start on the scan (detail levels), whose rims have no
      * fold to make and reach the scan's edge closer free. */
-    SPIA_FIT_FREE_RIMS = 16
+    SPIA_FIT_FREE_RIMS = 16,
+    /* Measure the scan-to-surface distances of the cage written only
+     * (scan_after; scan_before stays zero): one measure of every scan
+     * vertex fewer, where the distances to the cage given are known or
+     * not wanted (a finest detail level starts on the surface of the level
+     * above: on a 50k-vertex cage's third level, 3.2M faces, the measure
+     * left out took about 2 s). */
+    SPIA_FIT_NO_SCAN_BEFORE = 32
 } spia_fit_flags;
 
 typedef struct spia_fit_distances {
@@ -800,7 +807,7 @@ typedef struct spia_fit_report {
      * the face found), relative to the scan's diagonal, for the cage given
      * and the cage written.  `ignored` counts the scan vertices farther
      * than the cut-off: scan parts the surface does not reach.  Catmull-Clark only; all zero with
-     * SPIA_FIT_NO_SCAN_DISTANCES. */
+     * SPIA_FIT_NO_SCAN_DISTANCES, scan_before zero with SPIA_FIT_NO_SCAN_BEFORE. */
     int64_t scan_point_count;
     spia_fit_distances scan_before, scan_after;
     /* Optional caller-owned buffer of the scan's vertex_count floats: each

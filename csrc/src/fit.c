@@ -72,7 +72,7 @@ static spia_result resolve_fit(const spia_fit_options *in, spia_fit_options *out
     if (!(o.robust_scale > 0.0) || !isfinite(o.robust_scale))
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "robust_scale must be a positive number");
     const uint32_t known = SPIA_FIT_ALLOW_FOLDS | SPIA_FIT_HARD_CUTOFF | SPIA_FIT_NO_SCAN_DISTANCES | SPIA_FIT_SCAN_PULL |
-                           SPIA_FIT_FREE_RIMS;
+                           SPIA_FIT_FREE_RIMS | SPIA_FIT_NO_SCAN_BEFORE;
     if (o.flags & ~known)
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1, "unknown fit flags 0x%x", (unsigned)(o.flags & ~known));
     if ((o.flags & SPIA_FIT_SCAN_PULL) && (o.mode != SPIA_FIT_SURFACE || o.samples_per_edge < 2))
@@ -289,15 +289,17 @@ static spia_result sample_surface(fit_run *u) {
 }
 
 /* The scan's vertices measured against the cage given's surface (see
- * scan_side_prepare). */
+ * scan_side_prepare); only prepared for the cage written's measure with
+ * SPIA_FIT_NO_SCAN_BEFORE. */
 static spia_result measure_scan_given(fit_run *u) {
     fit_buffers *b = &u->b;
     const double t0 = spia__now();
     spia_result r = spia__fit_scan_side_prepare(u->cage, &u->adj, &u->surface_opt, u->fo.samples_per_edge, u->scan, b,
                                       &u->clock, u->status);
     if (r != SPIA_OK) return r == SPIA_ERROR_OUT_OF_MEMORY ? spia__fit_oom(u) : r;
-    if ((r = spia__fit_scan_side_measure(b, b->V0, u->cutoff_abs, u->diagonal, u->opt.threads, 0, &u->clock,
-                               &u->report->scan_before, u->status)) != SPIA_OK)
+    if (!(u->fo.flags & SPIA_FIT_NO_SCAN_BEFORE) &&
+        (r = spia__fit_scan_side_measure(b, b->V0, u->cutoff_abs, u->diagonal, u->opt.threads, 0, &u->clock,
+                                         &u->report->scan_before, u->status)) != SPIA_OK)
         return r;
     u->report->scan_point_count = b->scan_count;
     u->report->query_seconds += spia__now() - t0;
@@ -613,14 +615,23 @@ static spia_result fit_surface(fit_run *u) {
 }
 
 /* The scan's vertices measured against the written cage's surface, into
- * the report and its per-vertex buffer. */
+ * the report and its per-vertex buffer (each search starting from the
+ * closest point on the cage given's surface, where that was measured). */
 static spia_result measure_scan_written(fit_run *u) {
     fit_buffers *b = &u->b;
     spia_fit_report *report = u->report;
     const double t0 = spia__now();
-    const spia_result r = spia__fit_scan_side_measure(b, b->best, u->cutoff_abs, u->diagonal, u->opt.threads, 1, &u->clock,
-                                            &report->scan_after, u->status);
-    if (r != SPIA_OK) return r;
+    const int warm = !(u->fo.flags & SPIA_FIT_NO_SCAN_BEFORE);
+    /* Its own status: the grid's hierarchy, built here where the cage
+     * given was not measured, says OK on success, and the fit's own word
+     * (max_rounds reached) stands. */
+    spia_status measured;
+    const spia_result r = spia__fit_scan_side_measure(b, b->best, u->cutoff_abs, u->diagonal, u->opt.threads, warm,
+                                                      &u->clock, &report->scan_after, &measured);
+    if (r != SPIA_OK) {
+        if (u->status) *u->status = measured;
+        return r;
+    }
     report->query_seconds += spia__now() - t0;
     if (report->scan_distances) {
         int32_t scan_n = 0;

@@ -57,8 +57,8 @@ import numpy as np  # noqa: F401
 # reach some of them through it (spia._options, spia._Status, ...).
 from . import library  # the loader's state: see __getattr__ below
 from .errors import _RESULT_NAMES, _STATUS_OF_RESULT, PiaCancelled, PiaError, _raise
-from .header import (_PROGRESS, FIT_ALLOW_FOLDS, FIT_FREE_RIMS, FIT_HARD_CUTOFF, FIT_NO_SCAN_DISTANCES,
-                     FIT_SCAN_PULL, _declare, _f32p, _f64p, _FitDistances, _FitOptions, _FitReport, _i32p,
+from .header import (_PROGRESS, FIT_ALLOW_FOLDS, FIT_FREE_RIMS, FIT_HARD_CUTOFF, FIT_NO_SCAN_BEFORE,
+                     FIT_NO_SCAN_DISTANCES, FIT_SCAN_PULL, _declare, _f32p, _f64p, _FitDistances, _FitOptions, _FitReport, _i32p,
                      _i64p, _Mesh, _Options, _Report, _Status)
 from .library import (_MACHINES, _SYSTEM_NAMES, _SYSTEM_OF_PLATFORM, LIBRARY_NAMES, _library,
                       _library_candidates, _manifest, _package_dir, _platform_name, _system, available,

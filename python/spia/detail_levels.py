@@ -197,7 +197,10 @@ def fit_detail(cage, scan, levels, samples_per_edge=4, progress=None, boundary_s
     DETAIL_ROUNDS, DETAIL_SOLVER_ITERATIONS and DETAIL_ROBUST_SCALE.
     ``max_rounds`` bounds each level's rounds but the finest's when there
     are DETAIL_FINEST_FROM_LEVEL levels or more: ``finest_rounds`` bounds
-    that one (None: ``max_rounds``).
+    that one (None: ``max_rounds``).  ``measure_scan``: the finest level
+    measures the scan's vertices against the surface it wrote
+    (``report.scan_after``; its ``scan_before`` is None: the surface it
+    started from is the level above's, not measured).
     The finest level's vertices are numbered as :func:`subdivide` applied
     one level at a time numbers them.  ``memory_budget`` (bytes; 0: what
     the machine has available, negative: no check): the levels are refused
@@ -222,7 +225,8 @@ def fit_detail(cage, scan, levels, samples_per_edge=4, progress=None, boundary_s
         refined = subdivide(current, 1, progress=tick, **surface)
         follow = None if progress is None else (lambda it, value, level=level: progress(level, it, value))
         positions, report = fit(refined, scan, samples_per_edge=detail_samples(samples_per_edge, level),
-                                measure_scan=measure_scan and finest, progress=follow, threads=threads,
+                                measure_scan="after" if measure_scan and finest else False, progress=follow,
+                                threads=threads,
                                 smoothing=smoothing, slide_weight=slide_weight, scan_pull=scan_pull,
                                 free_rims=free_rims, max_rounds=rounds, solver_iterations=solver_iterations,
                                 robust_scale=robust_scale, flat=finest, **surface, **fit_options)

@@ -10,8 +10,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import _STATUS_OF_RESULT, PiaError, _raise
-from .header import (_PROGRESS, FIT_ALLOW_FOLDS, FIT_FREE_RIMS, FIT_HARD_CUTOFF, FIT_NO_SCAN_DISTANCES,
-                     FIT_SCAN_PULL, _FitOptions, _FitReport, _Status)
+from .header import (_PROGRESS, FIT_ALLOW_FOLDS, FIT_FREE_RIMS, FIT_HARD_CUTOFF, FIT_NO_SCAN_BEFORE,
+                     FIT_NO_SCAN_DISTANCES, FIT_SCAN_PULL, _FitOptions, _FitReport, _Status)
 from .interpolation import Stencils
 from .library import _library
 from .mesh import _as, _enum, _options, _ptr
@@ -145,7 +145,7 @@ class FitReport:
     folded_before: int = -1     # samples facing away from the scan (-1: not measured)
     folded_after: int = -1
     scan_point_count: int = 0   # scan vertices measured the other way (0: not measured)
-    scan_before: FitDistances = None
+    scan_before: FitDistances = None   # None with measure_scan="after"
     scan_after: FitDistances = None
     scan_distances: np.ndarray = field(default=None, repr=False)  # per scan vertex, relative, -1 unused
     # flat_positions() of the cage written, where fit(flat=True) could give them
@@ -169,7 +169,8 @@ def fit(cage, scan, mode="SURFACE", samples_per_edge=4, cutoff=0.02, smoothing=1
     distance; ``slide_weight``: how much samples are held back from sliding
     along the scan within a round; ``allow_folds``: no fold guard; ``hard_cutoff``: the cut-off's
     0/1 weights without the kernel; ``measure_scan``: also measure the
-    scan's vertices against the surface (``report.scan_before/after``);
+    scan's vertices against the surface (``report.scan_before/after``;
+    "after": against the cage written only, SPIA_FIT_NO_SCAN_BEFORE);
     ``scan_pull``: the scan's vertices pull the surface too (SPIA_FIT_SCAN_PULL);
     ``free_rims``: the cage's rims (faces with a boundary vertex) are not
     held smoother than the rest (SPIA_FIT_FREE_RIMS); ``flat``: also
@@ -202,9 +203,11 @@ def fit(cage, scan, mode="SURFACE", samples_per_edge=4, cutoff=0.02, smoothing=1
     if not (0 <= slide_weight < 1):
         raise PiaError("INVALID_ARGUMENT", f"slide_weight must be at least 0 and below 1, not {slide_weight!r}")
     fo.slide_weight = float(slide_weight)
+    if measure_scan not in (True, False, "after"):
+        raise PiaError("INVALID_ARGUMENT", f"measure_scan must be True, False or 'after', not {measure_scan!r}")
     fo.flags = ((FIT_ALLOW_FOLDS if allow_folds else 0) | (FIT_HARD_CUTOFF if hard_cutoff else 0)
                 | (0 if measure_scan else FIT_NO_SCAN_DISTANCES) | (FIT_SCAN_PULL if scan_pull else 0)
-                | (FIT_FREE_RIMS if free_rims else 0))
+                | (FIT_FREE_RIMS if free_rims else 0) | (FIT_NO_SCAN_BEFORE if measure_scan == "after" else 0))
     if fo.max_rounds < 1 or fo.solver_iterations < 1:
         raise PiaError("INVALID_ARGUMENT", "max_rounds and solver_iterations must be at least 1")
     out = np.empty_like(cage.positions)
@@ -233,6 +236,7 @@ def fit(cage, scan, mode="SURFACE", samples_per_edge=4, cutoff=0.02, smoothing=1
         query_seconds=rep.query_seconds, solve_seconds=rep.solve_seconds,
         vertex_distances=vertex_distances, history=history[: rep.history_count].copy(),
         folded_before=rep.folded_before, folded_after=rep.folded_after, scan_point_count=rep.scan_point_count,
-        scan_before=dist(rep.scan_before), scan_after=dist(rep.scan_after),
+        scan_before=None if measure_scan == "after" else dist(rep.scan_before),
+        scan_after=dist(rep.scan_after),
         scan_distances=per_scan[: scan.vertex_count] if rep.scan_point_count else None,
         flat_positions=flat_out if rep.flat_positions_written else None)

@@ -85,6 +85,7 @@ class _FitReport(ctypes.Structure):
 
 # spia_fit_flags
 FIT_ALLOW_FOLDS, FIT_HARD_CUTOFF, FIT_NO_SCAN_DISTANCES, FIT_SCAN_PULL, FIT_FREE_RIMS = 1, 2, 4, 8, 16
+FIT_NO_SCAN_BEFORE = 32
 
 
 def _declare(lib):

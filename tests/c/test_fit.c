@@ -180,6 +180,32 @@ int main(void) {
         fo.flags = SPIA_FIT_NO_SCAN_DISTANCES;
         r = spia_fit(&cm, scan, &o, &fo, out, &rep, &st);
         CHECK(r == SPIA_OK && rep.flat_positions_written == 0, "no grid, no flat positions: %s", st.message);
+        /* Without the scan's measure before the fit, the one after it (a
+         * search of its own, not started from the first's answers) gives
+         * the same distances, the cage and its flat positions the same. */
+        float *per_scan[2] = {malloc(sizeof(float) * (size_t)fine.nv), malloc(sizeof(float) * (size_t)fine.nv)};
+        float *cages[2] = {malloc(sizeof(float) * 3 * (size_t)nv), malloc(sizeof(float) * 3 * (size_t)nv)};
+        spia_fit_report both[2];
+        for (int k = 0; k < 2; ++k) {
+            memset(&both[k], 0, sizeof both[k]);
+            both[k].scan_distances = per_scan[k];
+            both[k].flat_positions = k ? theirs : flat;
+            fo.flags = k ? SPIA_FIT_NO_SCAN_BEFORE : 0;
+            r = spia_fit(&cm, scan, &o, &fo, cages[k], &both[k], &st);
+            CHECK(r == SPIA_OK && both[k].flat_positions_written == 1, "fit, flags %u: %s", fo.flags, st.message);
+        }
+        CHECK(both[0].scan_before.mean > both[0].scan_after.mean && both[0].scan_point_count > 0, "scan before %g after %g",
+              both[0].scan_before.mean, both[0].scan_after.mean);
+        CHECK(both[1].scan_before.mean == 0.0 && both[1].scan_before.p95 == 0.0 && both[1].scan_before.ignored == 0,
+              "no measure before, yet scan_before %g", both[1].scan_before.mean);
+        CHECK(both[1].scan_point_count == both[0].scan_point_count, "scan points %lld, %lld",
+              (long long)both[1].scan_point_count, (long long)both[0].scan_point_count);
+        CHECK(memcmp(&both[1].scan_after, &both[0].scan_after, sizeof both[0].scan_after) == 0,
+              "scan after %.9g / %.9g", both[1].scan_after.mean, both[0].scan_after.mean);
+        CHECK(memcmp(per_scan[0], per_scan[1], sizeof(float) * (size_t)fine.nv) == 0, "per-vertex scan distances differ");
+        CHECK(memcmp(cages[0], cages[1], sizeof(float) * 3 * (size_t)nv) == 0, "the cages differ");
+        CHECK(memcmp(flat, theirs, sizeof(float) * 3 * (size_t)nv) == 0, "the flat positions differ");
+        free(per_scan[0]), free(per_scan[1]), free(cages[0]), free(cages[1]);
         fo.flags = 0;
         free(flat), free(theirs);
     }

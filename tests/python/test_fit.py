@@ -226,6 +226,29 @@ def test_the_finest_of_three_levels_takes_its_own_rounds(native):
     assert native.fit_detail(base, scan, 3, cutoff=0.3).report.rounds <= native.DETAIL_FINEST_ROUNDS
 
 
+def test_scan_measured_after_the_fit_only(native):
+    """measure_scan="after" (SPIA_FIT_NO_SCAN_BEFORE) leaves out the scan's
+    measure against the cage given: the cage, the scan's distances to the
+    cage written and the flat positions are those of a fit that measured
+    both, scan_before is None; the finest detail level measures so."""
+    p, t = uv_sphere(120, 60)
+    scan = native.Scan(native.Mesh.from_faces(p, t))
+    cp, cf = quad_sphere(3)
+    cage = native.Mesh.from_faces(cp * 0.9, cf)
+    both = native.fit(cage, scan, cutoff=0.3, flat=True, max_rounds=3)
+    after = native.fit(cage, scan, cutoff=0.3, flat=True, max_rounds=3, measure_scan="after")
+    assert both[1].scan_before.mean > both[1].scan_after.mean > 0 and after[1].scan_before is None
+    assert after[1].scan_after == both[1].scan_after and after[1].scan_point_count == both[1].scan_point_count
+    np.testing.assert_array_equal(after[1].scan_distances, both[1].scan_distances)
+    np.testing.assert_array_equal(after[0], both[0])
+    np.testing.assert_array_equal(after[1].flat_positions, both[1].flat_positions)
+    with pytest.raises(native.PiaError, match="measure_scan"):
+        native.fit(cage, scan, measure_scan="before")
+    detail = native.fit_detail(native.Mesh.from_faces(both[0], cf), scan, 2, cutoff=0.3)
+    assert detail.report.scan_before is None and detail.report.scan_point_count == both[1].scan_point_count
+    assert 0 < detail.report.scan_after.mean < both[1].scan_after.mean
+
+
 @pytest.mark.parametrize("per_edge", [1, 2, 3, 5, 6])
 def test_sample_products_for_every_grid_size(native, sphere_scan, per_edge):
     """The sample products take eight, four and single samples at a time:
