@@ -172,6 +172,26 @@ static void buffers_free(fit_buffers *b) {
     free(b->pull_faces), free(b->pull_w), free(b->pull_off);
 }
 
+/* The rounds' own buffers (the solver's, the weights, the fold guard's and
+ * the scan's pull's, with its hierarchy over the samples) freed once the
+ * rounds are over, before the measures of the cage written: the scan's
+ * then builds its grid's hierarchy where the cage given was not measured
+ * (SPIA_FIT_NO_SCAN_BEFORE), and the peak stays that of the rounds. */
+static void rounds_free(fit_buffers *b) {
+    free(b->work), free(b->precond), free(b->tmp_n), free(b->tmp_diag), free(b->wts);
+    free(b->hold), free(b->smooth), free(b->bar), free(b->bar_start), free(b->start_n), free(b->start_len);
+    b->work = b->precond = b->tmp_n = b->tmp_diag = b->hold = b->smooth = NULL;
+    b->wts = NULL, b->start_n = NULL, b->start_len = NULL;
+    b->bar = NULL, b->bar_start = NULL, b->bar_capacity = 0;
+    spia_scan_free(b->pull_surface);
+    b->pull_surface = NULL;
+    free(b->pull_pos), free(b->pull_d), free(b->pull_sizes), free(b->pull_quads), free(b->pull_near);
+    free(b->pull_faces), free(b->pull_w), free(b->pull_off);
+    b->pull_pos = b->pull_d = NULL;
+    b->pull_sizes = b->pull_quads = b->pull_near = b->pull_faces = NULL;
+    b->pull_w = b->pull_off = NULL;
+}
+
 /* The umbrella neighbours of every vertex, from the faces. */
 static spia_result build_neighbours(const spia_mesh *mesh, const spia_adjacency *adj, fit_buffers *b) {
     const int32_t n = mesh->vertex_count;
@@ -784,6 +804,7 @@ spia_result spia_fit(const spia_mesh *cage, const spia_scan *scan, const spia_op
     if (u.S > 0 && (r = measure_given(&u)) < 0) goto done;
     r = u.fo.mode == SPIA_FIT_VERTICES ? fit_vertices(&u) : fit_surface(&u);
     if (r < 0) goto done;
+    rounds_free(&u.b);
     if (u.S > 0)
         r = measure_samples_written(&u, r);
     else if (u.b.L) {

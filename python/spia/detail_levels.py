@@ -54,19 +54,20 @@ def detail_samples(samples_per_edge, level):
 # scan's pull's buffers and the level itself, DETAIL_BYTES_PER_SAMPLE; at
 # the finest level, the grid that measures the scan's distances besides
 # (:func:`_measure_grid`): its points, and the hierarchy over its quads, or
-# over one quad a ptex face once the grid has more than 2M quads.
-# Measured on two threads, the growth of the resident size: over the
-# bunny's cage's 3 levels, 0.41e9 bytes (0.72M samples, a grid of 0.72M
-# quads); over the finest fit of the dragon's 50k-vertex cage at 3 levels,
-# 5.64e9 (12.9M samples, 3.2M ptex faces searched), and 6.2e9 over the
-# whole call in Blender, the scan's hierarchy included; a 3,052-face cage
-# at 5 levels, 6.0e9 over the call (12.5M samples).  The estimate is 0.78e9 and 6.54e9 for the first two:
-# the fixed part weighs on small cages, and it keeps a tenth or more over
-# the large ones.
-DETAIL_BYTES_PER_SAMPLE = 380
+# over one quad a ptex face once the grid has more than 2M quads.  (The
+# fit frees its rounds' buffers before it measures the scan, so the two
+# do not add up: the sum keeps a margin.)  Measured on two threads, the
+# growth of the resident size: over the bunny's cage's 3 levels, 0.36e9
+# bytes (0.72M samples, a grid of 0.72M quads); over the whole call in
+# Blender, the scan's hierarchy included, 4.7e9 for the dragon's
+# 50k-vertex cage at 3 levels (12.9M samples, 3.2M ptex faces searched)
+# and 4.6e9 for a 3,044-vertex cage at 5 levels (12.5M samples).  The
+# estimate is 0.57e9, 5.25e9 and 5.08e9: the fixed part weighs on small
+# cages, and it keeps a tenth over the large ones.
+DETAIL_BYTES_PER_SAMPLE = 290
 DETAIL_BYTES_PER_GRID_POINT = 16
 DETAIL_BYTES_PER_SEARCHED_QUAD = 280
-DETAIL_BYTES_FIXED = 256 << 20
+DETAIL_BYTES_FIXED = 128 << 20
 # The largest grid searched through a hierarchy of its own (the library's
 # SCAN_GRID_FACES).
 MEASURE_GRID_QUADS = 2 << 20
@@ -98,7 +99,7 @@ def detail_memory_estimate(cage, levels, samples_per_edge=4):
     (:func:`detail_samples` squared per face) and the finest level's the
     grid that measures the scan besides (:func:`_measure_grid`); the level
     that needs the most sets the peak, with DETAIL_BYTES_FIXED besides:
-    about 1.9 KB per finest face of a large cage at the default samples.
+    about 1.6 KB per finest face of a large cage at the default samples.
     fit_detail itself does not refuse: a script checks this against the
     memory it has."""
     levels = int(levels)
