@@ -153,28 +153,9 @@ static int clock_forward(void *user, int32_t iteration, double value) {
 
 /* ---- the entry point -------------------------------------------------------- */
 
-static void buffers_free(fit_buffers *b) {
-    spia__fit_blocks_free(&b->blocks);
-    spia_stencils_free(b->L);
-    free(b->V0), free(b->V), free(b->best), free(b->X), free(b->near), free(b->work), free(b->precond), free(b->tmp_diag);
-    free(b->tmp_n), free(b->T), free(b->N), free(b->d), free(b->scratch), free(b->targets), free(b->solved);
-    free(b->wts), free(b->on_boundary);
-    free(b->nb_start), free(b->nb), free(b->free_vertex), free(b->sample_face);
-    free(b->dots), free(b->start_n), free(b->start_len), free(b->folded), free(b->mark), free(b->hold), free(b->smooth), free(b->bar), free(b->bar_start);
-    spia__fit_blocks_free(&b->grid);
-    spia_scan_free(b->surface);
-    free(b->grid_pos), free(b->scan_d), free(b->scan_scratch), free(b->grid_sizes);
-    free(b->grid_quads), free(b->scan_vertex), free(b->coarse_pos), free(b->scan_face);
-    free(b->scan_near);
-    free(b->scan_pts);
-    spia_scan_free(b->pull_surface);
-    free(b->pull_pos), free(b->pull_d), free(b->pull_sizes), free(b->pull_quads), free(b->pull_near);
-    free(b->pull_faces), free(b->pull_w), free(b->pull_off);
-}
-
 /* The rounds' own buffers (the solver's, the weights, the fold guard's and
- * the scan's pull's, with its hierarchy over the samples) freed once the
- * rounds are over, before the measures of the cage written: the scan's
+ * the scan's pull's, with its hierarchy over the samples), freed as soon as
+ * the rounds are over, before the measures of the cage written: the scan's
  * then builds its grid's hierarchy where the cage given was not measured
  * (SPIA_FIT_NO_SCAN_BEFORE), and the peak stays that of the rounds. */
 static void rounds_free(fit_buffers *b) {
@@ -190,6 +171,24 @@ static void rounds_free(fit_buffers *b) {
     b->pull_pos = b->pull_d = NULL;
     b->pull_sizes = b->pull_quads = b->pull_near = b->pull_faces = NULL;
     b->pull_w = b->pull_off = NULL;
+}
+
+/* Every buffer: the rounds' (rounds_free, a second time harmless) and the
+ * rest. */
+static void buffers_free(fit_buffers *b) {
+    rounds_free(b);
+    spia__fit_blocks_free(&b->blocks);
+    spia_stencils_free(b->L);
+    free(b->V0), free(b->V), free(b->best), free(b->X), free(b->near);
+    free(b->T), free(b->N), free(b->d), free(b->scratch), free(b->targets), free(b->solved), free(b->on_boundary);
+    free(b->nb_start), free(b->nb), free(b->free_vertex), free(b->sample_face);
+    free(b->dots), free(b->folded), free(b->mark);
+    spia__fit_blocks_free(&b->grid);
+    spia_scan_free(b->surface);
+    free(b->grid_pos), free(b->scan_d), free(b->scan_scratch), free(b->grid_sizes);
+    free(b->grid_quads), free(b->scan_vertex), free(b->coarse_pos), free(b->scan_face);
+    free(b->scan_near);
+    free(b->scan_pts);
 }
 
 /* The umbrella neighbours of every vertex, from the faces. */

@@ -221,7 +221,8 @@ def fit_detail(cage, scan, levels, samples_per_edge=4, progress=None, boundary_s
     reports, topology = [], [(cage.vertex_count, cage.face_sizes, cage.face_vertices)]
     for level in range(1, levels + 1):
         finest = level == levels
-        rounds = finest_rounds if finest and levels >= DETAIL_FINEST_FROM_LEVEL and finest_rounds else max_rounds
+        rounds = (finest_rounds if finest and levels >= DETAIL_FINEST_FROM_LEVEL and finest_rounds is not None
+                  else max_rounds)
         tick = None if progress is None else (lambda _l, _s, level=level: progress(level, 0, 0.0))
         refined = subdivide(current, 1, progress=tick, **surface)
         follow = None if progress is None else (lambda it, value, level=level: progress(level, it, value))

@@ -224,6 +224,8 @@ def test_the_finest_of_three_levels_takes_its_own_rounds(native):
     two = native.fit_detail(base, scan, 2, cutoff=0.3, finest_rounds=1)
     assert all(2 <= rep.rounds <= native.DETAIL_ROUNDS for rep in two.reports)
     assert native.fit_detail(base, scan, 3, cutoff=0.3).report.rounds <= native.DETAIL_FINEST_ROUNDS
+    with pytest.raises(native.PiaError, match="max_rounds"):  # 0 is no bound of its own, but a wrong one
+        native.fit_detail(base, scan, 3, cutoff=0.3, finest_rounds=0)
 
 
 def test_scan_measured_after_the_fit_only(native):
