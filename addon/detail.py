@@ -34,9 +34,14 @@ MATCH_TOLERANCE = 1e-5
 APART_TOLERANCE = 1e-2
 # At most this many vertices are looked for among all (each a pass over them).
 MAX_SEARCHED = 1000
-# The Multires modifier's quality while its levels are subdivided, before
-# Reshape sets them (None: the settings' quality throughout).
+# How the Multires levels are made before Reshape sets them (see
+# _new_multires): the modifier's quality meanwhile (None: the settings'
+# quality throughout), Subdivide's mode for the first level and for the
+# later ones, and whether the modifier is hidden from the viewport until
+# Reshape is done.
 SUBDIVIDE_QUALITY = 1
+SUBDIVIDE_MODES = ('CATMULL_CLARK', 'LINEAR')
+HIDE_WHILE_SUBDIVIDING = True
 
 
 def surface_options(settings):
@@ -251,21 +256,31 @@ def _new_multires(obj, settings):
     modifier.boundary_smooth = settings["boundary_smooth"]
     modifier.uv_smooth = 'NONE'
     # Reshape sets every level from the finest, so how the levels are made
-    # first does not show: Linear gave the same levels to the bit as
-    # Catmull-Clark (the bunny, 2 levels) in half the time (the 50k cage to
-    # 3 levels: 33 s against 66 s in Blender 5.3), and so did the lowest
-    # quality, which Reshape does not use (it runs at the modifier's own):
-    # each Subdivide builds Blender's evaluator of the cage again, at the
-    # modifier's quality (the 50k cage: 14 s at quality 1, 30 s at 3).
+    # first does not show (test_levels_do_not_depend_on_how_they_are_made):
+    # Linear gave the same levels to the bit as Catmull-Clark (the bunny, 2
+    # levels) in half the time (the 50k cage to 3 levels: 33 s against 66 s
+    # in Blender 5.3), and so did the lowest quality, which Reshape does not
+    # use (it runs at the modifier's own): each Subdivide builds Blender's
+    # evaluator of the cage again, at the modifier's quality (the 50k cage:
+    # 14 s at quality 1, 30 s at 3).  The first level's Catmull-Clark only
+    # allocates the displacement (0.08 s against Linear's 1.4 to 2.0).
+    # Hidden, the modifier is not evaluated at each new level: bpy.ops
+    # updates the view layer after every operator.  On the 50k cage at 3
+    # levels (Blender 5.3) the Subdivides took 7.4 s hidden against 10.5 to
+    # 14.7 shown, and Reshape 5.4 s against 12.2 to 13.4, then the one
+    # evaluation once shown 5.7 to 6.1 s (1.3 after a shown Reshape).
     if hasattr(modifier, "quality") and SUBDIVIDE_QUALITY is not None:
         modifier.quality = SUBDIVIDE_QUALITY
+    if HIDE_WHILE_SUBDIVIDING:
+        modifier.show_viewport = False
     return modifier
 
 
 def _subdivide_multires(obj, modifier, context):
     """One more level on obj's Multires modifier (Blender's Subdivide)."""
+    mode = SUBDIVIDE_MODES[0 if modifier.total_levels == 0 else 1]
     with context.temp_override(object=obj, active_object=obj):
-        bpy.ops.object.multires_subdivide(modifier=modifier.name, mode='LINEAR')
+        bpy.ops.object.multires_subdivide(modifier=modifier.name, mode=mode)
 
 
 def _show_multires(modifier, levels, settings):
@@ -333,6 +348,7 @@ def apply_detail_steps(obj, detail, settings, context=None, stage=None):
         begin("Blender: Multires Reshape to the fitted positions")
         yield _nothing
         _reshape(obj, modifier, top, context or bpy.context)
+        modifier.show_viewport = True
     finally:
         bpy.data.meshes.remove(top)
     return modifier

@@ -219,19 +219,24 @@ def test_computed_order_refuses_what_it_cannot_number():
     assert sorted(order.tolist()) == list(range(fine.vertex_count))
 
 
-def test_levels_do_not_depend_on_the_quality_they_are_subdivided_at(monkeypatch):
-    """The Multires levels are subdivided at quality 1 and then reshaped at
-    the settings' quality: every level Blender shows is the one subdividing
-    at the settings' quality gives."""
+def test_levels_do_not_depend_on_how_they_are_made(monkeypatch):
+    """The Multires levels are subdivided at quality 1, the first by
+    Catmull-Clark and the next by Linear, the modifier hidden, and then
+    reshaped at the settings' quality: every level Blender shows is the one
+    an artist's Catmull-Clark Subdivides at the settings' quality, the
+    modifier shown throughout, give."""
     from subdiv_pia import detail as detail_module
     scan = import_obj(DATA + "/bun_zipper.obj")
     cage = import_obj(DATA + "/bun_zipper_quadriflow_cage.obj")
     shown = []
-    for quality in (1, None):
-        monkeypatch.setattr(detail_module, "SUBDIVIDE_QUALITY", quality)
+    for quick in (True, False):
+        if not quick:
+            monkeypatch.setattr(detail_module, "SUBDIVIDE_QUALITY", None)
+            monkeypatch.setattr(detail_module, "SUBDIVIDE_MODES", ('CATMULL_CLARK', 'CATMULL_CLARK'))
+            monkeypatch.setattr(detail_module, "HIDE_WHILE_SUBDIVIDING", False)
         new_obj, _report = api.interpolate(cage, target=scan.name, fit_detail_levels=2)
         multires = new_obj.modifiers[0]
-        assert multires.quality == 3
+        assert multires.quality == 3 and multires.show_viewport
         levels = []
         for level in range(3):
             multires.levels = level
