@@ -352,7 +352,7 @@ static spia_result measure_given(fit_run *u) {
     b->dots = malloc(sizeof(float) * (size_t)S);
     b->folded = malloc((size_t)S);
     if (!b->dots || !b->folded) return spia__fit_oom(u);
-    spia__fit_normal_agreement(b->X, b->N, S, u->fo.samples_per_edge, b->dots);
+    spia__fit_normal_agreement(b->X, b->N, S, u->fo.samples_per_edge, b->dots, u->opt.threads);
     u->sign = spia__fit_orientation(b->dots, b->d, b->on_boundary, S, u->cutoff_abs);
     report->folded_before = spia__fit_find_folds(b->dots, b->d, b->on_boundary, S, u->cutoff_abs, u->sign, b->folded);
     if (u->fo.samples_per_edge < 2) report->folded_before = -1;
@@ -565,7 +565,7 @@ static spia_result round_measure(fit_run *u, int32_t round) {
     spia_fit_report *report = u->report;
     const int64_t S = u->S;
     if (evaluate(u->scan, b, b->V, S, u->opt.threads, &report->query_seconds, &u->clock)) return spia__fit_cancelled(u);
-    spia__fit_normal_agreement(b->X, b->N, S, u->fo.samples_per_edge, b->dots);
+    spia__fit_normal_agreement(b->X, b->N, S, u->fo.samples_per_edge, b->dots, u->opt.threads);
     spia__fit_find_folds(b->dots, b->d, b->on_boundary, S, u->cutoff_abs, u->sign, b->folded);
     const double mean = spia__fit_mean_within(b->d, S, u->cutoff_abs);
     report->rounds = round;
@@ -692,7 +692,7 @@ static spia_result measure_samples_written(fit_run *u, spia_result r) {
     if (!u->measured_best) {
         if (evaluate(u->scan, b, b->best, S, u->opt.threads, &report->query_seconds, &u->clock))
             return spia__fit_cancelled(u);
-        spia__fit_normal_agreement(b->X, b->N, S, u->fo.samples_per_edge, b->dots);
+        spia__fit_normal_agreement(b->X, b->N, S, u->fo.samples_per_edge, b->dots, u->opt.threads);
     }
     report->after = spia__fit_distance_stats(b->d, S, u->cutoff_abs, u->diagonal, b->scratch);
     report->folded_after = u->fo.samples_per_edge < 2

@@ -4,6 +4,7 @@
  * the stiffening of their faces' vertices, and the barrier's pairs (its
  * constants in fit.h). */
 #include "fit.h"
+#include "threads.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -37,19 +38,33 @@ static void grid_normal(const double *X, int64_t s, int32_t k, double n[3]) {
  * to the neighbours along the ptex face's sample grid (grid_differences);
  * 0 where it or the scan's normal vanishes, and everywhere when the grid is
  * a single sample. */
-void spia__fit_normal_agreement(const double *X, const float *N, int64_t S, int32_t k, float *dots) {
+typedef struct agreement_pass {
+    const double *X;
+    const float *N;
+    int32_t k;
+    float *dots;
+} agreement_pass;
+
+static void agreement_range(void *context, int64_t begin, int64_t end, int thread) {
+    (void)thread;
+    const agreement_pass *p = context;
+    for (int64_t s = begin; s < end; ++s) {
+        double n[3];
+        grid_normal(p->X, s, p->k, n);
+        const float *m = p->N + 3 * s;
+        const double len = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+        const double mlen = sqrt((double)m[0] * m[0] + (double)m[1] * m[1] + (double)m[2] * m[2]);
+        p->dots[s] = len > 0.0 && mlen > 0.0 ? (float)((n[0] * m[0] + n[1] * m[1] + n[2] * m[2]) / (len * mlen)) : 0.0f;
+    }
+}
+
+void spia__fit_normal_agreement(const double *X, const float *N, int64_t S, int32_t k, float *dots, int threads) {
     if (k < 2) {
         memset(dots, 0, sizeof(float) * (size_t)S);
         return;
     }
-    for (int64_t s = 0; s < S; ++s) {
-        double n[3];
-        grid_normal(X, s, k, n);
-        const float *m = N + 3 * s;
-        const double len = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-        const double mlen = sqrt((double)m[0] * m[0] + (double)m[1] * m[1] + (double)m[2] * m[2]);
-        dots[s] = len > 0.0 && mlen > 0.0 ? (float)((n[0] * m[0] + n[1] * m[1] + n[2] * m[2]) / (len * mlen)) : 0.0f;
-    }
+    agreement_pass p = {X, N, k, dots};
+    spia__parallel_for(threads, S, 65536, agreement_range, &p);
 }
 
 /* Per sample, the unit normal of the starting cage's surface where it

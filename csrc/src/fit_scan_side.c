@@ -228,6 +228,60 @@ static spia_result scan_pull_prepare(fit_run *u) {
     return SPIA_OK;
 }
 
+/* The pull's passes over the samples and the scan's vertices that are
+ * independent item by item, on the fit's threads. */
+typedef struct pull_pass {
+    fit_buffers *b;
+    double cutoff_abs;
+} pull_pass;
+
+#define PULL_GRAIN 65536
+
+/* The samples' positions in float, for the pull's hierarchy. */
+static void pull_positions(void *context, int64_t begin, int64_t end, int thread) {
+    (void)thread;
+    fit_buffers *b = ((const pull_pass *)context)->b;
+    for (int64_t i = 3 * begin; i < 3 * end; ++i) b->pull_pos[i] = (float)b->X[i];
+}
+
+/* Each scan vertex's nearest corner of its closest quad, kept in
+ * pull_faces (-1: it does not pull). */
+static void pull_corners(void *context, int64_t begin, int64_t end, int thread) {
+    (void)thread;
+    const pull_pass *p = context;
+    fit_buffers *b = p->b;
+    for (int64_t v = begin; v < end; ++v) {
+        const int32_t f = b->pull_faces[v];
+        int32_t pick = -1;
+        if (f >= 0 && b->pull_d[v] <= p->cutoff_abs) {
+            double best = INFINITY;
+            for (int c = 0; c < 4; ++c) {
+                const int32_t i = b->pull_quads[4 * (int64_t)f + c];
+                double d2 = 0.0;
+                for (int a = 0; a < 3; ++a) {
+                    const double x = b->X[3 * (int64_t)i + a] - b->scan_pts[3 * v + a];
+                    d2 += x * x;
+                }
+                if (d2 < best) best = d2, pick = i;
+            }
+            if (b->wts[pick] <= 0.0f) pick = -1;
+        }
+        b->pull_faces[v] = pick;
+    }
+}
+
+/* Each pulled sample's plane target moved by its pull, its weight grown. */
+static void pull_targets(void *context, int64_t begin, int64_t end, int thread) {
+    (void)thread;
+    fit_buffers *b = ((const pull_pass *)context)->b;
+    for (int64_t i = begin; i < end; ++i) {
+        if (b->pull_w[i] <= 0.0) continue;
+        const double shift = b->pull_off[i] / ((double)b->wts[i] + b->pull_w[i]);
+        for (int a = 0; a < 3; ++a) b->T[3 * i + a] += (float)(shift * b->N[3 * i + a]);
+        b->wts[i] = (float)((double)b->wts[i] + b->pull_w[i]);
+    }
+}
+
 /* SPIA_FIT_SCAN_PULL: each scan vertex within the cut-off pulls the
  * surface's nearest pulling sample along the scan's normal at that
  * sample's closest point, with the robust kernel's weight: the sample's
@@ -238,7 +292,8 @@ spia_result spia__fit_scan_pull(fit_run *u) {
     const int64_t S = u->S, k = u->fo.samples_per_edge;
     spia_result r;
     if (!b->pull_quads && (r = scan_pull_prepare(u)) != SPIA_OK) return r;
-    for (int64_t i = 0; i < 3 * S; ++i) b->pull_pos[i] = (float)b->X[i];
+    pull_pass pass = {b, u->cutoff_abs};
+    spia__parallel_for(u->opt.threads, S, PULL_GRAIN, pull_positions, &pass);
     if (!b->pull_surface) {
         spia_mesh view;
         memset(&view, 0, sizeof view);
@@ -258,27 +313,8 @@ spia_result spia__fit_scan_pull(fit_run *u) {
         return spia__fit_cancelled(u);
     int64_t pulling_samples = 0, pulling_scan = 0;
     for (int64_t i = 0; i < S; ++i) pulling_samples += b->wts[i] > 0.0f;
-    /* Each scan vertex's nearest corner of its closest quad, kept in
-     * pull_faces (-1: it does not pull). */
-    for (int64_t v = 0; v < b->scan_count; ++v) {
-        const int32_t f = b->pull_faces[v];
-        int32_t pick = -1;
-        if (f >= 0 && b->pull_d[v] <= u->cutoff_abs) {
-            double best = INFINITY;
-            for (int c = 0; c < 4; ++c) {
-                const int32_t i = b->pull_quads[4 * (int64_t)f + c];
-                double d2 = 0.0;
-                for (int a = 0; a < 3; ++a) {
-                    const double x = b->X[3 * (int64_t)i + a] - b->scan_pts[3 * v + a];
-                    d2 += x * x;
-                }
-                if (d2 < best) best = d2, pick = i;
-            }
-            if (b->wts[pick] <= 0.0f) pick = -1;
-        }
-        b->pull_faces[v] = pick;
-        pulling_scan += pick >= 0;
-    }
+    spia__parallel_for(u->opt.threads, b->scan_count, PULL_GRAIN, pull_corners, &pass);
+    for (int64_t v = 0; v < b->scan_count; ++v) pulling_scan += b->pull_faces[v] >= 0;
     if (!pulling_scan) return SPIA_OK;
     double ratio = (double)pulling_samples / (double)pulling_scan;
     ratio = ratio < SCAN_PULL_MIN_RATIO ? SCAN_PULL_MIN_RATIO : ratio > SCAN_PULL_MAX_RATIO ? SCAN_PULL_MAX_RATIO : ratio;
@@ -297,11 +333,6 @@ spia_result spia__fit_scan_pull(fit_run *u) {
         b->pull_w[i] += w;
         b->pull_off[i] += w * off;
     }
-    for (int64_t i = 0; i < S; ++i) {
-        if (b->pull_w[i] <= 0.0) continue;
-        const double shift = b->pull_off[i] / ((double)b->wts[i] + b->pull_w[i]);
-        for (int a = 0; a < 3; ++a) b->T[3 * i + a] += (float)(shift * b->N[3 * i + a]);
-        b->wts[i] = (float)((double)b->wts[i] + b->pull_w[i]);
-    }
+    spia__parallel_for(u->opt.threads, S, PULL_GRAIN, pull_targets, &pass);
     return SPIA_OK;
 }

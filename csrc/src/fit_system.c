@@ -4,6 +4,7 @@
  * the 3x3 block-Jacobi preconditioner and conjugate gradients.  The
  * products over the samples are fit_blocks.c's. */
 #include "fit.h"
+#include "threads.h"
 
 #include <math.h>
 #include <string.h>
@@ -13,10 +14,62 @@
  * better (for the same time) than looser tolerances with more rounds. */
 #define CG_TOLERANCE 1e-10
 
-static void laplacian(const fit_system *f, const double *x, double *y) {
-    for (int32_t v = 0; v < f->n; ++v) {
+/* The per-vertex passes run over the vertices in chunks of a size that
+ * depends on the vertex count only (at least VERTEX_CHUNK, at most
+ * MAX_CHUNKS of them), on the fit's threads; a sum over the vertices adds
+ * each chunk's own sum in chunk order, so the results do not depend on
+ * the threads either.  On the 50k-vertex cage's finest detail level (3.2M
+ * vertices) these passes, run on one thread, were a tenth of the level. */
+#define VERTEX_CHUNK 16384
+#define MAX_CHUNKS 1024
+
+typedef struct vertex_pass vertex_pass;
+typedef double (*vertex_fn)(const vertex_pass *p, int32_t begin, int32_t end);
+
+struct vertex_pass {
+    const fit_system *f;
+    vertex_fn fn;
+    int32_t chunk;
+    double sums[MAX_CHUNKS];
+    const double *x, *y, *P; /* what each pass reads */
+    double *z, *w, *r, *V;   /* and writes */
+    double a;                /* a scalar of the pass */
+    int held;
+};
+
+static void vertex_chunks(void *context, int64_t c0, int64_t c1, int thread) {
+    (void)thread;
+    vertex_pass *p = context;
+    for (int64_t c = c0; c < c1; ++c) {
+        const int64_t begin = c * p->chunk, end = begin + p->chunk < p->f->n ? begin + p->chunk : p->f->n;
+        p->sums[c] = p->fn(p, (int32_t)begin, (int32_t)end);
+    }
+}
+
+/* Runs fn over every vertex; returns the sum of what its chunks return. */
+static double vertex_run(vertex_pass *p, vertex_fn fn) {
+    const int32_t n = p->f->n;
+    int64_t chunk = ((int64_t)n + MAX_CHUNKS - 1) / MAX_CHUNKS;
+    if (chunk < VERTEX_CHUNK) chunk = VERTEX_CHUNK;
+    p->fn = fn;
+    p->chunk = (int32_t)chunk;
+    const int64_t chunks = ((int64_t)n + chunk - 1) / chunk;
+    spia__parallel_for(p->f->blocks->threads, chunks, 1, vertex_chunks, p);
+    double sum = 0.0;
+    for (int64_t c = 0; c < chunks; ++c) sum += p->sums[c];
+    return sum;
+}
+
+static inline double stiffness(const fit_system *f, int32_t v) { return f->hold[v] + f->smooth[v] - 1.0; }
+
+/* w = C Lap x (with `held`, H Lap x): the umbrella Laplacian scaled by
+ * each vertex's stiffness (or hold). */
+static double laplacian_scaled(const vertex_pass *p, int32_t begin, int32_t end) {
+    const fit_system *f = p->f;
+    const double *x = p->x;
+    for (int32_t v = begin; v < end; ++v) {
         const int64_t a = f->nb_start[v], b = f->nb_start[v + 1];
-        double *out = y + 3 * (int64_t)v;
+        double *out = p->w + 3 * (int64_t)v;
         if (a == b) {
             out[0] = out[1] = out[2] = 0.0;
             continue;
@@ -24,13 +77,17 @@ static void laplacian(const fit_system *f, const double *x, double *y) {
         double m[3] = {0.0, 0.0, 0.0};
         for (int64_t k = a; k < b; ++k)
             for (int c = 0; c < 3; ++c) m[c] += x[3 * (int64_t)f->nb[k] + c];
-        for (int c = 0; c < 3; ++c) out[c] = x[3 * (int64_t)v + c] - m[c] / (double)(b - a);
+        const double s = p->held ? f->hold[v] : stiffness(f, v);
+        for (int c = 0; c < 3; ++c) out[c] = (x[3 * (int64_t)v + c] - m[c] / (double)(b - a)) * s;
     }
+    return 0.0;
 }
 
-/* z += scale * Lap^T y (the neighbour relation is symmetric). */
-static void laplacian_transpose_add(const fit_system *f, const double *y, double scale, double *z) {
-    for (int32_t v = 0; v < f->n; ++v) {
+/* z += a * Lap^T w (the neighbour relation is symmetric). */
+static double laplacian_transpose_add(const vertex_pass *p, int32_t begin, int32_t end) {
+    const fit_system *f = p->f;
+    const double *y = p->w;
+    for (int32_t v = begin; v < end; ++v) {
         const int64_t a = f->nb_start[v], b = f->nb_start[v + 1];
         if (a == b) continue;
         double acc[3] = {y[3 * (int64_t)v], y[3 * (int64_t)v + 1], y[3 * (int64_t)v + 2]};
@@ -39,21 +96,29 @@ static void laplacian_transpose_add(const fit_system *f, const double *y, double
             const double inv = 1.0 / (double)(f->nb_start[j + 1] - f->nb_start[j]);
             for (int c = 0; c < 3; ++c) acc[c] -= y[3 * (int64_t)j + c] * inv;
         }
-        for (int c = 0; c < 3; ++c) z[3 * (int64_t)v + c] += scale * acc[c];
+        for (int c = 0; c < 3; ++c) p->z[3 * (int64_t)v + c] += p->a * acc[c];
     }
+    return 0.0;
 }
-
-static inline double stiffness(const fit_system *f, int32_t v) { return f->hold[v] + f->smooth[v] - 1.0; }
 
 /* z += lambda Lap^T C Lap x (the operator's share), or with `held` the
  * right-hand side's lambda Lap^T H Lap x. */
 static void fairness_add(const fit_system *f, const double *x, int held, double *z) {
-    laplacian(f, x, f->tmp_n);
-    for (int32_t v = 0; v < f->n; ++v) {
-        const double k = held ? f->hold[v] : stiffness(f, v);
-        for (int c = 0; c < 3; ++c) f->tmp_n[3 * (int64_t)v + c] *= k;
-    }
-    laplacian_transpose_add(f, f->tmp_n, f->lambda, z);
+    vertex_pass p;
+    p.f = f, p.x = x, p.w = f->tmp_n, p.z = z, p.a = f->lambda, p.held = held;
+    vertex_run(&p, laplacian_scaled);
+    vertex_run(&p, laplacian_transpose_add);
+}
+
+/* z = z + damping x at free vertices, 0 at the others. */
+static double damp(const vertex_pass *p, int32_t begin, int32_t end) {
+    const fit_system *f = p->f;
+    for (int32_t v = begin; v < end; ++v)
+        for (int c = 0; c < 3; ++c) {
+            const int64_t i = 3 * (int64_t)v + c;
+            p->z[i] = f->free_vertex[v] ? p->z[i] + f->damping * p->x[i] : 0.0;
+        }
+    return 0.0;
 }
 
 /* y = A x, the normal-equation matrix: M^T B M x block by block, then the
@@ -64,11 +129,9 @@ static void system_apply(const fit_system *f, const double *x, double *y) {
     if (f->lambda > 0.0) {
         fairness_add(f, x, 0, y);
     }
-    for (int32_t v = 0; v < f->n; ++v)
-        for (int c = 0; c < 3; ++c) {
-            const int64_t i = 3 * (int64_t)v + c;
-            y[i] = f->free_vertex[v] ? y[i] + f->damping * x[i] : 0.0;
-        }
+    vertex_pass p;
+    p.f = f, p.x = x, p.z = y;
+    vertex_run(&p, damp);
 }
 
 /* Inverse of a symmetric 3x3 matrix (xx, xy, xz, yy, yz, zz), as 9 entries;
@@ -90,39 +153,26 @@ static void invert_sym3(const double a[6], double inv[9]) {
     inv[6] = c02 / det, inv[7] = c12 / det, inv[8] = c22 / det;
 }
 
-/* z = P r with the 3x3 blocks of P (9 per vertex); returns z . r. */
-static double precondition(int32_t n, const double *precond, const double *r, double *z) {
-    double rz = 0.0;
-    for (int32_t v = 0; v < n; ++v) {
-        const double *P = precond + 9 * (int64_t)v, *rv = r + 3 * (int64_t)v;
-        double *zv = z + 3 * (int64_t)v;
-        for (int c = 0; c < 3; ++c) zv[c] = P[3 * c] * rv[0] + P[3 * c + 1] * rv[1] + P[3 * c + 2] * rv[2];
-        rz += zv[0] * rv[0] + zv[1] * rv[1] + zv[2] * rv[2];
-    }
-    return rz;
+/* z_v = P_v r_v with the 3x3 block P_v (9 per vertex); returns z_v . r_v. */
+static inline double precondition_one(const double *P, const double *rv, double *zv) {
+    for (int c = 0; c < 3; ++c) zv[c] = P[3 * c] * rv[0] + P[3 * c + 1] * rv[1] + P[3 * c + 2] * rv[2];
+    return zv[0] * rv[0] + zv[1] * rv[1] + zv[2] * rv[2];
 }
 
-/* One round: conjugate gradients on A V = b from the current V, with targets
- * T (S * 3 floats).  `work` holds 5 * 3n doubles, `precond` 9n. */
-int spia__fit_least_squares_round(fit_system *f, const float *T, const double *V0, double *V, int iterations,
-                                  double *work, double *precond, fit_clock *clock) {
-    const int64_t N3 = 3 * (int64_t)f->n;
-    double *b = work, *r = work + N3, *z = work + 2 * N3, *p = work + 3 * N3, *Ap = work + 4 * N3;
-    /* b = M^T B T + lambda Lap^T H Lap V0 + damping V (the damping anchors the
-     * current iterate, so it does not bias the fit). */
-    memset(b, 0, sizeof(double) * (size_t)N3);
-    spia__fit_blocks_normal(f, NULL, T, b);
-    if (f->lambda > 0.0) {
-        fairness_add(f, V0, 1, b);
-    }
-    for (int64_t i = 0; i < N3; ++i) b[i] += f->damping * V[i];
+/* z += damping V (the right-hand side's anchor at the current iterate). */
+static double anchor(const vertex_pass *p, int32_t begin, int32_t end) {
+    const double damping = p->f->damping;
+    for (int64_t i = 3 * (int64_t)begin; i < 3 * (int64_t)end; ++i) p->z[i] += damping * p->V[i];
+    return 0.0;
+}
 
-    /* Block-Jacobi preconditioner: sum_s m_si^2 B_s + lambda (Lap^T Lap)_ii + damping. */
-    double *diag = f->tmp_diag;
-    memset(diag, 0, sizeof(double) * 6 * (size_t)f->n);
-    spia__fit_blocks_diagonal(f, diag);
-    for (int32_t v = 0; v < f->n; ++v) {
-        double *a = diag + 6 * (int64_t)v;
+/* The block-Jacobi preconditioner into w (9 per vertex): the inverse of
+ * sum_s m_si^2 B_s (tmp_diag, 6 per vertex) + lambda (Lap^T C Lap)_ii +
+ * damping, zero at vertices held in place. */
+static double preconditioner(const vertex_pass *p, int32_t begin, int32_t end) {
+    const fit_system *f = p->f;
+    for (int32_t v = begin; v < end; ++v) {
+        double *a = f->tmp_diag + 6 * (int64_t)v;
         const int64_t na = f->nb_start[v], nb = f->nb_start[v + 1];
         double lap = 0.0; /* (Lap^T C Lap)_vv */
         if (nb > na) {
@@ -136,31 +186,97 @@ int spia__fit_least_squares_round(fit_system *f, const float *T, const double *V
         const double d = f->lambda * lap + f->damping;
         a[0] += d, a[3] += d, a[5] += d;
         if (f->free_vertex[v])
-            invert_sym3(a, precond + 9 * (int64_t)v);
+            invert_sym3(a, p->w + 9 * (int64_t)v);
         else
-            memset(precond + 9 * (int64_t)v, 0, 9 * sizeof(double));
+            memset(p->w + 9 * (int64_t)v, 0, 9 * sizeof(double));
     }
+    return 0.0;
+}
+
+/* The first residual r = x - y (b - A V) at free vertices, z = P r;
+ * returns z . r. */
+static double residual(const vertex_pass *p, int32_t begin, int32_t end) {
+    const unsigned char *free_vertex = p->f->free_vertex;
+    double rz = 0.0;
+    for (int32_t v = begin; v < end; ++v) {
+        double *rv = p->r + 3 * (int64_t)v;
+        for (int c = 0; c < 3; ++c) {
+            const int64_t i = 3 * (int64_t)v + c;
+            rv[c] = free_vertex[v] ? p->x[i] - p->y[i] : 0.0;
+        }
+        rz += precondition_one(p->P + 9 * (int64_t)v, rv, p->z + 3 * (int64_t)v);
+    }
+    return rz;
+}
+
+/* x . y */
+static double dot(const vertex_pass *p, int32_t begin, int32_t end) {
+    double sum = 0.0;
+    for (int64_t i = 3 * (int64_t)begin; i < 3 * (int64_t)end; ++i) sum += p->x[i] * p->y[i];
+    return sum;
+}
+
+/* A step of a along x (y = A x): V += a x, r -= a y, z = P r; returns
+ * z . r. */
+static double step(const vertex_pass *p, int32_t begin, int32_t end) {
+    double rz = 0.0;
+    for (int32_t v = begin; v < end; ++v) {
+        double *rv = p->r + 3 * (int64_t)v;
+        for (int c = 0; c < 3; ++c) {
+            const int64_t i = 3 * (int64_t)v + c;
+            p->V[i] += p->a * p->x[i];
+            rv[c] -= p->a * p->y[i];
+        }
+        rz += precondition_one(p->P + 9 * (int64_t)v, rv, p->z + 3 * (int64_t)v);
+    }
+    return rz;
+}
+
+/* The next direction w = x + a w (x: z). */
+static double direction(const vertex_pass *p, int32_t begin, int32_t end) {
+    for (int64_t i = 3 * (int64_t)begin; i < 3 * (int64_t)end; ++i) p->w[i] = p->x[i] + p->a * p->w[i];
+    return 0.0;
+}
+
+/* One round: conjugate gradients on A V = b from the current V, with targets
+ * T (S * 3 floats).  `work` holds 5 * 3n doubles, `precond` 9n. */
+int spia__fit_least_squares_round(fit_system *f, const float *T, const double *V0, double *V, int iterations,
+                                  double *work, double *precond, fit_clock *clock) {
+    const int64_t N3 = 3 * (int64_t)f->n;
+    double *b = work, *r = work + N3, *z = work + 2 * N3, *p = work + 3 * N3, *Ap = work + 4 * N3;
+    vertex_pass pass;
+    pass.f = f;
+    /* b = M^T B T + lambda Lap^T H Lap V0 + damping V (the damping anchors the
+     * current iterate, so it does not bias the fit). */
+    memset(b, 0, sizeof(double) * (size_t)N3);
+    spia__fit_blocks_normal(f, NULL, T, b);
+    if (f->lambda > 0.0) {
+        fairness_add(f, V0, 1, b);
+    }
+    pass.z = b, pass.V = V;
+    vertex_run(&pass, anchor);
+
+    memset(f->tmp_diag, 0, sizeof(double) * 6 * (size_t)f->n);
+    spia__fit_blocks_diagonal(f, f->tmp_diag);
+    pass.w = precond;
+    vertex_run(&pass, preconditioner);
 
     system_apply(f, V, Ap);
-    for (int64_t i = 0; i < N3; ++i) r[i] = f->free_vertex[i / 3] ? b[i] - Ap[i] : 0.0;
-    double rz = precondition(f->n, precond, r, z);
+    pass.x = b, pass.y = Ap, pass.r = r, pass.z = z, pass.P = precond;
+    double rz = vertex_run(&pass, residual);
     memcpy(p, z, sizeof(double) * (size_t)N3);
     const double rz0 = rz;
     int it = 0;
     for (; it < iterations && rz > CG_TOLERANCE * CG_TOLERANCE * rz0 && rz > 0.0 && !spia__fit_clock_tick(clock); ++it) {
         system_apply(f, p, Ap);
-        double pAp = 0.0;
-        for (int64_t i = 0; i < N3; ++i) pAp += p[i] * Ap[i];
+        pass.x = p, pass.y = Ap;
+        const double pAp = vertex_run(&pass, dot);
         if (!(pAp > 0.0)) break;
-        const double alpha = rz / pAp;
-        for (int64_t i = 0; i < N3; ++i) {
-            V[i] += alpha * p[i];
-            r[i] -= alpha * Ap[i];
-        }
-        const double rz_new = precondition(f->n, precond, r, z);
-        const double beta = rz_new / rz;
+        pass.a = rz / pAp, pass.V = V, pass.r = r, pass.z = z, pass.P = precond;
+        const double rz_new = vertex_run(&pass, step);
+        pass.a = rz_new / rz, pass.x = z, pass.w = p;
         rz = rz_new;
-        for (int64_t i = 0; i < N3; ++i) p[i] = z[i] + beta * p[i];
+        vertex_run(&pass, direction);
     }
     return it;
 }

@@ -358,6 +358,25 @@ def test_fit_is_independent_of_the_thread_count(native):
             assert np.array_equal(other_rep.scan_distances.view(np.uint32), rep.scan_distances.view(np.uint32))
 
 
+def test_a_large_fit_is_independent_of_the_thread_count(native):
+    """A cage of more vertices than one chunk of the solver's passes over
+    the vertices (their sums are added chunk by chunk), with the scan's
+    pull: 1, 2 and 3 threads give the same cage to the bit."""
+    p, t = uv_sphere(240, 120)
+    scan = native.Scan(native.Mesh.from_faces(p, t))
+    cp, cf = quad_sphere(64)
+    bumps = 1.0 + 0.02 * np.random.default_rng(1).standard_normal((len(cp), 1))
+    cage = native.Mesh.from_faces((cp * bumps).astype(np.float32), cf)
+    assert cage.vertex_count > 16384  # fit_system.c's VERTEX_CHUNK
+    fits = [native.fit(cage, scan, threads=threads, samples_per_edge=2, max_rounds=2, solver_iterations=4,
+                       scan_pull=True) for threads in (1, 2, 3)]
+    out, rep = fits[0]
+    assert rep.rounds == 2 and np.abs(out - cage.positions).max() > 1e-3
+    for other, other_rep in fits[1:]:
+        assert np.array_equal(out.view(np.uint32), other.view(np.uint32))
+        assert np.array_equal(other_rep.history, rep.history) and other_rep.after == rep.after
+
+
 def test_bad_input(native, sphere_scan):
     cp, cf = quad_sphere(4)
     cage = native.Mesh.from_faces(cp, cf)
