@@ -509,7 +509,8 @@ static spia_result surface_system(fit_run *u, int guard, fit_system *f) {
     int64_t counted = S - u->report->before.ignored;
     int32_t free_count = 0;
     for (int32_t v = 0; v < n; ++v) free_count += b->free_vertex[v];
-    f->blocks = &b->blocks, f->n = n, f->S = S, f->normals = b->N, f->dist = b->d, f->weight = b->wts;
+    f->blocks = &b->blocks, f->threads = u->opt.threads, f->n = n, f->S = S;
+    f->normals = b->N, f->dist = b->d, f->weight = b->wts;
     f->on_boundary = b->on_boundary, f->cutoff_abs = u->cutoff_abs;
     f->alpha = u->fo.point_weight;
     f->beta = u->fo.slide_weight;

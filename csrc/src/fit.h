@@ -66,6 +66,7 @@ typedef struct fold_pair {
 
 typedef struct fit_system {
     const sample_blocks *blocks; /* the sample stencils */
+    int threads;            /* of the passes over the vertices */
     int32_t n;              /* cage vertices */
     int64_t S;              /* samples */
     const float *normals;   /* S * 3 */
