@@ -296,7 +296,8 @@ typedef struct spia_options {
      * [0.5], unless face_shape_parameters (face_count floats) is given. */
     double shape_parameter;
     const float *face_shape_parameters;
-    /* Threads for building stencils and for the solvers' sparse products:
+    /* Threads for building stencils, the solvers' sparse products and the
+     * fits' closest points and least squares:
      * 0 = one per processor the system reports, 1 = the calling thread
      * only.  Results do not depend on it: every row and every sum is
      * computed in the same order whatever the count. [0] */

@@ -14,15 +14,12 @@
  * better (for the same time) than looser tolerances with more rounds. */
 #define CG_TOLERANCE 1e-10
 
-/* The per-vertex passes run over the vertices in chunks of a size that
- * depends on the vertex count only (at least VERTEX_CHUNK, at most
- * MAX_CHUNKS of them), on the fit's threads; a sum over the vertices adds
- * each chunk's own sum in chunk order, so the results do not depend on
- * the threads either.  On one thread these passes took about 4 s of the
- * 50k-vertex dragon cage's detail levels (profiled; 3.2M vertices at the
- * finest), on two the levels took 48 s instead of 51.5. */
+/* The per-vertex passes run over the vertices in chunks of VERTEX_CHUNK or
+ * more on the fit's threads (spia__parallel_sum: a sum over the vertices is
+ * the same whatever the threads).  On one thread these passes took about
+ * 4 s of the 50k-vertex dragon cage's detail levels (profiled; 3.2M
+ * vertices at the finest); on two the levels took 48 s instead of 51.5. */
 #define VERTEX_CHUNK 16384
-#define MAX_CHUNKS 1024
 
 typedef struct vertex_pass vertex_pass;
 typedef double (*vertex_fn)(const vertex_pass *p, int32_t begin, int32_t end);
@@ -30,35 +27,21 @@ typedef double (*vertex_fn)(const vertex_pass *p, int32_t begin, int32_t end);
 struct vertex_pass {
     const fit_system *f;
     vertex_fn fn;
-    int32_t chunk;
-    double sums[MAX_CHUNKS];
     const double *x, *y, *P; /* what each pass reads */
     double *z, *w, *r, *V;   /* and writes */
     double a;                /* a scalar of the pass */
     int held;
 };
 
-static void vertex_chunks(void *context, int64_t c0, int64_t c1, int thread) {
-    (void)thread;
-    vertex_pass *p = context;
-    for (int64_t c = c0; c < c1; ++c) {
-        const int64_t begin = c * p->chunk, end = begin + p->chunk < p->f->n ? begin + p->chunk : p->f->n;
-        p->sums[c] = p->fn(p, (int32_t)begin, (int32_t)end);
-    }
+static double vertex_chunk(void *context, int64_t begin, int64_t end) {
+    const vertex_pass *p = context;
+    return p->fn(p, (int32_t)begin, (int32_t)end);
 }
 
-/* Runs fn over every vertex; returns the sum of what its chunks return. */
+/* Runs fn over every vertex; returns the sum of what it returns. */
 static double vertex_run(vertex_pass *p, vertex_fn fn) {
-    const int32_t n = p->f->n;
-    int64_t chunk = ((int64_t)n + MAX_CHUNKS - 1) / MAX_CHUNKS;
-    if (chunk < VERTEX_CHUNK) chunk = VERTEX_CHUNK;
     p->fn = fn;
-    p->chunk = (int32_t)chunk;
-    const int64_t chunks = ((int64_t)n + chunk - 1) / chunk;
-    spia__parallel_for(p->f->threads, chunks, 1, vertex_chunks, p);
-    double sum = 0.0;
-    for (int64_t c = 0; c < chunks; ++c) sum += p->sums[c];
-    return sum;
+    return spia__parallel_sum(p->f->threads, p->f->n, VERTEX_CHUNK, vertex_chunk, p);
 }
 
 static inline double stiffness(const fit_system *f, int32_t v) { return f->hold[v] + f->smooth[v] - 1.0; }

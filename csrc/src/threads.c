@@ -128,6 +128,37 @@ void spia__parallel_for(int threads, int64_t count, int64_t grain, spia__range_f
     for (int t = 0; t < started; ++t) thread_join(handles[t]);
 }
 
+typedef struct sum_loop {
+    spia__sum_fn fn;
+    void *context;
+    int64_t count, chunk;
+    double sums[SPIA__SUM_CHUNKS];
+} sum_loop;
+
+static void sum_chunks(void *context, int64_t c0, int64_t c1, int thread) {
+    (void)thread;
+    sum_loop *s = (sum_loop *)context;
+    for (int64_t c = c0; c < c1; ++c) {
+        const int64_t begin = c * s->chunk, end = s->count - begin < s->chunk ? s->count : begin + s->chunk;
+        s->sums[c] = s->fn(s->context, begin, end);
+    }
+}
+
+double spia__parallel_sum(int threads, int64_t count, int64_t min_chunk, spia__sum_fn fn, void *context) {
+    if (count <= 0) return 0.0;
+    sum_loop s;
+    s.fn = fn;
+    s.context = context;
+    s.count = count;
+    s.chunk = (count + SPIA__SUM_CHUNKS - 1) / SPIA__SUM_CHUNKS;
+    if (s.chunk < min_chunk) s.chunk = min_chunk;
+    const int64_t chunks = (count + s.chunk - 1) / s.chunk;
+    spia__parallel_for(threads, chunks, 1, sum_chunks, &s);
+    double sum = 0.0;
+    for (int64_t c = 0; c < chunks; ++c) sum += s.sums[c];
+    return sum;
+}
+
 #if defined(_MSC_VER) && !defined(__clang__)
 void spia__counter_set(spia__counter *c, int64_t value) { InterlockedExchange64(&c->value, (long long)value); }
 int64_t spia__counter_get(spia__counter *c) { return (int64_t)InterlockedCompareExchange64(&c->value, 0, 0); }

@@ -28,6 +28,16 @@ typedef void (*spia__range_fn)(void *context, int64_t begin, int64_t end, int th
  * the thread count. */
 void spia__parallel_for(int threads, int64_t count, int64_t grain, spia__range_fn fn, void *context);
 
+/* Work on the items [begin, end) that returns a share of a sum. */
+typedef double (*spia__sum_fn)(void *context, int64_t begin, int64_t end);
+
+/* Calls fn over [0, count) in chunks whose size depends on count only (at
+ * least min_chunk items, at most SPIA__SUM_CHUNKS chunks), on up to
+ * `threads` threads, and returns the sum of what the chunks return, added
+ * in chunk order: the same to the bit whatever the threads. */
+#define SPIA__SUM_CHUNKS 1024
+double spia__parallel_sum(int threads, int64_t count, int64_t min_chunk, spia__sum_fn fn, void *context);
+
 /* The processors this process may run on (at least 1). */
 int spia__processor_count(void);
 
