@@ -400,3 +400,51 @@ def test_detail_memory_estimate_bounds_the_peak(native):
     grown, need, faces, made = (int(x) for x in out.split())
     assert faces == made == 2803 * 4 ** 3
     assert grown < need < 2.0 * grown, (grown, need)
+
+
+def test_flat_positions_are_the_least_squares_of_the_limit_grid(native):
+    """The flat positions of a quad mesh are scipy's solve of the same
+    least squares (each face's bilinear quad against its 3 x 3 grid of
+    limit points, the corners weighted 1/16) over the limit points of the
+    mesh subdivided once, which keeps the cage's vertices (its limit
+    points are the grid's corners), numbers face f's point n + f and puts
+    each face's children at 4f to 4f + 3, each from its corner: corner,
+    edge point towards the next corner, face point, edge point from the
+    one before.  The same to the bit on 1, 2 and 3 threads."""
+    import scipy.sparse
+    import scipy.sparse.linalg
+    positions, quads = cube_sphere(24)
+    mesh = _mesh(native, positions * np.array([1.0, 0.8, 1.3]), quads)
+    n, faces = mesh.vertex_count, mesh.face_vertices.reshape(-1, 4)
+    sub = native.subdivide(mesh, 1)
+    grid = native.limit_stencils(sub).apply(sub.positions).astype(np.float64)
+    children = sub.face_vertices.reshape(len(faces), 4, 4)
+    # Each child turned to start at its corner, the one vertex of the cage's.
+    first = np.argmax(children < n, axis=2)
+    children = np.take_along_axis(children, (first[:, :, None] + np.arange(4)) % 4, axis=2)
+    order = np.argsort(np.argsort(faces, axis=1), axis=1)  # each child where its corner is in the face
+    children = np.take_along_axis(children[np.arange(len(faces))[:, None], np.argsort(children[:, :, 0], axis=1)],
+                                  order[:, :, None], axis=1)
+    assert (children[:, :, 0] == faces).all() and (children[:, :, 2] == n + np.arange(len(faces))[:, None]).all()
+    edge_next = children[:, :, 1]  # the point on the edge from corner c to corner c + 1
+    at = {(0, 0): faces[:, 0], (2, 0): faces[:, 1], (2, 2): faces[:, 2], (0, 2): faces[:, 3],
+          (1, 1): n + np.arange(len(faces)), (1, 0): edge_next[:, 0], (2, 1): edge_next[:, 1],
+          (1, 2): edge_next[:, 2], (0, 1): edge_next[:, 3]}
+    rows, cols, values, targets = [], [], [], []
+    for r, ((i, j), points) in enumerate(sorted(at.items())):
+        s, t = i / 2.0, j / 2.0
+        root = 1.0 if i == 1 or j == 1 else 0.25  # the square root of the corners' 1/16
+        for c, w in enumerate(((1 - s) * (1 - t), s * (1 - t), s * t, (1 - s) * t)):
+            rows.append(r * len(faces) + np.arange(len(faces)))
+            cols.append(faces[:, c])
+            values.append(np.full(len(faces), root * w))
+        targets.append(root * grid[points])
+    A = scipy.sparse.csr_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(cols))),
+                                shape=(9 * len(faces), n))
+    theirs = scipy.sparse.linalg.spsolve((A.T @ A).tocsc(), A.T @ np.concatenate(targets))
+    ours = [native.flat_positions(mesh, threads=threads) for threads in (1, 2, 3)]
+    extent = np.ptp(positions, axis=0).max()
+    assert np.abs(ours[0] - theirs).max() < 1e-6 * extent  # measured 2.3e-7
+    assert np.abs(ours[0] - grid[:n]).max() > 1e-4 * extent  # not the limit points
+    for other in ours[1:]:
+        assert np.array_equal(other.view(np.uint32), ours[0].view(np.uint32))
