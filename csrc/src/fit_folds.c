@@ -33,11 +33,7 @@ static void grid_normal(const double *X, int64_t s, int32_t k, double n[3]) {
     n[0] = du[1] * dv[2] - du[2] * dv[1], n[1] = du[2] * dv[0] - du[0] * dv[2], n[2] = du[0] * dv[1] - du[1] * dv[0];
 }
 
-/* Per sample, the cosine between its limit normal and the scan's normal at
- * its closest point.  The normal is the cross product of the differences
- * to the neighbours along the ptex face's sample grid (grid_differences);
- * 0 where it or the scan's normal vanishes, and everywhere when the grid is
- * a single sample. */
+/* spia__fit_normal_agreement's work on the samples [begin, end). */
 typedef struct agreement_pass {
     const double *X;
     const float *N;
@@ -58,6 +54,11 @@ static void agreement_range(void *context, int64_t begin, int64_t end, int threa
     }
 }
 
+/* Per sample, the cosine between its limit normal and the scan's normal at
+ * its closest point.  The normal is the cross product of the differences
+ * to the neighbours along the ptex face's sample grid (grid_differences);
+ * 0 where it or the scan's normal vanishes, and everywhere when the grid is
+ * a single sample.  On `threads` threads, each sample on its own. */
 void spia__fit_normal_agreement(const double *X, const float *N, int64_t S, int32_t k, float *dots, int threads) {
     if (k < 2) {
         memset(dots, 0, sizeof(float) * (size_t)S);
