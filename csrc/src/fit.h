@@ -207,6 +207,10 @@ static inline spia_result spia__fit_cancelled(fit_run *u) {
 /* ---- fit_blocks.c ------------------------------------------------------------- */
 
 void spia__fit_blocks_free(sample_blocks *B);
+#define FIT_BLOCK_SETS 2
+spia_result spia__fit_blocks_build_sets(const spia_mesh *cage, const spia_adjacency *adj, const spia_options *opt,
+                                        int count, const int32_t *per_edge, const int *corners, sample_blocks **B,
+                                        fit_clock *clock, spia_status *status);
 spia_result spia__fit_blocks_build(const spia_mesh *cage, const spia_adjacency *adj, const spia_options *opt,
                                    int32_t per_edge, int corners, sample_blocks *B, fit_clock *clock,
                                    spia_status *status);
@@ -254,6 +258,11 @@ int spia__fit_barrier_pairs(const double *X, const float *N, const float *d, con
 
 /* ---- fit_scan_side.c ---------------------------------------------------------- */
 
+/* Points along each edge of a ptex face of the grid the scan's vertices are
+ * measured against, for samples_per_edge per_edge: its blocks' side. */
+int32_t spia__fit_scan_grid_side(const spia_mesh *cage, int32_t per_edge);
+/* The scan side's grid and buffers; the grid's blocks are made here unless
+ * b->grid has them already (spia__fit_scan_grid_side's side). */
 spia_result spia__fit_scan_side_prepare(const spia_mesh *cage, const spia_adjacency *adj, const spia_options *opt,
                                         int32_t per_edge, const spia_scan *scan, fit_buffers *b, fit_clock *clock,
                                         spia_status *status);

@@ -66,14 +66,25 @@ typedef struct block_sink {
 
 static inline int64_t block_width(const sample_blocks *B, int64_t g) { return B->start[g + 1] - B->start[g]; }
 
+/* FNV-1a in four lanes (weight i in lane i mod 4), which do not wait for
+ * one another: a block of the 3 x 3 grid has 144 weights, and a level of
+ * 3.2M faces hashes one a face. */
 static uint64_t weights_hash(const float *w, int64_t count) {
-    uint64_t h = 1469598103934665603ull ^ (uint64_t)count;
-    for (int64_t i = 0; i < count; ++i) {
+    uint64_t h[4] = {1469598103934665603ull ^ (uint64_t)count, 1469598103934665603ull, 1469598103934665603ull,
+                     1469598103934665603ull};
+    int64_t i = 0;
+    for (; i + 4 <= count; i += 4) {
+        uint32_t bits[4];
+        memcpy(bits, w + i, sizeof bits);
+        for (int k = 0; k < 4; ++k) h[k] = (h[k] ^ bits[k]) * 1099511628211ull;
+    }
+    for (; i < count; ++i) {
         uint32_t bits;
         memcpy(&bits, w + i, sizeof bits);
-        h = (h ^ bits) * 1099511628211ull;
+        h[0] = (h[0] ^ bits) * 1099511628211ull;
     }
-    return h ^ (h >> 29);
+    const uint64_t m = ((h[0] * 31 + h[1]) * 31 + h[2]) * 31 + h[3];
+    return m ^ (m >> 29);
 }
 
 /* Gives block g (its weights at the end of w) the weights of an earlier
@@ -160,37 +171,55 @@ static int block_sink_add(void *user, int64_t ptex, int32_t width, const int32_t
     return share_weights(k, ptex, per * kept);
 }
 
+/* Sample blocks of the cage for `count` sets of points at once (one
+ * OpenSubdiv topology and one surface a face for all): set i has
+ * per_edge[i]^2 points per ptex face, at the centres of a grid's cells, or
+ * with corners[i] a grid of per_edge[i] points on each edge, from corner
+ * to corner. */
+spia_result spia__fit_blocks_build_sets(const spia_mesh *cage, const spia_adjacency *adj, const spia_options *opt,
+                                        int count, const int32_t *per_edge, const int *corners, sample_blocks **B,
+                                        fit_clock *clock, spia_status *status) {
+    block_sink sink[FIT_BLOCK_SETS];
+    spia__block_points points[FIT_BLOCK_SETS];
+    if (count < 1 || count > FIT_BLOCK_SETS)
+        return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "%d sets of sample stencils", count);
+    memset(sink, 0, sizeof sink);
+    for (int i = 0; i < count; ++i) memset(B[i], 0, sizeof *B[i]);
+    spia_result r = SPIA_OK;
+    for (int i = 0; i < count && r == SPIA_OK; ++i) {
+        sample_blocks *b = B[i];
+        b->per = per_edge[i] * per_edge[i];
+        b->columns = cage->vertex_count;
+        b->threads = opt->threads > BLOCK_PIECES ? BLOCK_PIECES : opt->threads < 1 ? 1 : opt->threads;
+        b->avx = !(opt->solve_flags & SPIA_SOLVE_NO_AVX) && spia__have_avx();
+        b->groups = spia_surface_sample_count(cage, per_edge[i]) / b->per;
+        b->start = calloc((size_t)b->groups + 1, sizeof(int64_t));
+        b->w_at = malloc(sizeof(int64_t) * (size_t)(b->groups > 0 ? b->groups : 1));
+        b->u = malloc(sizeof(double) * 6 * BLOCK_PIECES * (size_t)b->per);
+        b->extra = malloc(sizeof(double) * 6 * (BLOCK_PIECES - 1) * (size_t)(b->columns > 0 ? b->columns : 1));
+        if (!b->start || !b->w_at || !b->u || !b->extra)
+            r = spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the sample stencils");
+        sink[i] = (block_sink){b, 0, 0, NULL, 0, NULL, 0, 0, 0, clock};
+        points[i] = (spia__block_points){per_edge[i], corners[i], block_sink_add, &sink[i]};
+    }
+    if (r == SPIA_OK) r = spia__osd_surface_blocks(cage, adj, opt, points, count, status);
+    for (int i = 0; i < count; ++i)
+        if (r == SPIA_OK && sink[i].next != B[i]->groups)
+            r = spia__fail(status, SPIA_ERROR_INTERNAL, -1, "the sample stencils do not match the cage's faces");
+    for (int i = 0; i < count; ++i) {
+        free(sink[i].kept), free(sink[i].table);
+        if (r != SPIA_OK) spia__fit_blocks_free(B[i]);
+    }
+    return r;
+}
+
 /* The sample blocks of the cage (per ptex face, per_edge^2 samples; with
  * `corners`, a grid with per_edge points on each edge, from corner to
  * corner). */
 spia_result spia__fit_blocks_build(const spia_mesh *cage, const spia_adjacency *adj, const spia_options *opt,
                                    int32_t per_edge, int corners, sample_blocks *B, fit_clock *clock,
                                    spia_status *status) {
-    memset(B, 0, sizeof *B);
-    B->per = per_edge * per_edge;
-    B->columns = cage->vertex_count;
-    B->threads = opt->threads > BLOCK_PIECES ? BLOCK_PIECES : opt->threads < 1 ? 1 : opt->threads;
-    B->avx = !(opt->solve_flags & SPIA_SOLVE_NO_AVX) && spia__have_avx();
-    B->groups = spia_surface_sample_count(cage, per_edge) / B->per;
-    B->start = calloc((size_t)B->groups + 1, sizeof(int64_t));
-    B->w_at = malloc(sizeof(int64_t) * (size_t)(B->groups > 0 ? B->groups : 1));
-    B->u = malloc(sizeof(double) * 6 * BLOCK_PIECES * (size_t)B->per);
-    B->extra = malloc(sizeof(double) * 6 * (BLOCK_PIECES - 1) * (size_t)(B->columns > 0 ? B->columns : 1));
-    if (!B->start || !B->w_at || !B->u || !B->extra) {
-        spia__fit_blocks_free(B);
-        return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the sample stencils");
-    }
-    block_sink sink = {B, 0, 0, NULL, 0, NULL, 0, 0, 0, clock};
-    spia_result r = spia__osd_surface_blocks(cage, adj, opt, per_edge, corners, block_sink_add, &sink, status);
-    free(sink.kept);
-    free(sink.table);
-    if (r == SPIA_OK && sink.next != B->groups)
-        r = spia__fail(status, SPIA_ERROR_INTERNAL, -1, "the sample stencils do not match the cage's faces");
-    if (r != SPIA_OK) {
-        spia__fit_blocks_free(B);
-        return r;
-    }
-    return SPIA_OK;
+    return spia__fit_blocks_build_sets(cage, adj, opt, 1, &per_edge, &corners, &B, clock, status);
 }
 
 /* The block products four samples at a time, in GCC's and Clang's vector

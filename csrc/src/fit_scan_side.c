@@ -70,22 +70,36 @@ static spia_result scan_points_prepare(const spia_scan *scan, fit_buffers *b) {
  * face, and each scan vertex then takes its distance to the grid's quads
  * of the face it found (coarse_range). */
 #define SCAN_GRID_FACES (2 << 20)
-spia_result spia__fit_scan_side_prepare(const spia_mesh *cage, const spia_adjacency *adj, const spia_options *opt,
-                                        int32_t per_edge, const spia_scan *scan, fit_buffers *b, fit_clock *clock,
-                                        spia_status *status) {
+static int32_t grid_levels(int64_t ptex, int32_t per_edge) {
     int32_t levels = 1;
     while ((1 << levels) < per_edge) ++levels;
     ++levels;
-    const int64_t ptex = spia_surface_sample_count(cage, 1);
     while (levels > 1 && (ptex << (2 * levels)) > SCAN_GRID_FACES) --levels;
+    return levels;
+}
+
+int32_t spia__fit_scan_grid_side(const spia_mesh *cage, int32_t per_edge) {
+    return (1 << grid_levels(spia_surface_sample_count(cage, 1), per_edge)) + 1;
+}
+
+spia_result spia__fit_scan_side_prepare(const spia_mesh *cage, const spia_adjacency *adj, const spia_options *opt,
+                                        int32_t per_edge, const spia_scan *scan, fit_buffers *b, fit_clock *clock,
+                                        spia_status *status) {
+    const int64_t ptex = spia_surface_sample_count(cage, 1);
+    const int32_t levels = grid_levels(ptex, per_edge);
     const int32_t side = (1 << levels) + 1; /* points along a ptex face's edge */
     if (ptex * side * side > INT32_MAX)
         return spia__fail(status, SPIA_ERROR_INVALID_ARGUMENT, -1,
                           "the cage has too many faces (%lld ptex faces) to measure the scan's distances to its "
                           "surface; leave that measure out (SPIA_FIT_NO_SCAN_DISTANCES)",
                           (long long)ptex);
-    spia_result r = spia__fit_blocks_build(cage, adj, opt, side, 1, &b->grid, clock, status);
-    if (r != SPIA_OK) return r == SPIA_ERROR_CANCELLED ? scan_side_cancelled(status) : r;
+    /* The grid's blocks, unless the fit made them with its samples'. */
+    if (!b->grid.start) {
+        const spia_result r = spia__fit_blocks_build(cage, adj, opt, side, 1, &b->grid, clock, status);
+        if (r != SPIA_OK) return r == SPIA_ERROR_CANCELLED ? scan_side_cancelled(status) : r;
+    }
+    if (b->grid.per != side * side)
+        return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "the surface's grid does not match the cage's faces");
     if (spia__fit_clock_tick(clock)) return scan_side_cancelled(status);
     const int32_t gv = (int32_t)(ptex * side * side);
     b->coarse = (ptex << (2 * levels)) > SCAN_GRID_FACES;

@@ -387,18 +387,27 @@ static inline int32_t spia__ptex_of_face(int32_t size) { return size == 4 ? 1 : 
 /* Catmull-Clark limit stencils at samples inside faces (osd_samples.cpp). */
 spia_result spia__osd_surface_stencils(const spia_mesh *mesh, const spia_adjacency *adj, const spia_options *options,
                                        int32_t samples_per_edge, spia_stencils **out, spia_status *status);
-/* The same rows face by face: for each ptex face in order, emit gets its
- * columns (mesh numbering, each once) and its samples' weights over them,
- * samples_per_edge^2 rows of `width` (sample j's at weights + j * width).
- * With `corners`, the points are a grid over the whole ptex face instead,
- * samples_per_edge (at least 2) on each edge from 0 to 1, corners included;
- * a nonzero return stops it: SPIA_ERROR_CANCELLED or SPIA_ERROR_INTERNAL
+/* The same rows face by face, for one set of points or several at once
+ * (one topology and one surface a face for all): for each ptex face in
+ * order, each set's emit gets its columns (mesh numbering, each once) and
+ * its points' weights over them, per_edge^2 rows of `width` (point j's at
+ * weights + j * width).  A set's points are at the centres of a grid of
+ * per_edge^2 cells over the ptex face, or with `corners` a grid of
+ * per_edge (at least 2) points on each edge from 0 to 1, corners included.
+ * The surfaces are made on options->threads; emit is called on the calling
+ * thread, each set's in ptex order, the same whatever the threads.  A
+ * nonzero return stops it: SPIA_ERROR_CANCELLED or SPIA_ERROR_INTERNAL
  * with that result, anything else with SPIA_ERROR_OUT_OF_MEMORY. */
 typedef int (*spia__sample_block_fn)(void *user, int64_t ptex, int32_t width, const int32_t *columns,
                                      const double *weights);
+typedef struct spia__block_points {
+    int32_t per_edge;
+    int32_t corners;
+    spia__sample_block_fn emit;
+    void *user;
+} spia__block_points;
 spia_result spia__osd_surface_blocks(const spia_mesh *mesh, const spia_adjacency *adj, const spia_options *options,
-                                     int32_t samples_per_edge, int32_t corners, spia__sample_block_fn emit,
-                                     void *user, spia_status *status);
+                                     const spia__block_points *sets, int32_t set_count, spia_status *status);
 
 /* The scan's own copy of its positions (scan.c), in its own order, with
  * (original, when not NULL) each vertex's index in the mesh it was made

@@ -49,11 +49,11 @@ struct SampleGrid {
 }  // namespace
 
 // OpenSubdiv's adaptive patches on `refiner` (refined here) for the faces
-// marked in `wanted`: per ptex face of each, its block, columns in the
-// refiner's numbering.
-static spia_result far_blocks(Far::TopologyRefiner &refiner, const spia_options *opt, const SampleGrid &grid,
-                              const std::vector<char> &wanted, std::vector<std::vector<FaceBlocks>> &out,
-                              spia_status *status) {
+// marked in `wanted`: per grid, per face of each, per ptex face its block,
+// columns in the refiner's numbering.
+static spia_result far_blocks(Far::TopologyRefiner &refiner, const spia_options *opt,
+                              const std::vector<SampleGrid> &grids, const std::vector<char> &wanted,
+                              std::vector<std::vector<std::vector<FaceBlocks>>> &out, spia_status *status) {
     Far::TopologyRefiner::AdaptiveOptions adaptive(opt->quality);
     adaptive.useInfSharpPatch = true;
     adaptive.considerFVarChannels = false;
@@ -84,59 +84,64 @@ static spia_result far_blocks(Far::TopologyRefiner &refiner, const spia_options 
         refined.reset();
     }
     Far::PatchMap map(*patches);
-    const int per_face = grid.per_face;
     const Far::TopologyLevel &base = refiner.GetLevel(0);
     const int32_t n = base.GetNumVertices(), faces = base.GetNumFaces();
-    std::vector<Far::ConstIndexArray> cvs((size_t)per_face);
-    std::vector<double> basis((size_t)per_face * 20);
+    std::vector<Far::ConstIndexArray> cvs;
+    std::vector<double> basis;
     std::vector<int32_t> stamp((size_t)n, -1), slot((size_t)n, 0);
-    out.assign((size_t)faces, std::vector<FaceBlocks>());
+    out.assign(grids.size(), std::vector<std::vector<FaceBlocks>>((size_t)faces));
     int32_t stamp_id = 0;
-    for (int32_t face = 0; face < faces; ++face) {
-        if (!wanted[(size_t)face]) continue;
-        const int size = base.GetFaceVertices(face).size();
-        const int subs = size == 4 ? 1 : size;
-        out[(size_t)face].resize((size_t)subs);
-        for (int sub = 0; sub < subs; ++sub, ++stamp_id) {
-            const int f = ptex.GetFaceId(face) + sub;
-            FaceBlocks &fb = out[(size_t)face][(size_t)sub];
-            for (int j = 0; j < per_face; ++j) {
-                const Far::PatchMap::Handle *handle = map.FindPatch(f, grid.s[(size_t)j], grid.t[(size_t)j]);
-                if (!handle)
-                    return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "OpenSubdiv has no patch under a sample");
-                cvs[(size_t)j] = patches->GetPatchVertices(*handle);
-                if (cvs[(size_t)j].size() > 20)
-                    return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "a patch of %d points", cvs[(size_t)j].size());
-                patches->EvaluateBasis<double>(*handle, grid.s[(size_t)j], grid.t[(size_t)j], &basis[(size_t)j * 20]);
-                for (int k = 0; k < cvs[(size_t)j].size(); ++k) {
-                    const Far::StencilReal<double> point = points->GetStencil(cvs[(size_t)j][k]);
-                    const Far::Index *idx = point.GetVertexIndices();
-                    for (int e = 0; e < point.GetSize(); ++e) {
-                        const Far::Index c = idx[e];
-                        if (c < 0 || c >= n)
-                            return spia__fail(status, SPIA_ERROR_INTERNAL, -1,
-                                              "OpenSubdiv sample stencil refers to point %d, not a control vertex",
-                                              (int)c);
-                        if (stamp[(size_t)c] != stamp_id) {
-                            stamp[(size_t)c] = stamp_id;
-                            slot[(size_t)c] = (int32_t)fb.columns.size();
-                            fb.columns.push_back(c);
+    for (size_t g = 0; g < grids.size(); ++g) {
+        const SampleGrid &grid = grids[g];
+        const int per_face = grid.per_face;
+        cvs.resize((size_t)per_face);
+        basis.resize((size_t)per_face * 20);
+        for (int32_t face = 0; face < faces; ++face) {
+            if (!wanted[(size_t)face]) continue;
+            const int size = base.GetFaceVertices(face).size();
+            const int subs = size == 4 ? 1 : size;
+            out[g][(size_t)face].resize((size_t)subs);
+            for (int sub = 0; sub < subs; ++sub, ++stamp_id) {
+                const int f = ptex.GetFaceId(face) + sub;
+                FaceBlocks &fb = out[g][(size_t)face][(size_t)sub];
+                for (int j = 0; j < per_face; ++j) {
+                    const Far::PatchMap::Handle *handle = map.FindPatch(f, grid.s[(size_t)j], grid.t[(size_t)j]);
+                    if (!handle)
+                        return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "OpenSubdiv has no patch under a sample");
+                    cvs[(size_t)j] = patches->GetPatchVertices(*handle);
+                    if (cvs[(size_t)j].size() > 20)
+                        return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "a patch of %d points", cvs[(size_t)j].size());
+                    patches->EvaluateBasis<double>(*handle, grid.s[(size_t)j], grid.t[(size_t)j], &basis[(size_t)j * 20]);
+                    for (int k = 0; k < cvs[(size_t)j].size(); ++k) {
+                        const Far::StencilReal<double> point = points->GetStencil(cvs[(size_t)j][k]);
+                        const Far::Index *idx = point.GetVertexIndices();
+                        for (int e = 0; e < point.GetSize(); ++e) {
+                            const Far::Index c = idx[e];
+                            if (c < 0 || c >= n)
+                                return spia__fail(status, SPIA_ERROR_INTERNAL, -1,
+                                                  "OpenSubdiv sample stencil refers to point %d, not a control vertex",
+                                                  (int)c);
+                            if (stamp[(size_t)c] != stamp_id) {
+                                stamp[(size_t)c] = stamp_id;
+                                slot[(size_t)c] = (int32_t)fb.columns.size();
+                                fb.columns.push_back(c);
+                            }
                         }
                     }
                 }
-            }
-            const size_t width = fb.columns.size();
-            fb.weights.assign(width * (size_t)per_face, 0.0);
-            for (int j = 0; j < per_face; ++j) {
-                double *row = &fb.weights[(size_t)j * width];
-                for (int k = 0; k < cvs[(size_t)j].size(); ++k) {
-                    const double b = basis[(size_t)j * 20 + (size_t)k];
-                    if (b == 0.0) continue;
-                    const Far::StencilReal<double> point = points->GetStencil(cvs[(size_t)j][k]);
-                    const Far::Index *idx = point.GetVertexIndices();
-                    const double *w = point.GetWeights();
-                    for (int e = 0; e < point.GetSize(); ++e)
-                        if (w[e] != 0.0) row[slot[(size_t)idx[e]]] += b * w[e];
+                const size_t width = fb.columns.size();
+                fb.weights.assign(width * (size_t)per_face, 0.0);
+                for (int j = 0; j < per_face; ++j) {
+                    double *row = &fb.weights[(size_t)j * width];
+                    for (int k = 0; k < cvs[(size_t)j].size(); ++k) {
+                        const double b = basis[(size_t)j * 20 + (size_t)k];
+                        if (b == 0.0) continue;
+                        const Far::StencilReal<double> point = points->GetStencil(cvs[(size_t)j][k]);
+                        const Far::Index *idx = point.GetVertexIndices();
+                        const double *w = point.GetWeights();
+                        for (int e = 0; e < point.GetSize(); ++e)
+                            if (w[e] != 0.0) row[slot[(size_t)idx[e]]] += b * w[e];
+                    }
                 }
             }
         }
@@ -179,19 +184,92 @@ static spia_result emit_stopped(int stop, spia_status *status) {
     return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory for the sample stencils");
 }
 
-static spia_result surface_blocks(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt, int32_t per_edge,
-                                  bool corners, spia__sample_block_fn emit, void *user, spia_status *status) {
+namespace {
+// A set of points to make blocks at (spia__block_points), and where they go.
+struct PointSet {
+    SampleGrid grid;
+    spia__sample_block_fn emit;
+    void *user;
+};
+
+// One face's blocks from Bfr: its columns (mesh numbering, each once) and,
+// per set of points, the weights of each of its ptex faces in turn.
+struct BfrFace {
+    int subs = 0;
+    std::vector<int32_t> columns;
+    std::vector<std::vector<double>> weights;
+};
+
+struct BfrScratch {
+    Bfr::Surface<double> srf;
+    std::vector<Far::Index> cv;
+    std::vector<int32_t> slot;  // per control point, its column
+    std::vector<double> w;
+};
+}  // namespace
+
+// Faces go to the threads kBatchFaces at a time, in pieces of kPieceFaces,
+// each thread with a Bfr factory of its own, made afresh every kFactoryFaces
+// faces (a cache shared between threads takes its lock for every face, and
+// one kept for the whole mesh grows: see bfr_rows in osd_limit_stencils.cpp).
+// The blocks are then handed to the sets' emit in face order on the calling
+// thread, so what emit sees (and the progress it calls) does not depend on
+// the threads.
+const int32_t kBatchFaces = 8192, kPieceFaces = 512, kFactoryFaces = 131072;
+
+// Face f's blocks for every set.  False where Bfr makes no surface.
+static bool bfr_face(const Bfr::RefinerSurfaceFactory<> &factory, int32_t f, const Prepared &p,
+                     const std::vector<PointSet> &sets, BfrScratch &x, BfrFace &out) {
+    if (!factory.InitVertexSurface(f, &x.srf) || !x.srf.IsValid()) return false;
+    const size_t points = (size_t)x.srf.GetNumControlPoints();
+    x.cv.resize(points);
+    x.w.resize(points);
+    x.slot.resize(points);
+    x.srf.GetControlPointIndices(x.cv.data());
+    out.columns.clear();
+    for (size_t k = 0; k < points; ++k) {
+        size_t j = 0;
+        while (j < out.columns.size() && out.columns[j] != x.cv[k]) ++j;
+        if (j == out.columns.size()) out.columns.push_back(x.cv[k]);
+        x.slot[k] = (int32_t)j;
+    }
+    const Bfr::Parameterization param = x.srf.GetParameterization();
+    out.subs = param.HasSubFaces() ? param.GetFaceSize() : 1;
+    const size_t width = out.columns.size();
+    for (size_t i = 0; i < width; ++i) out.columns[i] = p.vertex_of[(size_t)out.columns[i]];
+    out.weights.resize(sets.size());
+    for (size_t s = 0; s < sets.size(); ++s) {
+        const SampleGrid &grid = sets[s].grid;
+        std::vector<double> &block = out.weights[s];
+        block.assign(width * (size_t)grid.per_face * (size_t)out.subs, 0.0);
+        for (int sub = 0; sub < out.subs; ++sub)
+            for (int j = 0; j < grid.per_face; ++j) {
+                double uv[2], st[2] = {grid.s[(size_t)j], grid.t[(size_t)j]};
+                if (param.HasSubFaces())
+                    param.ConvertNormalizedSubFaceToCoord(sub, st, uv);
+                else
+                    uv[0] = st[0], uv[1] = st[1];
+                x.srf.EvaluateStencil(uv, x.w.data());
+                double *row = &block[((size_t)sub * (size_t)grid.per_face + (size_t)j) * width];
+                for (size_t k = 0; k < points; ++k) row[x.slot[k]] += x.w[k];
+            }
+    }
+    return true;
+}
+
+static spia_result surface_blocks(const spia_mesh *m, const spia_adjacency *adj, const spia_options *opt,
+                                  const std::vector<PointSet> &sets, spia_status *status) {
     Prepared p;
     spia_result r = prepare(m, adj, opt, p, status);
     if (r != SPIA_OK) return r;
-    const SampleGrid grid(per_edge, corners);
-    const int per_face = grid.per_face;
+    std::vector<SampleGrid> grids;
+    for (const PointSet &set : sets) grids.push_back(set.grid);
 
     // The faces for OpenSubdiv's patch table, on their part of the mesh.
     bool any_far = false;
     const std::vector<char> far_face = faces_for_far(m, adj, p, any_far);
-    std::vector<std::vector<FaceBlocks>> far_out;  // per face of the part
-    std::vector<int32_t> local_face_of;            // mesh face -> face of the part
+    std::vector<std::vector<std::vector<FaceBlocks>>> far_out;  // per set, per face of the part
+    std::vector<int32_t> local_face_of;                         // mesh face -> face of the part
     Part part;
     if (any_far) {
         std::vector<int32_t> marked;
@@ -206,7 +284,7 @@ static spia_result surface_blocks(const spia_mesh *m, const spia_adjacency *adj,
         const int32_t local_faces = part.refiner->GetLevel(0).GetNumFaces();
         std::vector<char> wanted((size_t)local_faces, 0);
         for (int32_t i = 0; i < local_faces; ++i) wanted[(size_t)i] = far_face[(size_t)part.mesh_face(i)];
-        if ((r = far_blocks(*part.refiner, opt, grid, wanted, far_out, status)) != SPIA_OK) return r;
+        if ((r = far_blocks(*part.refiner, opt, grids, wanted, far_out, status)) != SPIA_OK) return r;
         local_face_of.assign((size_t)m->face_count, -1);
         for (int32_t i = 0; i < local_faces; ++i) local_face_of[(size_t)part.mesh_face(i)] = i;
     }
@@ -214,56 +292,78 @@ static spia_result surface_blocks(const spia_mesh *m, const spia_adjacency *adj,
     const Far::TopologyRefiner &refiner = *p.refiner;
     Bfr::SurfaceFactory::Options qopt;
     qopt.SetApproxLevelSharp(opt->quality).SetApproxLevelSmooth(opt->quality);
-    Bfr::RefinerSurfaceFactory<> factory(refiner, qopt);
-    Bfr::Surface<double> srf;
-    std::vector<Far::Index> cv;
-    std::vector<double> w;
-    std::vector<int32_t> stamp((size_t)p.osd_n, -1), slot((size_t)p.osd_n, 0), columns;
-    std::vector<double> block;
+    const int threads = opt->threads > 0 ? opt->threads : 1;
+    std::vector<int32_t> failed_face_of((size_t)threads, INT32_MAX);  // per thread, the first face Bfr failed on
+    std::vector<unsigned char> out_of_memory_of((size_t)threads, 0), other_failure_of((size_t)threads, 0);
+    struct Worker {
+        std::unique_ptr<Bfr::RefinerSurfaceFactory<>> factory;
+        int64_t faces = 0;  // made by its factory
+        BfrScratch x;
+    };
+    std::vector<Worker> workers((size_t)threads);
+    std::vector<BfrFace> batch((size_t)std::min(kBatchFaces, m->face_count));
+    std::vector<int32_t> columns;
     int64_t ptex = 0;
-    for (int32_t f = 0; f < m->face_count; ++f) {
-        if (any_far && far_face[(size_t)f]) {
-            const std::vector<FaceBlocks> &subs = far_out[(size_t)local_face_of[(size_t)f]];
-            for (const FaceBlocks &fb : subs) {
-                columns.resize(fb.columns.size());
-                for (size_t i = 0; i < columns.size(); ++i) columns[i] = p.vertex_of[(size_t)part.osd(fb.columns[i])];
-                if (int stop = emit(user, ptex++, (int32_t)columns.size(), columns.data(), fb.weights.data()))
-                    return emit_stopped(stop, status);
+    for (int32_t f0 = 0; f0 < m->face_count; f0 += kBatchFaces) {
+        const int32_t count = std::min(kBatchFaces, m->face_count - f0);
+        parallel_for(threads, count, kPieceFaces, [&](int64_t i0, int64_t i1, int thread) {
+            try {
+                Worker &w = workers[(size_t)thread];
+                if (!w.factory || w.faces >= kFactoryFaces) {
+                    w.factory.reset(new Bfr::RefinerSurfaceFactory<>(refiner, qopt));
+                    w.faces = 0;
+                }
+                w.faces += i1 - i0;
+                for (int64_t i = i0; i < i1; ++i) {
+                    const int32_t f = f0 + (int32_t)i;
+                    if (any_far && far_face[(size_t)f]) continue;
+                    if (!bfr_face(*w.factory, f, p, sets, w.x, batch[(size_t)i]))
+                        failed_face_of[(size_t)thread] = std::min(failed_face_of[(size_t)thread], f);
+                }
+            } catch (const std::bad_alloc &) {
+                out_of_memory_of[(size_t)thread] = 1;
+            } catch (...) {
+                other_failure_of[(size_t)thread] = 1;
             }
-            continue;
+        });
+        int32_t failed_face = INT32_MAX;
+        for (int t = 0; t < threads; ++t) {
+            if (out_of_memory_of[(size_t)t]) throw std::bad_alloc();
+            if (other_failure_of[(size_t)t])
+                return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "unexpected failure computing sample stencils");
+            failed_face = std::min(failed_face, failed_face_of[(size_t)t]);
         }
-        if (!factory.InitVertexSurface(f, &srf) || !srf.IsValid())
-            return spia__fail(status, SPIA_ERROR_INTERNAL, f, "OpenSubdiv built no limit surface for face %d", (int)f);
-        cv.resize((size_t)srf.GetNumControlPoints());
-        w.resize(cv.size());
-        srf.GetControlPointIndices(cv.data());
-        columns.clear();
-        for (size_t k = 0; k < cv.size(); ++k) {
-            const Far::Index c = cv[k];
-            if (stamp[(size_t)c] != f) {
-                stamp[(size_t)c] = f;
-                slot[(size_t)c] = (int32_t)columns.size();
-                columns.push_back(c);
+        if (failed_face != INT32_MAX)
+            return spia__fail(status, SPIA_ERROR_INTERNAL, failed_face, "OpenSubdiv built no limit surface for face %d",
+                              (int)failed_face);
+        for (int32_t i = 0; i < count; ++i) {
+            const int32_t f = f0 + i;
+            if (any_far && far_face[(size_t)f]) {
+                const int32_t local = local_face_of[(size_t)f];
+                const int64_t subs = (int64_t)far_out[0][(size_t)local].size();
+                for (size_t s = 0; s < sets.size(); ++s)
+                    for (int64_t sub = 0; sub < subs; ++sub) {
+                        const FaceBlocks &fb = far_out[s][(size_t)local][(size_t)sub];
+                        columns.resize(fb.columns.size());
+                        for (size_t k = 0; k < columns.size(); ++k)
+                            columns[k] = p.vertex_of[(size_t)part.osd(fb.columns[k])];
+                        if (int stop = sets[s].emit(sets[s].user, ptex + sub, (int32_t)columns.size(), columns.data(),
+                                                    fb.weights.data()))
+                            return emit_stopped(stop, status);
+                    }
+                ptex += subs;
+                continue;
             }
-        }
-        const Bfr::Parameterization param = srf.GetParameterization();
-        const int sub_faces = param.HasSubFaces() ? param.GetFaceSize() : 1;
-        const size_t width = columns.size();
-        for (size_t i = 0; i < width; ++i) columns[i] = p.vertex_of[(size_t)columns[i]];
-        for (int sub = 0; sub < sub_faces; ++sub, ++ptex) {
-            block.assign(width * (size_t)per_face, 0.0);
-            for (int j = 0; j < per_face; ++j) {
-                double uv[2], st[2] = {grid.s[(size_t)j], grid.t[(size_t)j]};
-                if (param.HasSubFaces())
-                    param.ConvertNormalizedSubFaceToCoord(sub, st, uv);
-                else
-                    uv[0] = st[0], uv[1] = st[1];
-                srf.EvaluateStencil(uv, w.data());
-                double *row = &block[(size_t)j * width];
-                for (size_t k = 0; k < cv.size(); ++k) row[slot[(size_t)cv[k]]] += w[k];
+            const BfrFace &face = batch[(size_t)i];
+            const size_t width = face.columns.size();
+            for (size_t s = 0; s < sets.size(); ++s) {
+                const size_t per_sub = width * (size_t)sets[s].grid.per_face;
+                for (int sub = 0; sub < face.subs; ++sub)
+                    if (int stop = sets[s].emit(sets[s].user, ptex + sub, (int32_t)width, face.columns.data(),
+                                                face.weights[s].data() + (size_t)sub * per_sub))
+                        return emit_stopped(stop, status);
             }
-            if (int stop = emit(user, ptex, (int32_t)width, columns.data(), block.data()))
-                return emit_stopped(stop, status);
+            ptex += face.subs;
         }
     }
     spia__ok(status);
@@ -307,7 +407,8 @@ static spia_result surface(const spia_mesh *m, const spia_adjacency *adj, const 
     RowsOut o;
     o.per = per_edge * per_edge;
     o.offsets.reserve((size_t)rows + 1);
-    spia_result r = surface_blocks(m, adj, opt, per_edge, false, RowsOut::add, &o, status);
+    const std::vector<PointSet> sets{{SampleGrid(per_edge, false), RowsOut::add, &o}};
+    spia_result r = surface_blocks(m, adj, opt, sets, status);
     if (r != SPIA_OK) return r;
     if ((int64_t)o.offsets.size() != rows + 1)
         return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "OpenSubdiv made %lld sample stencils for %lld samples",
@@ -340,13 +441,16 @@ extern "C" spia_result spia__osd_surface_stencils(const spia_mesh *mesh, const s
 }
 
 extern "C" spia_result spia__osd_surface_blocks(const spia_mesh *mesh, const spia_adjacency *adj,
-                                                const spia_options *options, int32_t samples_per_edge,
-                                                int32_t corners, spia__sample_block_fn emit, void *user,
-                                                spia_status *status) {
-    if (corners && samples_per_edge < 2)
-        return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "a grid with corners needs two points an edge");
+                                                const spia_options *options, const spia__block_points *sets,
+                                                int32_t set_count, spia_status *status) {
+    for (int32_t i = 0; i < set_count; ++i)
+        if (sets[i].corners && sets[i].per_edge < 2)
+            return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "a grid with corners needs two points an edge");
     try {
-        return spia_osd::surface_blocks(mesh, adj, options, samples_per_edge, corners != 0, emit, user, status);
+        std::vector<spia_osd::PointSet> points;
+        for (int32_t i = 0; i < set_count; ++i)
+            points.push_back({spia_osd::SampleGrid(sets[i].per_edge, sets[i].corners != 0), sets[i].emit, sets[i].user});
+        return spia_osd::surface_blocks(mesh, adj, options, points, status);
     } catch (const std::bad_alloc &) {
         return spia__fail(status, SPIA_ERROR_OUT_OF_MEMORY, -1, "out of memory computing sample stencils");
     } catch (...) {

@@ -377,6 +377,40 @@ def test_a_large_fit_is_independent_of_the_thread_count(native):
         assert np.array_equal(other_rep.history, rep.history) and other_rep.after == rep.after
 
 
+def test_the_stencils_of_a_large_open_creased_fit_are_independent_of_the_thread_count(native):
+    """The samples' and the scan grid's stencils are made face by face on
+    the threads, batch by batch, and handed over in face order: on an open
+    grid of more faces than two batches, with faces that go through
+    OpenSubdiv's patch table instead of Bfr (corners of one face, a
+    sharpened vertex) among them, 1, 2 and 3 threads give the same fit and
+    the same scan distances to the bit."""
+    n = 130
+    x, y = np.meshgrid(np.linspace(0.0, 1.0, n + 1), np.linspace(0.0, 1.0, n + 1))
+    bump = 0.05 * np.sin(5.0 * x) * np.cos(4.0 * y)
+    pos = np.stack([x.ravel(), y.ravel(), bump.ravel()], axis=1).astype(np.float32)
+    v = (np.arange(n)[None, :] + (n + 1) * np.arange(n)[:, None]).ravel()
+    quads = np.stack([v, v + 1, v + n + 2, v + n + 1], axis=1).astype(np.int32)
+    creases = np.zeros(len(pos), np.float32)
+    creases[(n + 1) * (n // 2) + n // 2] = 0.8
+    cage = native.Mesh(pos, np.full(n * n, 4, np.int32), quads.ravel(), vertex_creases=creases)
+    assert n * n > 2 * 8192  # osd_samples.cpp's kBatchFaces
+    sx, sy = np.meshgrid(np.linspace(-0.05, 1.05, 2 * n), np.linspace(-0.05, 1.05, 2 * n))
+    sz = 0.05 * np.sin(5.0 * sx) * np.cos(4.0 * sy) + 0.01 * np.sin(40.0 * sx)
+    sp = np.stack([sx.ravel(), sy.ravel(), sz.ravel()], axis=1).astype(np.float32)
+    w = (np.arange(2 * n - 1)[None, :] + 2 * n * np.arange(2 * n - 1)[:, None]).ravel()
+    tris = np.concatenate([np.c_[w, w + 1, w + 2 * n + 1], np.c_[w, w + 2 * n + 1, w + 2 * n]]).astype(np.int32)
+    scan = native.Scan(native.Mesh.from_faces(sp, tris))
+    fits = [native.fit(cage, scan, threads=threads, samples_per_edge=2, max_rounds=1, solver_iterations=4)
+            for threads in (1, 2, 3)]
+    out, rep = fits[0]
+    assert rep.scan_point_count == len(sp) and np.abs(out - cage.positions).max() > 1e-4
+    for other, other_rep in fits[1:]:
+        assert np.array_equal(out.view(np.uint32), other.view(np.uint32))
+        assert (other_rep.before, other_rep.after) == (rep.before, rep.after)
+        assert (other_rep.scan_before, other_rep.scan_after) == (rep.scan_before, rep.scan_after)
+        assert np.array_equal(other_rep.scan_distances.view(np.uint32), rep.scan_distances.view(np.uint32))
+
+
 def test_bad_input(native, sphere_scan):
     cp, cf = quad_sphere(4)
     cage = native.Mesh.from_faces(cp, cf)
