@@ -782,14 +782,23 @@ static int on_scan_boundary(unsigned char bits, const double bary[3]) {
     return 0;
 }
 
-/* One query; writes the outputs for point i. */
-static void closest_one(const spia_scan *s, const double p[3], float radius, int32_t *near, int64_t i,
-                        float *closest, float *normals, float *distances, int32_t *faces, uint8_t *on_boundary) {
+/* One query; writes the outputs for point i and returns its triangle.  The
+ * search starts from triangle near[i] where there is one, else within
+ * `radius` where that is finite, else from triangle `seed` (the previous
+ * point's, when not negative): the distance to the triangle it starts from
+ * bounds the search, which then finds the same nearest triangle as a
+ * search from nothing. */
+static int64_t closest_one(const spia_scan *s, const double p[3], float radius, int64_t seed, int32_t *near,
+                           int64_t i, float *closest, float *normals, float *distances, int32_t *faces,
+                           uint8_t *on_boundary) {
     spia__bvh_hit q;
     if (near && near[i] >= 0)
         spia__bvh_closest_from(&s->bvh, p, near[i], &q);
+    else if (seed >= 0 && !(radius < INFINITY))
+        spia__bvh_closest_from(&s->bvh, p, seed, &q);
     else
         spia__bvh_closest(&s->bvh, p, radius, &q);
+    const int64_t found = q.triangle;
     if (near) near[i] = q.triangle >= 0 && q.triangle <= INT32_MAX ? (int32_t)q.triangle : -1;
     if (q.triangle < 0) { /* a point that is not finite (the internal entry point does not check) */
         q.triangle = 0;
@@ -823,6 +832,7 @@ static void closest_one(const spia_scan *s, const double p[3], float radius, int
         }
         for (int c = 0; c < 3; ++c) normals[3 * i + c] = len > 0.0 ? (float)(nrm[c] / len) : 0.0f;
     }
+    return found;
 }
 
 typedef struct closest_task {
@@ -841,11 +851,17 @@ typedef struct closest_task {
 static void closest_range(void *context, int64_t begin, int64_t end, int thread) {
     const closest_task *t = (const closest_task *)context;
     if (spia__build_poll(t->progress, thread, (double)begin / (double)t->count)) return;
+    /* Points come in the callers' order, which is coherent (a mesh's
+     * samples face by face, a scan's vertices): a point without a start of
+     * its own starts from the triangle nearest the point before.  A round
+     * of the fit of a detail level's 12.9M samples against the dragon's
+     * 4.9M triangles spent 0.2 to 0.3 s less in its queries (of 9.5 s). */
+    int64_t seed = -1;
     for (int64_t i = begin; i < end; ++i) {
         double p[3];
         for (int c = 0; c < 3; ++c) p[c] = t->points_double ? t->points_double[3 * i + c] : t->points_float[3 * i + c];
-        closest_one(t->scan, p, t->radius ? t->radius[i] : INFINITY, t->near, i, t->closest, t->normals, t->distances,
-                    t->faces, t->on_boundary);
+        seed = closest_one(t->scan, p, t->radius ? t->radius[i] : INFINITY, seed, t->near, i, t->closest, t->normals,
+                           t->distances, t->faces, t->on_boundary);
     }
 }
 

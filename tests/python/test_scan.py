@@ -107,6 +107,29 @@ def test_renumbered_vertices_give_the_same_closest_points(native):
     assert np.allclose(np.linalg.norm(normals, axis=1), 1, atol=1e-5)
 
 
+def test_closest_points_do_not_depend_on_the_order_of_the_points(native):
+    """Each search starts from the triangle nearest the point before it: the
+    same points in order (each seeded by its neighbour) and shuffled (seeded
+    by points anywhere) give the same closest points, normals, distances
+    and faces to the bit, and the faces are a brute-force search's."""
+    pos, tris = grid(60, 40, seed=5)
+    scan = native.Scan(native.Mesh(pos.astype(np.float32), np.full(len(tris), 3, np.int32),
+                                   tris.astype(np.int32).ravel()))
+    rng = np.random.default_rng(6)
+    t = np.linspace(0.0, 1.0, 20000)
+    q = np.c_[2 + 55 * t, 30 + 8 * np.sin(40 * t), 0.5 * np.cos(25 * t)].astype(np.float32)
+    shuffle = rng.permutation(len(q))
+    ordered = scan.closest_points(q)
+    shuffled = scan.closest_points(q[shuffle])
+    for mine, theirs in zip(ordered, shuffled):
+        assert np.array_equal(np.asarray(mine)[shuffle].view(np.uint32), np.asarray(theirs).view(np.uint32))
+    p32 = pos.astype(np.float32).astype(np.float64)
+    a, b, c = p32[tris[:, 0]], p32[tris[:, 1]], p32[tris[:, 2]]
+    for i in range(0, len(q), 997):
+        best = brute_force_distance(q[i].astype(np.float64), a, b, c)
+        assert abs(ordered[2][i] - best.min()) <= 1e-5 * (1 + best.min())
+
+
 def numpy_vertex_normals(pos, tris):
     """Area-weighted vertex normals in double from the float32 positions
     (NaN where no triangle is)."""
