@@ -301,42 +301,20 @@ static spia_result surface_blocks(const spia_mesh *m, const spia_adjacency *adj,
         BfrScratch x;
     };
     std::vector<Worker> workers((size_t)threads);
-    std::vector<BfrFace> batch((size_t)std::min(kBatchFaces, m->face_count));
+    // Two batches: one made on the threads while the one before is handed
+    // over on the calling thread (thread 0, when it takes a piece of the
+    // loop, first; or after it).
+    std::vector<BfrFace> batches[2];
+    for (auto &batch : batches) batch.resize((size_t)std::min(kBatchFaces, m->face_count));
     std::vector<int32_t> columns;
     int64_t ptex = 0;
-    for (int32_t f0 = 0; f0 < m->face_count; f0 += kBatchFaces) {
-        const int32_t count = std::min(kBatchFaces, m->face_count - f0);
-        parallel_for(threads, count, kPieceFaces, [&](int64_t i0, int64_t i1, int thread) {
-            try {
-                Worker &w = workers[(size_t)thread];
-                if (!w.factory || w.faces >= kFactoryFaces) {
-                    w.factory.reset(new Bfr::RefinerSurfaceFactory<>(refiner, qopt));
-                    w.faces = 0;
-                }
-                w.faces += i1 - i0;
-                for (int64_t i = i0; i < i1; ++i) {
-                    const int32_t f = f0 + (int32_t)i;
-                    if (any_far && far_face[(size_t)f]) continue;
-                    if (!bfr_face(*w.factory, f, p, sets, w.x, batch[(size_t)i]))
-                        failed_face_of[(size_t)thread] = std::min(failed_face_of[(size_t)thread], f);
-                }
-            } catch (const std::bad_alloc &) {
-                out_of_memory_of[(size_t)thread] = 1;
-            } catch (...) {
-                other_failure_of[(size_t)thread] = 1;
-            }
-        });
-        int32_t failed_face = INT32_MAX;
-        for (int t = 0; t < threads; ++t) {
-            if (out_of_memory_of[(size_t)t]) throw std::bad_alloc();
-            if (other_failure_of[(size_t)t])
-                return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "unexpected failure computing sample stencils");
-            failed_face = std::min(failed_face, failed_face_of[(size_t)t]);
-        }
-        if (failed_face != INT32_MAX)
-            return spia__fail(status, SPIA_ERROR_INTERNAL, failed_face, "OpenSubdiv built no limit surface for face %d",
-                              (int)failed_face);
-        for (int32_t i = 0; i < count; ++i) {
+    int32_t pending_f0 = -1, pending_count = 0, pending = 0;  // the batch made and not handed over
+    // Hands the pending batch's blocks over, in face order.
+    auto hand_over = [&]() -> spia_result {
+        const std::vector<BfrFace> &batch = batches[pending];
+        const int32_t f0 = pending_f0;
+        pending_f0 = -1;
+        for (int32_t i = 0; i < pending_count; ++i) {
             const int32_t f = f0 + i;
             if (any_far && far_face[(size_t)f]) {
                 const int32_t local = local_face_of[(size_t)f];
@@ -365,7 +343,49 @@ static spia_result surface_blocks(const spia_mesh *m, const spia_adjacency *adj,
             }
             ptex += face.subs;
         }
+        return SPIA_OK;
+    };
+    for (int32_t f0 = 0; f0 < m->face_count; f0 += kBatchFaces) {
+        const int32_t count = std::min(kBatchFaces, m->face_count - f0);
+        const int making = pending_f0 >= 0 ? 1 - pending : pending;
+        std::vector<BfrFace> &batch = batches[making];
+        spia_result handed = SPIA_OK;
+        parallel_for(threads, count, kPieceFaces, [&](int64_t i0, int64_t i1, int thread) {
+            try {
+                if (thread == 0 && pending_f0 >= 0) handed = hand_over();
+                Worker &w = workers[(size_t)thread];
+                if (!w.factory || w.faces >= kFactoryFaces) {
+                    w.factory.reset(new Bfr::RefinerSurfaceFactory<>(refiner, qopt));
+                    w.faces = 0;
+                }
+                w.faces += i1 - i0;
+                for (int64_t i = i0; i < i1; ++i) {
+                    const int32_t f = f0 + (int32_t)i;
+                    if (any_far && far_face[(size_t)f]) continue;
+                    if (!bfr_face(*w.factory, f, p, sets, w.x, batch[(size_t)i]))
+                        failed_face_of[(size_t)thread] = std::min(failed_face_of[(size_t)thread], f);
+                }
+            } catch (const std::bad_alloc &) {
+                out_of_memory_of[(size_t)thread] = 1;
+            } catch (...) {
+                other_failure_of[(size_t)thread] = 1;
+            }
+        });
+        if (pending_f0 >= 0) handed = hand_over();
+        int32_t failed_face = INT32_MAX;
+        for (int t = 0; t < threads; ++t) {
+            if (out_of_memory_of[(size_t)t]) throw std::bad_alloc();
+            if (other_failure_of[(size_t)t])
+                return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "unexpected failure computing sample stencils");
+            failed_face = std::min(failed_face, failed_face_of[(size_t)t]);
+        }
+        if (handed != SPIA_OK) return handed;
+        if (failed_face != INT32_MAX)
+            return spia__fail(status, SPIA_ERROR_INTERNAL, failed_face, "OpenSubdiv built no limit surface for face %d",
+                              (int)failed_face);
+        pending_f0 = f0, pending_count = count, pending = making;
     }
+    if (pending_f0 >= 0 && (r = hand_over()) != SPIA_OK) return r;
     spia__ok(status);
     return SPIA_OK;
 }
