@@ -365,18 +365,10 @@ static spia_result measure_given(fit_run *u) {
     if (u->fo.samples_per_edge < 2) report->folded_before = -1;
     if (u->fo.samples_per_edge >= 2 && !(u->fo.flags & SPIA_FIT_ALLOW_FOLDS)) {
         b->start_n = malloc(sizeof(float) * 3 * (size_t)S);
-        if (!b->start_n) return spia__fit_oom(u);
-        spia__fit_start_normals(b->X, b->dots, S, u->fo.samples_per_edge, u->sign, b->start_n);
         b->start_len = malloc(sizeof(float) * 2 * (size_t)S);
-        if (!b->start_len) return spia__fit_oom(u);
-        const int64_t per_face = (int64_t)u->fo.samples_per_edge * u->fo.samples_per_edge;
-        for (int64_t q = 0; q < S; ++q) {
-            int32_t pa[2], pb[2];
-            double D[2][3];
-            spia__fit_grid_differences(b->X, q - q % per_face, (int32_t)(q % per_face), u->fo.samples_per_edge, pa, pb, D);
-            for (int m = 0; m < 2; ++m)
-                b->start_len[2 * q + m] = (float)sqrt(D[m][0] * D[m][0] + D[m][1] * D[m][1] + D[m][2] * D[m][2]);
-        }
+        if (!b->start_n || !b->start_len) return spia__fit_oom(u);
+        spia__fit_start_normals(b->X, b->dots, S, u->fo.samples_per_edge, u->sign, b->start_n, b->start_len,
+                                u->opt.threads);
     }
     if (!(u->fo.flags & SPIA_FIT_NO_SCAN_DISTANCES)) return measure_scan_given(u);
     return SPIA_OK;
@@ -555,7 +547,7 @@ static spia_result round_weights(fit_run *u, int guard, fit_system *f) {
         const double reach = FOLD_BARRIER_REACH * kernel_scale < u->cutoff_abs ? FOLD_BARRIER_REACH * kernel_scale
                                                                                : u->cutoff_abs;
         if (spia__fit_barrier_pairs(b->X, b->N, b->d, b->on_boundary, S, u->fo.samples_per_edge, u->sign, reach, b->start_len, &b->bar,
-                          &b->bar_capacity, b->bar_start))
+                          &b->bar_capacity, b->bar_start, u->opt.threads))
             return spia__fit_oom(u);
         f->bar = b->bar, f->bar_start = b->bar_start;
     }

@@ -243,7 +243,8 @@ int spia__fit_least_squares_round(fit_system *f, const float *T, const double *V
 void spia__fit_grid_differences(const double *X, int64_t base, int32_t l, int32_t k, int32_t a[2], int32_t b[2],
                                 double D[2][3]);
 void spia__fit_normal_agreement(const double *X, const float *N, int64_t S, int32_t k, float *dots, int threads);
-void spia__fit_start_normals(const double *X, const float *dots, int64_t S, int32_t k, int sign, float *out);
+void spia__fit_start_normals(const double *X, const float *dots, int64_t S, int32_t k, int sign, float *normals,
+                             float *lengths, int threads);
 void spia__fit_facing_start(const float *start, const float *N, int64_t S, int sign, float *w);
 int spia__fit_orientation(const float *dots, const float *d, const uint8_t *on_boundary, int64_t S,
                           double cutoff_abs);
@@ -254,7 +255,7 @@ void spia__fit_stiffen(const spia_mesh *cage, const spia_adjacency *adj, const u
                        double *smooth);
 int spia__fit_barrier_pairs(const double *X, const float *N, const float *d, const uint8_t *on_boundary, int64_t S,
                             int32_t k, int sign, double reach, const float *start_len, fold_pair **bar,
-                            int64_t *capacity, int64_t *bar_start);
+                            int64_t *capacity, int64_t *bar_start, int threads);
 
 /* ---- fit_scan_side.c ---------------------------------------------------------- */
 

@@ -69,15 +69,39 @@ void spia__fit_normal_agreement(const double *X, const float *N, int64_t S, int3
 }
 
 /* Per sample, the unit normal of the starting cage's surface where it
- * faced the scan as the cage does (sign), else zero (see facing_start). */
-void spia__fit_start_normals(const double *X, const float *dots, int64_t S, int32_t k, int sign, float *out) {
-    for (int64_t s = 0; s < S; ++s) {
-        double n[3];
-        grid_normal(X, s, k, n);
+ * faced the scan as the cage does (sign), else zero (see facing_start), and
+ * the lengths of its grid differences along u and v (the fold barrier's
+ * least lengths); on `threads` threads, each sample on its own. */
+typedef struct start_pass {
+    const double *X;
+    const float *dots;
+    int32_t k;
+    int sign;
+    float *normals, *lengths;
+} start_pass;
+
+static void start_range(void *context, int64_t begin, int64_t end, int thread) {
+    (void)thread;
+    const start_pass *p = context;
+    const int64_t per_face = (int64_t)p->k * p->k;
+    for (int64_t s = begin; s < end; ++s) {
+        int32_t a[2], b[2];
+        double D[2][3];
+        spia__fit_grid_differences(p->X, s - s % per_face, (int32_t)(s % per_face), p->k, a, b, D);
+        const double *du = D[0], *dv = D[1];
+        const double n[3] = {du[1] * dv[2] - du[2] * dv[1], du[2] * dv[0] - du[0] * dv[2], du[0] * dv[1] - du[1] * dv[0]};
         const double len = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-        const int keep = len > 0.0 && (double)sign * dots[s] > 0.0;
-        for (int c = 0; c < 3; ++c) out[3 * s + c] = keep ? (float)(n[c] / len) : 0.0f;
+        const int keep = len > 0.0 && (double)p->sign * p->dots[s] > 0.0;
+        for (int c = 0; c < 3; ++c) p->normals[3 * s + c] = keep ? (float)(n[c] / len) : 0.0f;
+        for (int m = 0; m < 2; ++m)
+            p->lengths[2 * s + m] = (float)sqrt(D[m][0] * D[m][0] + D[m][1] * D[m][1] + D[m][2] * D[m][2]);
     }
+}
+
+void spia__fit_start_normals(const double *X, const float *dots, int64_t S, int32_t k, int sign, float *normals,
+                             float *lengths, int threads) {
+    start_pass p = {X, dots, k, sign, normals, lengths};
+    spia__parallel_for(threads, S, 65536, start_range, &p);
 }
 
 /* Lets go of the samples whose closest point lies on a part of the scan
@@ -169,51 +193,117 @@ void spia__fit_stiffen(const spia_mesh *cage, const spia_adjacency *adj, const u
  * (armadillo), 0.011/0.004/0.004/0.003/0.008% (Chinese dragon); at 0.5 the
  * mean distances moved by -0.2% to +1.4%. */
 #define FOLD_BARRIER_COMPRESS 0.5
-int spia__fit_barrier_pairs(const double *X, const float *N, const float *d, const uint8_t *on_boundary, int64_t S,
-                            int32_t k, int sign, double reach, const float *start_len, fold_pair **bar,
-                            int64_t *capacity, int64_t *bar_start) {
-    const int32_t per = k * k;
-    int64_t count = 0;
-    for (int64_t g = 0; g * per < S; ++g) {
-        bar_start[g] = count;
+/* The pairs of the ptex faces [g0, g1) into a list of their own, and each
+ * face's first pair's place in it into bar_start; returns 1 out of memory. */
+typedef struct barrier_list {
+    fold_pair *v;
+    int64_t count, capacity;
+    int failed;
+} barrier_list;
+
+typedef struct barrier_pass {
+    const double *X;
+    const float *N, *d, *start_len;
+    const uint8_t *on_boundary;
+    int32_t k;
+    int sign;
+    double reach;
+    int64_t groups, chunk;
+    int64_t *bar_start;
+    barrier_list *lists; /* one a chunk of `chunk` faces */
+} barrier_pass;
+
+static int barrier_faces(const barrier_pass *p, int64_t g0, int64_t g1, barrier_list *out) {
+    const int32_t k = p->k, per = k * k;
+    const float *d = p->d;
+    for (int64_t g = g0; g < g1; ++g) {
+        p->bar_start[g] = out->count;
         const int64_t base = g * per;
         int over_hole = 0;
-        for (int32_t l = 0; l < per && !over_hole; ++l) over_hole = on_boundary[base + l];
+        for (int32_t l = 0; l < per && !over_hole; ++l) over_hole = p->on_boundary[base + l];
         if (over_hole) continue;
         for (int32_t l = 0; l < per; ++l) {
             const int64_t q = base + l;
-            if (!(d[q] <= reach)) continue;
+            if (!(d[q] <= p->reach)) continue;
             int32_t pa[2], pb[2];
             double D[2][3];
-            spia__fit_grid_differences(X, base, l, k, pa, pb, D);
-            const float *n = N + 3 * q;
+            spia__fit_grid_differences(p->X, base, l, k, pa, pb, D);
+            const float *n = p->N + 3 * q;
             const double e[2][3] = {
                 {D[1][1] * n[2] - D[1][2] * n[1], D[1][2] * n[0] - D[1][0] * n[2], D[1][0] * n[1] - D[1][1] * n[0]},
                 {n[1] * D[0][2] - n[2] * D[0][1], n[2] * D[0][0] - n[0] * D[0][2], n[0] * D[0][1] - n[1] * D[0][0]}};
             for (int m = 0; m < 2; ++m) {
-                if (!(d[base + pa[m]] <= reach) || !(d[base + pb[m]] <= reach)) continue;
+                if (!(d[base + pa[m]] <= p->reach) || !(d[base + pb[m]] <= p->reach)) continue;
                 /* along = sign e . D / |e| below FOLD_BARRIER_SHEAR |D|, squared where it is positive */
                 const double e2 = e[m][0] * e[m][0] + e[m][1] * e[m][1] + e[m][2] * e[m][2];
                 const double d2 = D[m][0] * D[m][0] + D[m][1] * D[m][1] + D[m][2] * D[m][2];
-                const double ed = (double)sign * (e[m][0] * D[m][0] + e[m][1] * D[m][1] + e[m][2] * D[m][2]);
+                const double ed = (double)p->sign * (e[m][0] * D[m][0] + e[m][1] * D[m][1] + e[m][2] * D[m][2]);
                 if (!(e2 > 0.0) || !(d2 > 0.0)) continue;
-                const double least = start_len ? FOLD_BARRIER_COMPRESS * start_len[2 * q + m] : 0.0;
+                const double least = p->start_len ? FOLD_BARRIER_COMPRESS * p->start_len[2 * q + m] : 0.0;
                 if (ed > 0.0 && ed * ed >= FOLD_BARRIER_SHEAR * FOLD_BARRIER_SHEAR * e2 * d2 && d2 >= least * least)
                     continue;
                 const double el = sqrt(e2), dl = sqrt(d2) > least / FOLD_BARRIER_SHEAR ? sqrt(d2) : least / FOLD_BARRIER_SHEAR;
-                if (count == *capacity) {
-                    const int64_t grown = *capacity > 0 ? 2 * *capacity : 4096;
-                    fold_pair *more = realloc(*bar, sizeof(fold_pair) * (size_t)grown);
+                if (out->count == out->capacity) {
+                    const int64_t grown = out->capacity > 0 ? 2 * out->capacity : 256;
+                    fold_pair *more = realloc(out->v, sizeof(fold_pair) * (size_t)grown);
                     if (!more) return 1;
-                    *bar = more, *capacity = grown;
+                    out->v = more, out->capacity = grown;
                 }
-                fold_pair *p = *bar + count++;
-                p->a = pa[m], p->b = pb[m];
-                for (int c = 0; c < 3; ++c) p->e[c] = (float)((double)sign * e[m][c] / el);
-                p->t = (float)(FOLD_BARRIER_SHEAR * dl);
+                fold_pair *f = out->v + out->count++;
+                f->a = pa[m], f->b = pb[m];
+                for (int c = 0; c < 3; ++c) f->e[c] = (float)((double)p->sign * e[m][c] / el);
+                f->t = (float)(FOLD_BARRIER_SHEAR * dl);
             }
         }
     }
-    bar_start[(S + per - 1) / per] = count;
+    return 0;
+}
+
+static void barrier_range(void *context, int64_t c0, int64_t c1, int thread) {
+    (void)thread;
+    const barrier_pass *p = context;
+    for (int64_t c = c0; c < c1; ++c) {
+        const int64_t g0 = c * p->chunk, g1 = p->groups - g0 < p->chunk ? p->groups : g0 + p->chunk;
+        p->lists[c].failed = barrier_faces(p, g0, g1, &p->lists[c]);
+    }
+}
+
+/* Ptex faces a chunk of the pairs' search takes. */
+#define BARRIER_CHUNK 16384
+
+/* The pairs, chunk by chunk on the threads, each chunk's list then put
+ * after the one before: the same list as one pass over the faces. */
+int spia__fit_barrier_pairs(const double *X, const float *N, const float *d, const uint8_t *on_boundary, int64_t S,
+                            int32_t k, int sign, double reach, const float *start_len, fold_pair **bar,
+                            int64_t *capacity, int64_t *bar_start, int threads) {
+    const int32_t per = k * k;
+    const int64_t groups = (S + per - 1) / per, chunks = (groups + BARRIER_CHUNK - 1) / BARRIER_CHUNK;
+    barrier_list *lists = calloc((size_t)(chunks > 0 ? chunks : 1), sizeof(barrier_list));
+    if (!lists) return 1;
+    barrier_pass p = {X, N, d, start_len, on_boundary, k, sign, reach, groups, BARRIER_CHUNK, bar_start, lists};
+    spia__parallel_for(threads, chunks, 1, barrier_range, &p);
+    int64_t count = 0;
+    int failed = 0;
+    for (int64_t c = 0; c < chunks; ++c) count += lists[c].count, failed |= lists[c].failed;
+    if (!failed && count > *capacity) {
+        fold_pair *more = realloc(*bar, sizeof(fold_pair) * (size_t)count);
+        if (more)
+            *bar = more, *capacity = count;
+        else
+            failed = 1;
+    }
+    int64_t at = 0;
+    for (int64_t c = 0; c < chunks; ++c) {
+        if (!failed) {
+            if (lists[c].count) memcpy(*bar + at, lists[c].v, sizeof(fold_pair) * (size_t)lists[c].count);
+            const int64_t g0 = c * BARRIER_CHUNK, g1 = groups - g0 < BARRIER_CHUNK ? groups : g0 + BARRIER_CHUNK;
+            for (int64_t g = g0; g < g1; ++g) bar_start[g] += at;
+            at += lists[c].count;
+        }
+        free(lists[c].v);
+    }
+    free(lists);
+    if (failed) return 1;
+    bar_start[groups] = count;
     return 0;
 }
