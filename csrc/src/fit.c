@@ -320,8 +320,7 @@ static spia_result sample_surface(fit_run *u) {
 static spia_result measure_scan_given(fit_run *u) {
     fit_buffers *b = &u->b;
     const double t0 = spia__now();
-    spia_result r = spia__fit_scan_side_prepare(u->cage, &u->adj, &u->surface_opt, u->fo.samples_per_edge, u->scan, b,
-                                      &u->clock, u->status);
+    spia_result r = spia__fit_scan_side_prepare(u->cage, u->fo.samples_per_edge, u->scan, b, &u->clock, u->status);
     if (r != SPIA_OK) return r == SPIA_ERROR_OUT_OF_MEMORY ? spia__fit_oom(u) : r;
     if (!(u->fo.flags & SPIA_FIT_NO_SCAN_BEFORE) &&
         (r = spia__fit_scan_side_measure(b, b->V0, u->cutoff_abs, u->diagonal, u->opt.threads, 0, &u->clock,

@@ -262,11 +262,10 @@ int spia__fit_barrier_pairs(const double *X, const float *N, const float *d, con
 /* Points along each edge of a ptex face of the grid the scan's vertices are
  * measured against, for samples_per_edge per_edge: its blocks' side. */
 int32_t spia__fit_scan_grid_side(const spia_mesh *cage, int32_t per_edge);
-/* The scan side's grid and buffers; the grid's blocks are made here unless
- * b->grid has them already (spia__fit_scan_grid_side's side). */
-spia_result spia__fit_scan_side_prepare(const spia_mesh *cage, const spia_adjacency *adj, const spia_options *opt,
-                                        int32_t per_edge, const spia_scan *scan, fit_buffers *b, fit_clock *clock,
-                                        spia_status *status);
+/* The scan side's grid and buffers, over the grid's blocks the fit made
+ * with its samples' (spia__fit_scan_grid_side's side) in b->grid. */
+spia_result spia__fit_scan_side_prepare(const spia_mesh *cage, int32_t per_edge, const spia_scan *scan, fit_buffers *b,
+                                        fit_clock *clock, spia_status *status);
 spia_result spia__fit_scan_side_measure(fit_buffers *b, const double *V, double cutoff_abs, double diagonal,
                                         int threads, int warm, fit_clock *clock, spia_fit_distances *out,
                                         spia_status *status);

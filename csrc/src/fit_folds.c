@@ -24,13 +24,17 @@ void spia__fit_grid_differences(const double *X, int64_t base, int32_t l, int32_
 
 /* Sample s's grid normal: the cross product of its neighbours' differences
  * along u and v (grid_differences), not normalised. */
+static void differences_normal(const double D[2][3], double n[3]) {
+    const double *du = D[0], *dv = D[1];
+    n[0] = du[1] * dv[2] - du[2] * dv[1], n[1] = du[2] * dv[0] - du[0] * dv[2], n[2] = du[0] * dv[1] - du[1] * dv[0];
+}
+
 static void grid_normal(const double *X, int64_t s, int32_t k, double n[3]) {
     const int64_t per_face = (int64_t)k * k;
     int32_t a[2], b[2];
     double D[2][3];
     spia__fit_grid_differences(X, s - s % per_face, (int32_t)(s % per_face), k, a, b, D);
-    const double *du = D[0], *dv = D[1];
-    n[0] = du[1] * dv[2] - du[2] * dv[1], n[1] = du[2] * dv[0] - du[0] * dv[2], n[2] = du[0] * dv[1] - du[1] * dv[0];
+    differences_normal((const double(*)[3])D, n);
 }
 
 /* spia__fit_normal_agreement's work on the samples [begin, end). */
@@ -88,8 +92,8 @@ static void start_range(void *context, int64_t begin, int64_t end, int thread) {
         int32_t a[2], b[2];
         double D[2][3];
         spia__fit_grid_differences(p->X, s - s % per_face, (int32_t)(s % per_face), p->k, a, b, D);
-        const double *du = D[0], *dv = D[1];
-        const double n[3] = {du[1] * dv[2] - du[2] * dv[1], du[2] * dv[0] - du[0] * dv[2], du[0] * dv[1] - du[1] * dv[0]};
+        double n[3];
+        differences_normal((const double(*)[3])D, n);
         const double len = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
         const int keep = len > 0.0 && (double)p->sign * p->dots[s] > 0.0;
         for (int c = 0; c < 3; ++c) p->normals[3 * s + c] = keep ? (float)(n[c] / len) : 0.0f;

@@ -82,9 +82,8 @@ int32_t spia__fit_scan_grid_side(const spia_mesh *cage, int32_t per_edge) {
     return (1 << grid_levels(spia_surface_sample_count(cage, 1), per_edge)) + 1;
 }
 
-spia_result spia__fit_scan_side_prepare(const spia_mesh *cage, const spia_adjacency *adj, const spia_options *opt,
-                                        int32_t per_edge, const spia_scan *scan, fit_buffers *b, fit_clock *clock,
-                                        spia_status *status) {
+spia_result spia__fit_scan_side_prepare(const spia_mesh *cage, int32_t per_edge, const spia_scan *scan, fit_buffers *b,
+                                        fit_clock *clock, spia_status *status) {
     const int64_t ptex = spia_surface_sample_count(cage, 1);
     const int32_t levels = grid_levels(ptex, per_edge);
     const int32_t side = (1 << levels) + 1; /* points along a ptex face's edge */
@@ -93,12 +92,8 @@ spia_result spia__fit_scan_side_prepare(const spia_mesh *cage, const spia_adjace
                           "the cage has too many faces (%lld ptex faces) to measure the scan's distances to its "
                           "surface; leave that measure out (SPIA_FIT_NO_SCAN_DISTANCES)",
                           (long long)ptex);
-    /* The grid's blocks, unless the fit made them with its samples'. */
-    if (!b->grid.start) {
-        const spia_result r = spia__fit_blocks_build(cage, adj, opt, side, 1, &b->grid, clock, status);
-        if (r != SPIA_OK) return r == SPIA_ERROR_CANCELLED ? scan_side_cancelled(status) : r;
-    }
-    if (b->grid.per != side * side)
+    /* The grid's blocks are made with the samples' (sample_surface). */
+    if (!b->grid.start || b->grid.per != side * side)
         return spia__fail(status, SPIA_ERROR_INTERNAL, -1, "the surface's grid does not match the cage's faces");
     if (spia__fit_clock_tick(clock)) return scan_side_cancelled(status);
     const int32_t gv = (int32_t)(ptex * side * side);
